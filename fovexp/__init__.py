@@ -1,0 +1,18 @@
+"""fovexp: noise-based enhancement for foveated rendering (Tariq, Tursun, Didyk 2022).
+
+The public API (docs/API.md); the experiment runner and the analysis use only these names.
+"""
+
+from .errors import FovexpError
+from .geometry import Display, load_display
+from .io import read_image, write_image
+from .params import PAPER_TABLE2, EnhanceParams, ParameterTable, make_params
+from .pipeline import MAP_NAMES, EnhanceResult, Enhancer, enhance
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "MAP_NAMES", "PAPER_TABLE2", "Display", "EnhanceParams", "EnhanceResult", "Enhancer",
+    "FovexpError", "ParameterTable", "enhance", "load_display", "make_params", "read_image",
+    "write_image", "__version__",
+]

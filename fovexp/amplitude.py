@@ -1,0 +1,87 @@
+"""Noise amplitude K from the Laplacian pyramid, and the clipping control (paper section 4.2).
+
+The blur attenuates a frequency f by ``exp(-f^2 / (2 sigma_f^2))``, ``sigma_f = 1 / (2 pi
+sigma)``. It falls to the attenuation cut-off ``a`` at (notes section 1, erratum of eq. 6)::
+
+    f_c = sigma_f sqrt(-2 ln a) = sqrt(-2 ln a) / (2 pi sigma)
+
+The Laplacian level whose centre ``2**-(l + 0.5)`` (levels from 1, notes section 1) equals f_c
+is (eq. 7, corrected)::
+
+    l_a = log2(1 / f_c) - 0.5,   at least 1
+
+and (eq. 8) ``K = s_k |L_{l_a}|``, with a non-integer ``l_a`` interpolated linearly between the
+two bracketing levels in the log-frequency domain (the level index is log2 of frequency). As in
+the release (notes 3.7), ``|L_k|`` is smoothed by a 3 x 3 mean on its own grid, sampled
+bilinearly, and K carries the release's gain 3.5722, so that ``s_k`` of Table 2 means the
+same thing (the noise's local std is K / 6, see :mod:`fovexp.gabor`).
+
+Clipping control (section 4.2): with local minimum ``N_min`` and maximum ``N_max`` of the image
+the noise is added to, ``K`` is reduced so that ``N_max + K / 2 <= 1`` and
+``N_min - K / 2 >= 0`` (K / 2 is three noise standard deviations), and never below 0.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .pyramids import sample_bilinear
+
+#: The release's amplitude gain (notes section 3.7); part of what Table 2's s_k means.
+RELEASE_AMPLITUDE_GAIN = 3.5722
+
+
+def attenuation_cutoff_cpp(sigma_px: np.ndarray, attenuation: float) -> np.ndarray:
+    """Frequency (cycles/px) the blur attenuates to ``attenuation`` (eq. 6, corrected)."""
+    sigma_px = np.asarray(sigma_px, dtype=np.float64)
+    with np.errstate(divide="ignore"):
+        return np.sqrt(-2.0 * np.log(attenuation)) / (2.0 * np.pi * sigma_px)
+
+
+def band_centre_cpp(level: np.ndarray | float) -> np.ndarray:
+    """Centre frequency of Laplacian level ``level`` (from 1): ``2**-(level + 0.5)``."""
+    return 2.0 ** -(np.asarray(level, dtype=np.float64) + 0.5)
+
+
+def laplacian_level(sigma_px: np.ndarray, attenuation: float) -> np.ndarray:
+    """Continuous level ``l_a`` whose centre the blur attenuates by ``attenuation`` (eq. 7),
+    clamped to at least 1 (the finest band). Infinite sigma-free pixels get level 1."""
+    f_c = attenuation_cutoff_cpp(sigma_px, attenuation)
+    with np.errstate(divide="ignore"):
+        level = np.log2(1.0 / f_c) - 0.5
+    return np.maximum(np.nan_to_num(level, nan=1.0, neginf=1.0), 1.0)
+
+
+def laplacian_amplitude_at(
+    abs_levels: dict[int, np.ndarray], level: np.ndarray, x_px: np.ndarray, y_px: np.ndarray
+) -> np.ndarray:
+    """``|L|`` at continuous ``level``, interpolated between the two bracketing levels,
+    each sampled bilinearly at full-resolution coordinates (level k lives on G_{k-1}'s grid)."""
+    level = np.asarray(level, dtype=np.float64)
+    top = max(abs_levels)
+    level = np.minimum(level, top)
+    k0 = np.minimum(np.floor(level).astype(np.int64), top - 1) if top > 1 else np.ones_like(
+        level, dtype=np.int64
+    )
+    t = np.clip(level - k0, 0.0, 1.0)
+    out = np.zeros(level.shape, dtype=np.float64)
+    for k in np.unique(k0):
+        sel = k0 == k
+        xs, ys = x_px[sel], y_px[sel]
+        lo = sample_bilinear(abs_levels[int(k)], xs, ys, int(k) - 1)
+        if int(k) + 1 in abs_levels:
+            hi = sample_bilinear(abs_levels[int(k) + 1], xs, ys, int(k))
+        else:
+            hi = lo
+        out[sel] = (1.0 - t[sel]) * lo + t[sel] * hi
+    return out
+
+
+#: Coarsest Laplacian level built: centre 2**-8.5 cycles/px, selected (a = 0.25) for sigmas up to
+#: about 94 px, far past any foveation in the paper; coarser sigmas read this level.
+MAX_LAPLACIAN_LEVEL = 8
+
+
+def headroom_limit(n_min: np.ndarray, n_max: np.ndarray) -> np.ndarray:
+    """Largest K that keeps ``N_max + K/2 <= 1`` and ``N_min - K/2 >= 0``; never negative."""
+    return np.maximum(2.0 * np.minimum(1.0 - np.asarray(n_max), np.asarray(n_min)), 0.0)

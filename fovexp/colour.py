@@ -1,0 +1,59 @@
+"""Colour: display transfer functions and luminance (paper section 4.5, notes section 3.1, 3.4).
+
+The method processes luminance only: the input is linearised with the display's transfer
+function, the noise is computed from linear luminance and added to every channel of the linear
+colour image (a change of BT.601 luma Y with Cb, Cr kept adds the same amount to R, G and B),
+and the result is re-encoded.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: BT.601 luma weights. The release's Y of YCbCr, normalised as (Y - 16/255) / (219/255), equals
+#: 0.299 R + 0.587 G + 0.114 B (notes section 3.4); its grey for orientation uses the same
+#: weights rounded as MATLAB's rgb2gray (0.2989, 0.5870, 0.1140).
+LUMA_BT601 = np.array([0.299, 0.587, 0.114], dtype=np.float32)
+
+#: The release's hybrid transfer (notes section 3.1): ((v + 0.055) / 1.055) ** 2.2.
+_RELEASE_OFFSET = 0.055
+
+
+def linearize(encoded: np.ndarray, gamma: float, transfer: str = "power") -> np.ndarray:
+    """Display-encoded values in [0, 1] to linear light in [0, 1] (float32).
+
+    ``power``: ``v ** gamma`` (the display profile's gamma). ``release``: the release's
+    ``((v + 0.055) / 1.055) ** 2.2`` (notes section 3.1).
+    """
+    out = np.array(encoded, dtype=np.float32)  # a copy: worked on in place below
+    if transfer == "release":
+        out += np.float32(_RELEASE_OFFSET)
+        out *= np.float32(1.0 / (1.0 + _RELEASE_OFFSET))
+    return np.power(out, np.float32(gamma), out=out)
+
+
+def encode(
+    linear: np.ndarray, gamma: float, transfer: str = "power", add: np.ndarray | None = None
+) -> np.ndarray:
+    """Inverse of :func:`linearize`, after adding the grey ``add`` (H, W) to every channel;
+    values outside [0, 1] are clipped first (a display shows nothing else)."""
+    lin = np.asarray(linear, dtype=np.float32)
+    out = np.empty(lin.shape, dtype=np.float32)
+    if add is None:
+        out[...] = lin
+    else:
+        np.add(lin, add[..., None] if lin.ndim == 3 else add, out=out)
+    np.clip(out, 0.0, 1.0, out=out)
+    np.power(out, np.float32(1.0 / gamma), out=out)
+    if transfer == "release":
+        out *= np.float32(1.0 + _RELEASE_OFFSET)
+        out -= np.float32(_RELEASE_OFFSET)
+        np.clip(out, 0.0, 1.0, out=out)
+    return out
+
+
+def luminance(linear: np.ndarray) -> np.ndarray:
+    """Linear luma ``0.299 R + 0.587 G + 0.114 B`` of an (H, W, 3) image; grey passes through."""
+    if linear.ndim == 2:
+        return np.asarray(linear, dtype=np.float32)
+    return np.tensordot(linear, LUMA_BT601, axes=([-1], [0])).astype(np.float32, copy=False)

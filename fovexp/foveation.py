@@ -1,0 +1,317 @@
+"""Foveation: the spatially varying Gaussian blur that simulates foveated rendering.
+
+Paper section 6.2: inside the fovea (8 deg) the image is full resolution; past it the standard
+deviation of a Gaussian blur grows linearly with eccentricity at the *blur-rate* (arcmin of
+sigma per degree of eccentricity)::
+
+    sigma(e) = blur_rate * max(0, e - fovea)          [arcmin]
+
+converted to pixels with the local pixels per degree (notes section 2: blur-rate 0.34 at 40 deg
+gives 10.9 arcmin, about 9 px on the paper's display).
+
+:func:`foveate` is the fast method: a stack of Gaussian blurs at fixed sigmas, each computed on
+the coarsest Gaussian-pyramid level that still resolves it (the residual blur there is at least
+~1.9 level pixels, so the pyramid's aliasing is filtered away) and only over the region whose
+sigmas need it; each pixel then interpolates linearly between the two stack levels that bracket
+its sigma, sampling them bilinearly. :func:`foveate_exact` is the exact per-pixel spatially
+varying convolution it is measured against (``benchmarks/foveation_error.py``, and the tests).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from .pyramids import gaussian_pyramid, gaussian_sigma_px, level_scale
+
+#: Gaussians are truncated at 4 sigma, as scipy.ndimage.gaussian_filter does.
+TRUNCATE_SIGMAS = 4.0
+
+
+def sigma_px(
+    ecc_deg: np.ndarray, ppd: np.ndarray, blur_rate: float, fovea_deg: float
+) -> np.ndarray:
+    """Blur std in pixels: ``blur_rate / 60 * max(0, e - fovea) * ppd`` (paper section 6.2).
+
+    ``blur_rate`` is in arcmin per degree; ``ppd`` the local pixels per degree. With the
+    release preset (fovea 12 deg, 42.67 px/deg) blur-rate 0.46875 gives the release's
+    "6 px at 30 deg".
+    """
+    arcmin = blur_rate * np.maximum(0.0, np.asarray(ecc_deg) - fovea_deg)
+    return (arcmin / 60.0 * ppd).astype(np.float32)
+
+
+def stack_sigmas_px(max_sigma_px: float) -> np.ndarray:
+    """The blur-stack sigmas: 0.25 px apart up to 1.5 px, then a ratio of 2**0.25.
+
+    The linear interpolation between two Gaussians of std s1 < s2 differs from the Gaussian at
+    s in between by about (s2 - s1)^2 / s^2 of the local contrast (second derivative in sigma);
+    a constant ratio keeps that error the same at every scale. The spacing was chosen from the
+    measured error (benchmarks/foveation_error.md).
+    """
+    levels = [0.0, 0.25, 0.5, 0.75, 1.0, 1.25, 1.5]
+    while levels[-1] < max_sigma_px:
+        levels.append(levels[-1] * 2.0**0.25)
+    return np.array(levels, dtype=np.float64)
+
+
+#: Residual blur (in level pixels) below which a stack level moves to a finer pyramid level.
+MIN_RESIDUAL_LEVEL_PX = 1.25
+
+
+def _pyramid_level_for(sigma: float) -> int:
+    """Coarsest Gaussian level on which a blur of ``sigma`` (full-res px) is still well sampled:
+    the blur left to do there is at least :data:`MIN_RESIDUAL_LEVEL_PX` level pixels."""
+    m = 0
+    while math.sqrt(max(sigma**2 - gaussian_sigma_px(m + 1) ** 2, 0.0)) / level_scale(m + 1) >= (
+        MIN_RESIDUAL_LEVEL_PX
+    ):
+        m += 1
+    return m
+
+
+def gaussian_kernel(sigma: float) -> np.ndarray:
+    """Sampled, normalised 1-D Gaussian truncated at 4 sigma (scipy.ndimage's kernel)."""
+    r = int(TRUNCATE_SIGMAS * sigma + 0.5)
+    d = np.arange(-r, r + 1, dtype=np.float64)
+    g = np.exp(-0.5 * d * d / (sigma * sigma))
+    return (g / g.sum()).astype(np.float32)
+
+
+@numba.njit(cache=True, fastmath=True)
+def _blur_patch(src, ly0, ly1, lx0, lx1, g):  # pragma: no cover - compiled
+    """Separable Gaussian of ``src`` (h, w, c) over rows [ly0, ly1), cols [lx0, lx1);
+    samples outside ``src`` replicate its border."""
+    h, w, c = src.shape
+    r = g.shape[0] // 2
+    ph, pw = ly1 - ly0, lx1 - lx0
+    cx0 = lx0 - r
+    tw = pw + 2 * r
+    # vertical pass over the widened column range, columns clamped to the image
+    tmp = np.zeros((ph, tw * c), dtype=np.float32)
+    for yy in range(ph):
+        for k in range(2 * r + 1):
+            sy = min(max(ly0 + yy + k - r, 0), h - 1)
+            gk = g[k]
+            row = tmp[yy]
+            for xx in range(tw):
+                sx = min(max(cx0 + xx, 0), w - 1)
+                for ch in range(c):
+                    row[xx * c + ch] += gk * src[sy, sx, ch]
+    out = np.zeros((ph, pw * c), dtype=np.float32)
+    for yy in range(ph):
+        row = tmp[yy]
+        orow = out[yy]
+        for k in range(2 * r + 1):
+            gk = g[k]
+            base = k * c
+            for j in range(pw * c):
+                orow[j] += gk * row[base + j]
+    return out
+
+
+@numba.njit(parallel=True, cache=True, fastmath=True)
+def _foveate_bands(
+    img, sigma, levels, lvl_m, kbuf, kmeta, pbuf, pmeta, pad, band_h
+):  # pragma: no cover - compiled
+    """Blur stack evaluated band by band: for each band of rows and each stack level, blur
+    only the runs of columns whose sigmas need that level, then accumulate the per-pixel
+    linear interpolation between the two levels bracketing each sigma."""
+    h, w, c = img.shape
+    n = levels.shape[0]
+    out = np.empty_like(img)
+    nb = (h + band_h - 1) // band_h
+    for b in numba.prange(nb):
+        y0 = b * band_h
+        y1 = min(h, y0 + band_h)
+        # bracket index and weight per pixel of the band
+        kk = np.empty((y1 - y0, w), dtype=np.int64)
+        tt = np.empty((y1 - y0, w), dtype=np.float32)
+        for y in range(y0, y1):
+            for x in range(w):
+                s = sigma[y, x]
+                if s <= 0.0:
+                    kk[y - y0, x] = -1
+                    tt[y - y0, x] = 0.0
+                    for ch in range(c):
+                        out[y, x, ch] = img[y, x, ch]
+                    continue
+                k = np.searchsorted(levels, s) - 1
+                if k >= n - 1:
+                    k = n - 2
+                t = min((s - levels[k]) / (levels[k + 1] - levels[k]), 1.0)
+                kk[y - y0, x] = k
+                tt[y - y0, x] = t
+                for ch in range(c):
+                    out[y, x, ch] = (1.0 - t) * img[y, x, ch] if k == 0 else 0.0
+        for lv in range(1, n):
+            # columns where this level has a non-zero weight
+            need = np.zeros(w, dtype=np.bool_)
+            anyneed = False
+            for y in range(y1 - y0):
+                for x in range(w):
+                    k = kk[y, x]
+                    if k == lv or k == lv - 1:
+                        need[x] = True
+                        anyneed = True
+            if not anyneed:
+                continue
+            m = lvl_m[lv]
+            sc = 1 << m
+            off = pad if m > 0 else 0
+            ps, ph_, pw_ = pmeta[m, 0], pmeta[m, 1], pmeta[m, 2]
+            src = pbuf[ps : ps + ph_ * pw_ * c].reshape((ph_, pw_, c))
+            g = kbuf[kmeta[lv, 0] : kmeta[lv, 0] + 2 * kmeta[lv, 1] + 1]
+            gap = 2 * kmeta[lv, 1] * sc + 32
+            x = 0
+            while x < w:
+                if not need[x]:
+                    x += 1
+                    continue
+                xa = x
+                xb = x
+                while x < w and (need[x] or x - xb <= gap):
+                    if need[x]:
+                        xb = x
+                    x += 1
+                # level-grid patch covering rows [y0, y1) and cols [xa, xb] (+1 for bilinear)
+                ly0 = (y0 + off) // sc
+                ly1 = (y1 - 1 + off) // sc + 2
+                lx0 = (xa + off) // sc
+                lx1 = (xb + off) // sc + 2
+                patch = _blur_patch(src, ly0, ly1, lx0, lx1, g)
+                pw = lx1 - lx0
+                for y in range(y0, y1):
+                    fy = (y + off) / sc - ly0
+                    iy = min(int(fy), ly1 - ly0 - 2)
+                    ay = fy - iy
+                    for xx in range(xa, xb + 1):
+                        k = kk[y - y0, xx]
+                        if k == lv:
+                            wgt = 1.0 - tt[y - y0, xx]
+                        elif k == lv - 1:
+                            wgt = tt[y - y0, xx]
+                        else:
+                            continue
+                        fx = (xx + off) / sc - lx0
+                        ix = min(int(fx), pw - 2)
+                        ax = fx - ix
+                        w00 = wgt * (1.0 - ay) * (1.0 - ax)
+                        w01 = wgt * (1.0 - ay) * ax
+                        w10 = wgt * ay * (1.0 - ax)
+                        w11 = wgt * ay * ax
+                        for ch in range(c):
+                            out[y, xx, ch] += (
+                                w00 * patch[iy, ix * c + ch] + w01 * patch[iy, (ix + 1) * c + ch]
+                                + w10 * patch[iy + 1, ix * c + ch]
+                                + w11 * patch[iy + 1, (ix + 1) * c + ch]
+                            )
+    return out
+
+
+#: Rows per band of the banded evaluation (a band's work fits in cache; bands run in parallel).
+BAND_ROWS = 32
+
+
+def foveate(linear: np.ndarray, sigma_map_px: np.ndarray) -> np.ndarray:
+    """Spatially varying Gaussian blur of a linear image, ``sigma_map_px`` per pixel (fast).
+
+    Works on (H, W) or (H, W, C) float32 images; returns float32 of the same shape. Pixels
+    with sigma 0 are returned unchanged (bit-exact). Error against :func:`foveate_exact`:
+    see ``benchmarks/foveation_error.md``.
+    """
+    grey = linear.ndim == 2
+    img = np.ascontiguousarray(linear[..., None] if grey else linear, dtype=np.float32)
+    sigma = np.ascontiguousarray(sigma_map_px, dtype=np.float32)
+    max_sigma = float(sigma.max()) if sigma.size else 0.0
+    if max_sigma <= 0.0:
+        return linear.astype(np.float32, copy=True)
+    levels = stack_sigmas_px(max_sigma)
+    lvl_m = np.array([_pyramid_level_for(float(s)) for s in levels], dtype=np.int64)
+    top = int(lvl_m.max())
+    # Replicate borders at full resolution (as the exact convolution does) by padding before
+    # the pyramid; a multiple of 2**top keeps the level grids aligned with the image's.
+    step = level_scale(top)
+    pad = -(-int(TRUNCATE_SIGMAS * max_sigma + 2 * step) // step) * step if top else 0
+    padded = np.pad(img, ((pad, pad), (pad, pad), (0, 0)), mode="edge") if pad else img
+    pyramid = gaussian_pyramid(padded, top)
+    pyramid[0] = img  # level 0 is read unpadded (its borders replicate by clamping)
+    pmeta = np.zeros((top + 1, 3), dtype=np.int64)
+    start = 0
+    for m, lvl in enumerate(pyramid):
+        pmeta[m] = (start, lvl.shape[0], lvl.shape[1])
+        start += lvl.size
+    pbuf = np.concatenate([lvl.ravel() for lvl in pyramid])
+    kernels = [np.ones(1, np.float32)]
+    for k in range(1, levels.size):
+        m = int(lvl_m[k])
+        residual = math.sqrt(max(levels[k] ** 2 - gaussian_sigma_px(m) ** 2, 0.0)) / level_scale(m)
+        kernels.append(gaussian_kernel(residual) if residual > 0 else np.ones(1, np.float32))
+    kmeta = np.zeros((levels.size, 2), dtype=np.int64)
+    start = 0
+    for k, g in enumerate(kernels):
+        kmeta[k] = (start, g.size // 2)
+        start += g.size
+    kbuf = np.concatenate(kernels)
+    out = _foveate_bands(
+        img, sigma, levels.astype(np.float32), lvl_m, kbuf, kmeta, pbuf, pmeta, pad, BAND_ROWS
+    )
+    return out[..., 0] if grey else out
+
+
+@numba.njit(parallel=True, cache=True)
+def _exact_at(img, sigma, ys, xs, truncate):  # pragma: no cover - compiled
+    h, w, c = img.shape
+    n = ys.shape[0]
+    out = np.empty((n, c), dtype=np.float64)
+    for i in numba.prange(n):
+        y, x = ys[i], xs[i]
+        s = sigma[y, x]
+        if s <= 0.0:
+            for ch in range(c):
+                out[i, ch] = img[y, x, ch]
+            continue
+        r = int(truncate * s + 0.5)
+        g = np.empty(2 * r + 1)
+        for d in range(-r, r + 1):
+            g[d + r] = math.exp(-0.5 * d * d / (s * s))
+        g /= g.sum()
+        for ch in range(c):
+            acc = 0.0
+            for dy in range(-r, r + 1):
+                yy = min(max(y + dy, 0), h - 1)
+                row = 0.0
+                for dx in range(-r, r + 1):
+                    xx = min(max(x + dx, 0), w - 1)
+                    row += g[dx + r] * img[yy, xx, ch]
+                acc += g[dy + r] * row
+            out[i, ch] = acc
+    return out
+
+
+def foveate_exact(
+    linear: np.ndarray, sigma_map_px: np.ndarray, ys: np.ndarray | None = None,
+    xs: np.ndarray | None = None,
+) -> np.ndarray:
+    """Exact spatially varying convolution: each output pixel is the input convolved with the
+    sampled, normalised Gaussian of *its own* sigma (truncated at 4 sigma, replicated borders).
+
+    For a constant sigma this equals ``scipy.ndimage.gaussian_filter(mode="nearest")``. With
+    ``ys, xs`` only those pixels are computed (returns (N,) or (N, C)); otherwise the whole
+    image (slow: use on small images).
+    """
+    grey = linear.ndim == 2
+    img = np.ascontiguousarray(linear[..., None] if grey else linear, dtype=np.float32)
+    sigma = np.ascontiguousarray(sigma_map_px, dtype=np.float32)
+    whole = ys is None
+    if whole:
+        yy, xx = np.mgrid[0 : img.shape[0], 0 : img.shape[1]]
+        ys, xs = yy.ravel(), xx.ravel()
+    out = _exact_at(img, sigma, np.asarray(ys, np.int64), np.asarray(xs, np.int64),
+                    TRUNCATE_SIGMAS)
+    if whole:
+        out = out.reshape(img.shape)
+    out = out.astype(np.float32)
+    return out[..., 0] if grey else out

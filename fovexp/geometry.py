@@ -1,0 +1,245 @@
+"""Viewing geometry: eccentricity, pixels per degree and frequency-unit conversions.
+
+A display profile (``protocols/displays/*.yaml``) gives the screen's pixel grid, physical size and
+viewing distance. An image whose size differs from the display's is shown full screen: the screen's
+physical size and distance stay, the pixel pitch scales with the image (a 960x540 image on a 4K
+profile is a coarser rendering of the same view).
+
+Three models of the geometry are offered:
+
+``exact``
+    Flat screen, eye on the normal through the screen centre. Eccentricity is the true angle
+    between the gaze ray and the pixel's ray; pixels per degree grow off-axis (notes section 2).
+``linear``
+    The paper's approximation (section 6.1): a constant ``width_px / horizontal field`` pixels
+    per degree and eccentricity = on-screen distance / that constant.
+``release``
+    The authors' released prototype (notes section 3): eccentricity ``atan(R / D)`` with ``R``
+    the physical distance from the gaze point on the screen, and a constant 42.67 px/deg
+    (1920 px / 45 deg) at 3840 px width.
+
+Coordinates: pixel centres at integer ``(x, y)``, x to the right, y down; gaze points in
+normalised screen coordinates ``(x_h, x_v)`` in [0, 1] (paper section 3).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from .errors import FovexpError
+
+GeometryModel = Literal["exact", "linear", "release"]
+
+#: Release constants (notes section 3): 3840 px over a 90 degree field, taken as constant.
+RELEASE_PPD_AT_3840 = 1920.0 / 45.0
+RELEASE_WIDTH_CM = 120.0
+RELEASE_HEIGHT_CM = 67.0
+RELEASE_DISTANCE_CM = 60.0
+RELEASE_WIDTH_PX = 3840
+
+_DISPLAY_DIRS_ENV = "FOVEXP_DISPLAYS"
+_REPO_DISPLAYS = Path(__file__).resolve().parent.parent / "protocols" / "displays"
+
+
+class Display(BaseModel):
+    """A display profile: what the viewing geometry and colour stages need to know."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    name: str
+    width_px: int = Field(gt=0, le=32768)
+    height_px: int = Field(gt=0, le=32768)
+    width_cm: float = Field(gt=0, le=1000)
+    height_cm: float = Field(gt=0, le=1000)
+    distance_cm: float = Field(gt=0, le=1000)
+    refresh_hz: float = Field(gt=0, le=1000)
+    peak_luminance_cd_m2: float = Field(gt=0, le=100000)
+    gamma: float = Field(gt=0.5, le=5.0)
+
+    @property
+    def horizontal_field_deg(self) -> float:
+        """Full horizontal field of view, ``2 atan(w / 2D)`` (notes section 2: 80.8 deg)."""
+        return math.degrees(2.0 * math.atan(0.5 * self.width_cm / self.distance_cm))
+
+
+#: The release's display (notes section 3), for the ``release`` preset.
+RELEASE_DISPLAY = Display(
+    name="release-prototype",
+    width_px=RELEASE_WIDTH_PX,
+    height_px=2160,
+    width_cm=RELEASE_WIDTH_CM,
+    height_cm=RELEASE_HEIGHT_CM,
+    distance_cm=RELEASE_DISTANCE_CM,
+    refresh_hz=60.0,
+    peak_luminance_cd_m2=100.0,
+    gamma=2.2,
+)
+
+
+def display_search_path() -> list[Path]:
+    """Folders searched for ``NAME.yaml`` display profiles, in order."""
+    dirs = [Path(p) for p in __import__("os").environ.get(_DISPLAY_DIRS_ENV, "").split(":") if p]
+    return [*dirs, Path.cwd() / "protocols" / "displays", _REPO_DISPLAYS]
+
+
+def load_display(name_or_path: str | Path) -> Display:
+    """Load a display profile by name (searched in :func:`display_search_path`) or by path.
+
+    Raises :class:`FovexpError` naming the file and the field for a missing or bad profile.
+    """
+    path = Path(name_or_path)
+    if path.suffix not in (".yaml", ".yml"):
+        for d in display_search_path():
+            if (d / f"{name_or_path}.yaml").is_file():
+                path = d / f"{name_or_path}.yaml"
+                break
+        else:
+            raise FovexpError(
+                f"display profile {str(name_or_path)!r} not found "
+                f"(looked in {', '.join(str(d) for d in display_search_path())})"
+            )
+    try:
+        data = yaml.safe_load(path.read_text())
+    except OSError as exc:
+        raise FovexpError(f"cannot read display profile {path}: {exc.strerror}") from None
+    except yaml.YAMLError as exc:
+        raise FovexpError(f"display profile {path} is not valid YAML: {exc}") from None
+    if not isinstance(data, dict):
+        raise FovexpError(f"display profile {path} must be a mapping of fields")
+    try:
+        return Display(**data)
+    except ValidationError as exc:
+        err = exc.errors()[0]
+        field = ".".join(str(p) for p in err["loc"]) or "?"
+        raise FovexpError(f"display profile {path}: field {field!r}: {err['msg']}") from None
+
+
+@dataclass(frozen=True)
+class ViewingGeometry:
+    """The geometry of one image shown full screen on a display.
+
+    Attributes are in the units their names say; ``pitch_*_cm`` is the size of one *image*
+    pixel on the screen.
+    """
+
+    width_px: int
+    height_px: int
+    pitch_x_cm: float
+    pitch_y_cm: float
+    distance_cm: float
+    model: GeometryModel = "exact"
+    #: constant pixels per degree of the ``linear`` and ``release`` models
+    ppd_constant: float = float("nan")
+
+    @classmethod
+    def for_image(
+        cls, display: Display, width_px: int, height_px: int, model: GeometryModel = "exact"
+    ) -> ViewingGeometry:
+        """Geometry of a ``width_px x height_px`` image shown full screen on ``display``."""
+        if model == "release":
+            # The release's own screen and constant ppd, scaled to the image width.
+            return cls(
+                width_px, height_px,
+                RELEASE_WIDTH_CM / width_px, RELEASE_HEIGHT_CM / height_px,
+                RELEASE_DISTANCE_CM, "release",
+                RELEASE_PPD_AT_3840 * width_px / RELEASE_WIDTH_PX,
+            )
+        ppd_lin = width_px / display.horizontal_field_deg
+        return cls(
+            width_px, height_px,
+            display.width_cm / width_px, display.height_cm / height_px,
+            display.distance_cm, model, ppd_lin,
+        )
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return (self.height_px, self.width_px)
+
+    def gaze_px(self, gaze_norm: tuple[float, float]) -> tuple[float, float]:
+        """Normalised gaze ``(x_h, x_v)`` in [0, 1] to pixel coordinates (x right, y down)."""
+        gx, gy = (float(v) for v in gaze_norm)
+        if not (math.isfinite(gx) and math.isfinite(gy) and 0.0 <= gx <= 1.0 and 0.0 <= gy <= 1.0):
+            raise FovexpError(
+                f"gaze ({gx}, {gy}) is outside the screen: normalised coordinates must be in [0, 1]"
+            )
+        return gx * self.width_px - 0.5, gy * self.height_px - 0.5
+
+    def _screen_cm(self, x_px: np.ndarray, y_px: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Pixel coordinates to cm from the screen centre."""
+        return ((x_px + 0.5) - 0.5 * self.width_px) * self.pitch_x_cm, (
+            (y_px + 0.5) - 0.5 * self.height_px
+        ) * self.pitch_y_cm
+
+    def eccentricity_deg(
+        self, x_px: np.ndarray, y_px: np.ndarray, gaze_px: tuple[float, float]
+    ) -> np.ndarray:
+        """Retinal eccentricity (deg) of pixels ``(x_px, y_px)`` for a gaze at ``gaze_px``.
+
+        ``exact``: the angle between the two rays from the eye, ``atan2(|u x v|, u . v)``.
+        ``linear``: on-screen distance in px over the constant px/deg (paper section 6.1).
+        ``release``: ``atan(R / D)`` with ``R`` the on-screen distance in cm (notes section 3).
+        """
+        x_px = np.asarray(x_px, dtype=np.float64)
+        y_px = np.asarray(y_px, dtype=np.float64)
+        gx, gy = gaze_px
+        if self.model == "linear":
+            return np.hypot(x_px - gx, y_px - gy) / self.ppd_constant
+        if self.model == "release":
+            r_cm = np.hypot((x_px - gx) * self.pitch_x_cm, (y_px - gy) * self.pitch_y_cm)
+            return np.degrees(np.arctan(r_cm / self.distance_cm))
+        ux, uy = self._screen_cm(x_px, y_px)
+        vx, vy = self._screen_cm(np.float64(gx), np.float64(gy))
+        d = self.distance_cm
+        dot = ux * vx + uy * vy + d * d
+        cx = uy * d - d * vy
+        cy = d * vx - ux * d
+        cz = ux * vy - uy * vx
+        return np.degrees(np.arctan2(np.sqrt(cx * cx + cy * cy + cz * cz), dot))
+
+    def ppd(self, x_px: np.ndarray, y_px: np.ndarray) -> np.ndarray:
+        """Local pixels per degree at pixels ``(x_px, y_px)``.
+
+        ``exact``: at angle theta off the screen normal a small visual angle spans
+        ``D / cos^2(theta)`` cm radially and ``D / cos(theta)`` tangentially; an isotropic blur
+        needs one number, so this is their geometric mean, ``D / cos^1.5(theta)``, per radian,
+        over the (geometric-mean) pixel pitch. On axis on the LG profile: 39.3 px/deg.
+        ``linear`` and ``release``: the model's constant.
+        """
+        x_px = np.asarray(x_px, dtype=np.float64)
+        y_px = np.asarray(y_px, dtype=np.float64)
+        if self.model != "exact":
+            return np.full(np.broadcast(x_px, y_px).shape, self.ppd_constant)
+        ux, uy = self._screen_cm(x_px, y_px)
+        d = self.distance_cm
+        cos_theta = d / np.sqrt(ux * ux + uy * uy + d * d)
+        pitch = math.sqrt(self.pitch_x_cm * self.pitch_y_cm)
+        return (math.pi / 180.0) * d / (pitch * cos_theta**1.5)
+
+    def grid(self) -> tuple[np.ndarray, np.ndarray]:
+        """Broadcastable pixel-centre coordinates ``(x[None, :], y[:, None])``."""
+        return (
+            np.arange(self.width_px, dtype=np.float64)[None, :],
+            np.arange(self.height_px, dtype=np.float64)[:, None],
+        )
+
+
+def cpd_to_cpp(f_cpd: np.ndarray | float, ppd: np.ndarray | float) -> np.ndarray:
+    """Cycles per degree to cycles per pixel at ``ppd`` pixels per degree."""
+    return np.asarray(f_cpd) / ppd
+
+
+def cpp_to_cpd(f_cpp: np.ndarray | float, ppd: np.ndarray | float) -> np.ndarray:
+    """Cycles per pixel to cycles per degree at ``ppd`` pixels per degree."""
+    return np.asarray(f_cpp) * ppd
+
+
+def arcmin_to_px(arcmin: np.ndarray | float, ppd: np.ndarray | float) -> np.ndarray:
+    """Visual angle in arcmin to pixels at ``ppd`` pixels per degree."""
+    return np.asarray(arcmin) / 60.0 * ppd

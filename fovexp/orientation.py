@@ -1,0 +1,40 @@
+"""Noise orientation from image gradients (paper section 4.3; notes section 3.5).
+
+Sobel gradients of the foveated grey image on Gaussian-pyramid level 3 (1/8 resolution, for
+spatial and temporal smoothness), interpolated bicubically to the points where they are needed.
+The orientation follows the release's convention (x right, y down)::
+
+    omega = atan2(G_y, G_x) - pi / 2
+
+and the Gabor carrier then runs at ``omega - pi / 2``, i.e. along the gradient: the noise's
+stripes run along the edges (see :mod:`fovexp.gabor`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import ndimage
+
+from .pyramids import level_scale
+
+#: Gaussian-pyramid level the gradients are computed on (paper section 4.3).
+ORIENTATION_LEVEL = 3
+
+
+def sobel_gradients(grey_level: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(G_x, G_y)``: Sobel derivatives along x (right) and y (down), replicated borders."""
+    g = np.asarray(grey_level, dtype=np.float32)
+    return ndimage.sobel(g, axis=1, mode="nearest"), ndimage.sobel(g, axis=0, mode="nearest")
+
+
+def orientation_at(
+    gx: np.ndarray, gy: np.ndarray, x_px: np.ndarray, y_px: np.ndarray,
+    level: int = ORIENTATION_LEVEL,
+) -> np.ndarray:
+    """``omega`` (rad) at full-resolution points: G_x, G_y interpolated bicubically (cubic
+    spline, interpolating) from their level grid, then ``atan2(G_y, G_x) - pi/2``."""
+    s = float(level_scale(level))
+    coords = [np.asarray(y_px) / s, np.asarray(x_px) / s]
+    gxs = ndimage.map_coordinates(gx, coords, order=3, mode="nearest")
+    gys = ndimage.map_coordinates(gy, coords, order=3, mode="nearest")
+    return (np.arctan2(gys, gxs) - 0.5 * np.pi).astype(np.float32)

@@ -1,0 +1,183 @@
+"""Method parameters, the paper's Table 2, and the two presets (paper, release).
+
+The calibrated parameters (f_e, s_k, s_f) depend on the foveation strength only (paper
+section 6); Table 2 gives them at three blur-rates. :class:`ParameterTable` interpolates them
+linearly in blur-rate and clamps outside the table's range. A lab's own calibration (written by
+``fovexp analyze``) is a table in the same YAML format::
+
+    source: "Tariq et al. 2022, Table 2"
+    rows:
+      - {blur_rate: 0.11, f_e: 0.15, s_k: 22.4, s_f: 3.45}
+      - ...
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from .errors import FovexpError
+from .geometry import GeometryModel
+
+Method = Literal["foveated", "contrast", "ours"]
+PresetName = Literal["paper", "release"]
+
+METHODS: tuple[str, ...] = ("foveated", "contrast", "ours")
+
+
+@dataclass(frozen=True)
+class Preset:
+    """Constants that differ between the paper and the authors' released prototype."""
+
+    name: str
+    #: radius of the full-resolution fovea (paper section 6.2: 8 deg; release: 12 deg)
+    fovea_deg: float
+    geometry: GeometryModel
+    #: attenuation cut-off a of the amplitude level selection (paper section 4.2)
+    attenuation: float
+    #: Gabor kernel frequency width a, cycles/px (paper section 4.4: 0.06; release: 0.08)
+    gabor_a_cpp: float
+    #: headroom neighbourhood: min/max pyramid level (paper) or a square box (release)
+    minmax: Literal["pyramid", "box"]
+    minmax_level: int
+    minmax_box_px: int
+    #: per-impulse exact truncated draw (paper) or the release's rejection with fallback
+    frequency_draw: Literal["truncated", "release-rejection"]
+    #: colour transfer: pure power law with the display's gamma, or the release's hybrid
+    transfer: Literal["power", "release"]
+
+
+PAPER = Preset(
+    name="paper", fovea_deg=8.0, geometry="exact", attenuation=0.25, gabor_a_cpp=0.06,
+    minmax="pyramid", minmax_level=3, minmax_box_px=25, frequency_draw="truncated",
+    transfer="power",
+)
+RELEASE = Preset(
+    name="release", fovea_deg=12.0, geometry="release", attenuation=0.1, gabor_a_cpp=0.08,
+    minmax="box", minmax_level=3, minmax_box_px=25, frequency_draw="release-rejection",
+    transfer="release",
+)
+PRESETS: dict[str, Preset] = {"paper": PAPER, "release": RELEASE}
+
+
+def get_preset(name: str) -> Preset:
+    try:
+        return PRESETS[name]
+    except KeyError:
+        raise FovexpError(f"unknown preset {name!r} (choose from {', '.join(PRESETS)})") from None
+
+
+class TableRow(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    blur_rate: float = Field(ge=0, le=10)
+    f_e: float = Field(ge=0, le=2)
+    s_k: float = Field(ge=0, le=200)
+    s_f: float = Field(gt=0, le=50)
+
+
+class ParameterTable(BaseModel):
+    """Calibrated (f_e, s_k, s_f) per blur-rate, interpolated linearly in blur-rate."""
+
+    model_config = ConfigDict(extra="forbid")
+    source: str = ""
+    rows: list[TableRow] = Field(min_length=1)
+
+    @model_validator(mode="after")
+    def _sorted_unique(self) -> ParameterTable:
+        rates = [r.blur_rate for r in self.rows]
+        if len(set(rates)) != len(rates):
+            raise ValueError("blur_rate values must be distinct")
+        self.rows.sort(key=lambda r: r.blur_rate)
+        return self
+
+    def at(self, blur_rate: float) -> tuple[float, float, float]:
+        """(f_e, s_k, s_f) at ``blur_rate``: linear in blur-rate, clamped outside the table."""
+        x = [r.blur_rate for r in self.rows]
+        return tuple(  # type: ignore[return-value]
+            float(np.interp(blur_rate, x, [getattr(r, k) for r in self.rows]))
+            for k in ("f_e", "s_k", "s_f")
+        )
+
+    @classmethod
+    def load(cls, path: str | Path) -> ParameterTable:
+        path = Path(path)
+        try:
+            data = yaml.safe_load(path.read_text())
+            return cls(**data)
+        except OSError as exc:
+            raise FovexpError(f"cannot read parameter table {path}: {exc.strerror}") from None
+        except (yaml.YAMLError, TypeError) as exc:
+            raise FovexpError(f"parameter table {path} is malformed: {exc}") from None
+        except ValidationError as exc:
+            err = exc.errors()[0]
+            where = ".".join(str(p) for p in err["loc"]) or "?"
+            raise FovexpError(f"parameter table {path}: {where}: {err['msg']}") from None
+
+    def save(self, path: str | Path) -> None:
+        rows = [r.model_dump() for r in self.rows]
+        text = yaml.safe_dump({"source": self.source, "rows": rows}, sort_keys=False)
+        Path(path).write_text(text)
+
+
+#: Table 2 of the paper (section 6.3).
+PAPER_TABLE2 = ParameterTable(
+    source="Tariq, Tursun, Didyk 2022, Table 2",
+    rows=[
+        TableRow(blur_rate=0.11, f_e=0.15, s_k=22.4, s_f=3.45),
+        TableRow(blur_rate=0.34, f_e=0.23, s_k=21.02, s_f=2.21),
+        TableRow(blur_rate=0.57, f_e=0.28, s_k=18.68, s_f=2.19),
+    ],
+)
+
+#: The release's defaults (notes section 3), one row: the same at every blur-rate.
+RELEASE_TABLE = ParameterTable(
+    source="released prototype defaults",
+    rows=[TableRow(blur_rate=0.0, f_e=0.2, s_k=16.0, s_f=2.1)],
+)
+
+
+class EnhanceParams(BaseModel):
+    """Everything that selects what the enhancer computes for one frame.
+
+    ``f_e``, ``s_k`` and ``s_f`` left as ``None`` are taken from the preset's table at
+    ``blur_rate`` (see :meth:`resolved`).
+    """
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    method: Method = "ours"
+    blur_rate: float = Field(default=0.34, ge=0.0, le=5.0)  # arcmin per deg past the fovea
+    f_e: float | None = Field(default=None, ge=0.0, le=2.0)
+    s_k: float | None = Field(default=None, ge=0.0, le=200.0)
+    s_f: float | None = Field(default=None, gt=0.0, le=50.0)
+    impulses: int = Field(default=64, ge=1, le=512)
+    seed: int = Field(default=1, ge=0, le=2**31 - 1)
+    preset: PresetName = "paper"
+
+    def resolved(self, table: ParameterTable | None = None) -> EnhanceParams:
+        """A copy with f_e, s_k, s_f filled in from ``table`` (default: the preset's)."""
+        if table is None:
+            table = PAPER_TABLE2 if self.preset == "paper" else RELEASE_TABLE
+        f_e, s_k, s_f = table.at(self.blur_rate)
+        return self.model_copy(
+            update={
+                "f_e": f_e if self.f_e is None else self.f_e,
+                "s_k": s_k if self.s_k is None else self.s_k,
+                "s_f": s_f if self.s_f is None else self.s_f,
+            }
+        )
+
+
+def make_params(**kwargs: object) -> EnhanceParams:
+    """Build :class:`EnhanceParams`, turning validation errors into one clear line."""
+    try:
+        return EnhanceParams(**kwargs)  # type: ignore[arg-type]
+    except ValidationError as exc:
+        err = exc.errors()[0]
+        where = ".".join(str(p) for p in err["loc"]) or "?"
+        raise FovexpError(f"parameter {where}={err.get('input')!r}: {err['msg']}") from None

@@ -1,0 +1,423 @@
+"""The enhancer: the paper's stages composed, with a cache that knows what a change invalidates.
+
+Stages and what each depends on (a parameter change recomputes only what lies downstream)::
+
+    image ─ linear ─┬─ foveated ─┬─ luma ─ pyramid ─┬─ laplacian ── amplitude ─┐
+                    │            │                   └─ gradients ── orientation┤
+    gaze, blur_rate ┴─ sigma ────┴─ contrast (f_e) ─ headroom ────── K (s_k) ───┤
+    impulses, seed ─ impulses ─ band ─ frequency (s_f) ──────────────────────────┴─ noise ─ output
+
+The noise parameters are evaluated at the impulses only (the paper's per-impulse reading,
+section 4.4), and only at impulses whose band is open: nothing is computed for the fovea and
+its surround. Full-resolution maps of the parameters are computed on demand
+(:meth:`EnhanceResult.map`), by the same functions evaluated on the pixel grid.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from . import amplitude as amp
+from . import colour, frequency, gabor, orientation, pyramids
+from .contrast import contrast_enhance
+from .errors import FovexpError
+from .foveation import foveate, sigma_px
+from .geometry import Display, GeometryModel, ViewingGeometry
+from .params import EnhanceParams, ParameterTable, Preset, get_preset
+
+MAP_NAMES: tuple[str, ...] = (
+    "eccentricity_deg", "sigma_px", "f_low_cpp", "f_high_cpp", "amplitude", "orientation_rad",
+    "noise", "foveated", "contrast", "output",
+)
+
+
+def check_image(image: np.ndarray, what: str = "image") -> np.ndarray:
+    """Validate a display-encoded float image: (H, W) or (H, W, 3), finite, in [0, 1]."""
+    a = np.asarray(image)
+    if a.ndim == 3 and a.shape[2] == 1:
+        a = a[..., 0]
+    if a.ndim not in (2, 3) or (a.ndim == 3 and a.shape[2] != 3):
+        ch = a.shape[2] if a.ndim == 3 else "?"
+        raise FovexpError(
+            f"{what} has shape {a.shape}: expected grey (H, W) or RGB (H, W, 3), got {ch} channels"
+        )
+    if min(a.shape[:2]) < 16:
+        raise FovexpError(f"{what} is {a.shape[1]}x{a.shape[0]} px: at least 16x16 is needed")
+    if not np.issubdtype(a.dtype, np.floating):
+        raise FovexpError(f"{what} must be a float array in [0, 1], got dtype {a.dtype}")
+    bad = ~np.isfinite(a)
+    if bad.any():
+        y, x = np.argwhere(bad.reshape(a.shape[0], a.shape[1], -1).any(axis=2))[0]
+        raise FovexpError(f"{what} has {int(bad.sum())} NaN/Inf values (first at x={x}, y={y})")
+    lo, hi = float(a.min()), float(a.max())
+    if lo < 0.0 or hi > 1.0:
+        raise FovexpError(f"{what} values must lie in [0, 1], found [{lo:.4g}, {hi:.4g}]")
+    return a.astype(np.float32, copy=False)
+
+
+class _StageCache:
+    """Named stages computed lazily from inputs and other stages; setting an input drops
+    every stage downstream of it."""
+
+    def __init__(self) -> None:
+        self._fns: dict[str, tuple[tuple[str, ...], Callable[..., Any]]] = {}
+        self._inputs: dict[str, Any] = {}
+        self._values: dict[str, Any] = {}
+        self.timings_s: dict[str, float] = {}
+
+    def stage(self, name: str, deps: tuple[str, ...], fn: Callable[..., Any]) -> None:
+        self._fns[name] = (deps, fn)
+
+    def set(self, **inputs: Any) -> None:
+        for k, v in inputs.items():
+            old = self._inputs.get(k, _MISSING)
+            if old is _MISSING or not _same(old, v):
+                self._inputs[k] = v
+                self._invalidate(k)
+
+    def _invalidate(self, name: str) -> None:
+        for stage, (deps, _) in self._fns.items():
+            if name in deps and stage in self._values:
+                del self._values[stage]
+                self._invalidate(stage)
+
+    def get(self, name: str) -> Any:
+        if name in self._inputs:
+            return self._inputs[name]
+        if name not in self._values:
+            deps, fn = self._fns[name]
+            args = [self.get(d) for d in deps]
+            t0 = time.perf_counter()
+            self._values[name] = fn(*args)
+            self.timings_s[name] = self.timings_s.get(name, 0.0) + time.perf_counter() - t0
+        return self._values[name]
+
+    def cached(self, name: str) -> bool:
+        return name in self._values
+
+
+_MISSING = object()
+
+
+def _same(a: Any, b: Any) -> bool:
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        return a is b
+    return bool(a == b)
+
+
+@dataclass
+class ImpulseParams:
+    """Per-impulse noise parameters, for the impulses whose band is open."""
+
+    index: np.ndarray  # into the Impulses arrays
+    x_px: np.ndarray
+    y_px: np.ndarray
+    sigma_px: np.ndarray
+    f_low_cpp: np.ndarray
+    f_high_cpp: np.ndarray
+
+
+@dataclass
+class EnhanceResult:
+    """The output of one :meth:`Enhancer.enhance` call and access to every intermediate map."""
+
+    output: np.ndarray
+    params: EnhanceParams
+    timings_s: dict[str, float]
+    _enhancer: Enhancer = field(repr=False)
+    _version: int = field(repr=False)
+
+    def map(self, name: str) -> np.ndarray:
+        """Full-resolution float32 map ``name`` (one of :data:`MAP_NAMES`), computed on demand.
+
+        ``foveated``, ``contrast`` and ``output`` are display-encoded images in [0, 1];
+        ``amplitude`` is K after clipping control (noise std = K / 6); ``orientation_rad``
+        uses the release's convention (atan2(Gy, Gx) - pi/2, x right, y down); frequencies are
+        in cycles/px and are left as computed where the band is empty (F_L >= F_H).
+        """
+        if self._version != self._enhancer._version:
+            raise FovexpError("this result is stale: the enhancer has processed another frame since")
+        return self._enhancer._map(name)
+
+    def linear(self, name: str) -> np.ndarray:
+        """Linear-light ``foveated`` or ``contrast`` image (before noise and clipping)."""
+        if self._version != self._enhancer._version:
+            raise FovexpError("this result is stale: the enhancer has processed another frame since")
+        return self._enhancer.linear(name)
+
+
+class Enhancer:
+    """Foveation simulation, contrast enhancement and noise enhancement of frames.
+
+    One enhancer per display (and image size); it keeps the stages of the last frame so that
+    a parameter change recomputes only what depends on it.
+    """
+
+    def __init__(
+        self, display: Display, preset: str = "paper", geometry: GeometryModel | None = None,
+        table: ParameterTable | None = None,
+    ) -> None:
+        self.display = display
+        self.preset: Preset = get_preset(preset)
+        self.geometry_model: GeometryModel = (
+            "release" if self.preset.name == "release" else (geometry or self.preset.geometry)
+        )
+        self.table = table
+        self._version = 0
+        c = self._c = _StageCache()
+        p = self.preset
+        c.stage("geometry", ("shape",), self._geometry)
+        c.stage("linear", ("image",), self._linear)
+        c.stage("grid_ecc", ("geometry", "gaze"), self._grid_ecc)
+        c.stage("grid_ppd", ("geometry",), self._grid_ppd)
+        c.stage("sigma", ("sigma_given", "grid_ecc", "grid_ppd", "blur_rate"), self._sigma)
+        c.stage("foveated", ("linear", "sigma", "already_foveated"), self._foveated)
+        c.stage("luma", ("foveated",), colour.luminance)
+        c.stage("pyramid", ("luma",), lambda luma: pyramids.gaussian_pyramid(
+            luma, amp.MAX_LAPLACIAN_LEVEL))
+        c.stage("abs_laplacian", ("pyramid",), self._abs_laplacian)
+        c.stage("gradients", ("pyramid",), lambda pyr: orientation.sobel_gradients(
+            pyr[orientation.ORIENTATION_LEVEL]))
+        c.stage("contrast", ("foveated", "sigma", "f_e", "method"), self._contrast)
+        c.stage("headroom", ("contrast",), self._headroom)
+        c.stage("impulses", ("shape", "n_impulses", "seed"), lambda shape, n, seed:
+                gabor.generate_impulses(shape[1], shape[0], n, p.gabor_a_cpp, seed))
+        c.stage("imp_band", ("impulses", "geometry", "gaze", "sigma_given", "sigma",
+                             "blur_rate"), self._imp_band)
+        c.stage("imp_frequency", ("imp_band", "impulses", "s_f"), self._imp_frequency)
+        c.stage("imp_laplacian", ("imp_band", "abs_laplacian"), lambda b, lap:
+                self._laplacian_at(lap, b.sigma_px, b.x_px, b.y_px))
+        c.stage("imp_headroom", ("imp_band", "headroom"), lambda b, hr:
+                self._headroom_at(hr, b.x_px, b.y_px))
+        c.stage("imp_amplitude", ("imp_laplacian", "imp_headroom", "s_k"), self._amplitude)
+        c.stage("imp_orientation", ("imp_band", "gradients"), lambda b, g:
+                orientation.orientation_at(g[0], g[1], b.x_px, b.y_px))
+        c.stage("noise", ("shape", "impulses", "imp_band", "imp_amplitude", "imp_frequency",
+                          "imp_orientation", "n_impulses"), self._noise)
+        c.stage("output", ("method", "foveated", "contrast", "noise"), self._compose)
+
+    # ----------------------------------------------------------------------------- public API
+    def set_image(
+        self, image: np.ndarray, foveated: bool = False, sigma_px: np.ndarray | None = None
+    ) -> None:
+        """Set the frame: a full-resolution reference to foveate (default), or an already
+        foveated frame described by the blur-rate (``foveated=True``) or a sigma map in px.
+
+        ``image`` is display-encoded, float, in [0, 1], (H, W) or (H, W, 3).
+        """
+        img = check_image(image)
+        sigma_given = None
+        if sigma_px is not None:
+            sigma_given = np.asarray(sigma_px, dtype=np.float32)
+            if sigma_given.shape != img.shape[:2]:
+                raise FovexpError(
+                    f"sigma map has shape {sigma_given.shape}, the image {img.shape[:2]}"
+                )
+            if not np.isfinite(sigma_given).all() or float(sigma_given.min()) < 0:
+                raise FovexpError("sigma map must be finite and non-negative (px)")
+        self._c.set(image=img, shape=img.shape[:2], sigma_given=sigma_given,
+                    already_foveated=bool(foveated or sigma_px is not None))
+        self._version += 1
+
+    def enhance(
+        self, gaze: tuple[float, float] = (0.5, 0.5), params: EnhanceParams | None = None,
+        image: np.ndarray | None = None,
+    ) -> EnhanceResult:
+        """Process the current frame (or ``image``, set first) for ``gaze`` and ``params``."""
+        if image is not None:
+            self.set_image(image)
+        if "image" not in self._c._inputs:
+            raise FovexpError("no image: call set_image() first")
+        params = (params or EnhanceParams(preset=self.preset.name)).resolved(self.table)
+        if params.preset != self.preset.name:
+            raise FovexpError(
+                f"params are for preset {params.preset!r}, this enhancer is {self.preset.name!r}"
+            )
+        geom = ViewingGeometry.for_image(self.display, 1, 1, self.geometry_model)
+        gaze_t = (float(gaze[0]), float(gaze[1]))
+        geom.gaze_px(gaze_t)  # validates the gaze
+        self._c.timings_s = {}
+        self._c.set(
+            gaze=gaze_t, blur_rate=params.blur_rate, f_e=params.f_e, s_k=params.s_k,
+            s_f=params.s_f, n_impulses=params.impulses, seed=params.seed, method=params.method,
+        )
+        self._version += 1
+        out = self._c.get("output")
+        return EnhanceResult(out, params, dict(self._c.timings_s), self, self._version)
+
+    # ------------------------------------------------------------------------------- stages
+    def _geometry(self, shape: tuple[int, int]) -> ViewingGeometry:
+        return ViewingGeometry.for_image(self.display, shape[1], shape[0], self.geometry_model)
+
+    def _gamma(self) -> float:
+        return 2.2 if self.preset.transfer == "release" else self.display.gamma
+
+    def _linear(self, image: np.ndarray) -> np.ndarray:
+        return colour.linearize(image, self._gamma(), self.preset.transfer)
+
+    def _encode(self, linear: np.ndarray) -> np.ndarray:
+        return colour.encode(linear, self._gamma(), self.preset.transfer)
+
+    def _grid_ecc(self, geom: ViewingGeometry, gaze: tuple[float, float]) -> np.ndarray:
+        x, y = geom.grid()
+        return geom.eccentricity_deg(x, y, geom.gaze_px(gaze)).astype(np.float32)
+
+    def _grid_ppd(self, geom: ViewingGeometry) -> np.ndarray:
+        x, y = geom.grid()
+        return np.broadcast_to(geom.ppd(x, y), geom.shape).astype(np.float32)
+
+    def _sigma(self, given, ecc, ppd, blur_rate) -> np.ndarray:
+        if given is not None:
+            return given
+        return sigma_px(ecc, ppd, blur_rate, self.preset.fovea_deg)
+
+    def _foveated(self, linear, sigma, already_foveated) -> np.ndarray:
+        return linear if already_foveated else foveate(linear, sigma)
+
+    def _abs_laplacian(self, pyr: list[np.ndarray]) -> dict[int, np.ndarray]:
+        return pyramids.smoothed_abs_laplacian(pyr, len(pyr) - 1)
+
+    def _contrast(self, foveated, sigma, f_e, method) -> np.ndarray | None:
+        if method == "foveated":
+            return None
+        return contrast_enhance(foveated, sigma, f_e)
+
+    def _headroom(self, contrast: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, int]:
+        """Local minimum and maximum of the contrast-enhanced grey (section 4.2)."""
+        if contrast is None:
+            return np.zeros((1, 1)), np.ones((1, 1)), 1
+        grey = colour.luminance(contrast)
+        p = self.preset
+        if p.minmax == "pyramid":
+            lo, hi = pyramids.minmax_pyramid_level(grey, p.minmax_level)
+            return lo, hi, pyramids.level_scale(p.minmax_level)
+        from scipy import ndimage
+
+        size = p.minmax_box_px
+        return (ndimage.minimum_filter(grey, size, mode="nearest"),
+                ndimage.maximum_filter(grey, size, mode="nearest"), 1)
+
+    def _band_at(self, geom, gaze, sigma_given, sigma, blur_rate, x, y):
+        """F_L, F_H and sigma at points (section 4.1): sigma exactly from the geometry when
+        the foveation is simulated here, else sampled from the given sigma map."""
+        ecc = geom.eccentricity_deg(x, y, geom.gaze_px(gaze))
+        ppd = geom.ppd(x, y)
+        if sigma_given is None:
+            s = sigma_px(ecc, ppd, blur_rate, self.preset.fovea_deg).astype(np.float64)
+        else:
+            s = pyramids.sample_bilinear(sigma, x, y, 0).astype(np.float64)
+        f_lo, f_hi = frequency.frequency_band_cpp(ecc, ppd, s)
+        return s, f_lo, f_hi
+
+    def _imp_band(self, imp, geom, gaze, sigma_given, sigma, blur_rate) -> ImpulseParams:
+        x, y = imp.x_px, imp.y_px
+        # impulses whose kernel cannot reach the image are dropped with the others
+        s, f_lo, f_hi = self._band_at(geom, gaze, sigma_given, sigma, blur_rate,
+                                      np.clip(x, 0, geom.width_px - 1),
+                                      np.clip(y, 0, geom.height_px - 1))
+        open_ = np.flatnonzero(f_lo < f_hi)
+        return ImpulseParams(open_, x[open_], y[open_], s[open_], f_lo[open_], f_hi[open_])
+
+    def _imp_frequency(self, band: ImpulseParams, imp, s_f: float) -> np.ndarray:
+        mu, sig_n = frequency.lognormal_params(band.f_low_cpp, band.f_high_cpp, s_f)
+        if self.preset.frequency_draw == "truncated":
+            return frequency.draw_truncated(imp.quantile[band.index], mu, sig_n, band.f_high_cpp)
+        rng = np.random.default_rng(imp.seed)
+        normals = rng.standard_normal((len(imp), frequency.RELEASE_REJECTION_TRIES))
+        return frequency.draw_release(normals[band.index], mu, sig_n, band.f_high_cpp)
+
+    def _laplacian_at(self, lap, sigma, x, y) -> np.ndarray:
+        level = amp.laplacian_level(sigma, self.preset.attenuation)
+        return amp.laplacian_amplitude_at(lap, level, x, y)
+
+    def _headroom_at(self, headroom, x, y) -> np.ndarray:
+        lo, hi, block = headroom
+        xc = np.clip(x, 0, None)
+        yc = np.clip(y, 0, None)
+        return amp.headroom_limit(
+            pyramids.sample_nearest(lo, xc, yc, block), pyramids.sample_nearest(hi, xc, yc, block)
+        )
+
+    def _amplitude(self, lap_amp, limit, s_k) -> np.ndarray:
+        k = s_k * amp.RELEASE_AMPLITUDE_GAIN * lap_amp
+        return np.minimum(k, limit)
+
+    def _noise(self, shape, imp, band, k, f, omega, n) -> np.ndarray:
+        full = np.zeros(len(imp))
+        freq = np.zeros(len(imp))
+        carrier = np.zeros(len(imp))
+        full[band.index] = k
+        freq[band.index] = f
+        carrier[band.index] = omega - 0.5 * np.pi
+        return gabor.synthesize(shape, imp, full, freq, carrier, n, self.preset.gabor_a_cpp)
+
+    def _compose(self, method, foveated, contrast, noise) -> np.ndarray:
+        """The displayed frame: the noise (grey) is added to every channel of the linear
+        contrast-enhanced image, then encoded (section 4.5); values outside [0, 1] clip."""
+        if method == "foveated":
+            return self._encode(foveated)
+        if method == "contrast":
+            return self._encode(contrast)
+        return colour.encode(contrast, self._gamma(), self.preset.transfer, add=noise)
+
+    # ------------------------------------------------------------------------------- maps
+    def linear(self, name: str) -> np.ndarray:
+        """Linear-light ``foveated`` or ``contrast`` image of the current frame (before the
+        noise and before any clipping)."""
+        if name not in ("foveated", "contrast"):
+            raise FovexpError(f"no linear image {name!r} (choose foveated or contrast)")
+        v = self._c.get(name)
+        if v is None:
+            raise FovexpError(f"{name!r} does not exist for method {self._c.get('method')!r}")
+        return v
+
+    def _map(self, name: str) -> np.ndarray:
+        c = self._c
+        if name == "eccentricity_deg":
+            return c.get("grid_ecc")
+        if name == "sigma_px":
+            return c.get("sigma")
+        if name == "output":
+            return c.get("output")
+        if name in ("foveated", "contrast"):
+            return self._encode(self.linear(name))
+        if name == "noise":
+            if c.get("method") != "ours":
+                return np.zeros(c.get("shape"), np.float32)
+            return c.get("noise")
+        geom = c.get("geometry")
+        h, w = geom.shape
+        yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
+        x, y = xx.ravel(), yy.ravel()
+        s, f_lo, f_hi = self._band_at(geom, c.get("gaze"), c.get("sigma_given"), c.get("sigma"),
+                                      c.get("blur_rate"), x, y)
+        if name == "f_low_cpp":
+            return f_lo.reshape(h, w).astype(np.float32)
+        if name == "f_high_cpp":
+            return f_hi.reshape(h, w).astype(np.float32)
+        if name == "amplitude":
+            if c.get("method") != "ours":
+                return np.zeros((h, w), np.float32)
+            k = self._amplitude(self._laplacian_at(c.get("abs_laplacian"), s, x, y),
+                                self._headroom_at(c.get("headroom"), x, y), c.get("s_k"))
+            return np.where(f_lo < f_hi, k, 0.0).reshape(h, w).astype(np.float32)
+        if name == "orientation_rad":
+            gx, gy = c.get("gradients")
+            return orientation.orientation_at(gx, gy, x, y).reshape(h, w)
+        raise FovexpError(f"unknown map {name!r} (choose from {', '.join(MAP_NAMES)})")
+
+
+def enhance(
+    image: np.ndarray, display: Display, gaze: tuple[float, float] = (0.5, 0.5),
+    params: EnhanceParams | None = None, preset: str | None = None,
+) -> EnhanceResult:
+    """One-shot convenience: foveate ``image`` and enhance it (see :class:`Enhancer`)."""
+    params = params or EnhanceParams()
+    enh = Enhancer(display, preset=preset or params.preset)
+    enh.set_image(image)
+    return enh.enhance(gaze, params)

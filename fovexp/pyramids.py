@@ -1,0 +1,196 @@
+"""Image pyramids (paper sections 4.2, 4.3; notes sections 3.5, 3.7, 3.8).
+
+Gaussian and Laplacian pyramids use the 5-tap binomial kernel [1, 4, 6, 4, 1] / 16 with
+replicated borders, keeping every second sample (Burt and Adelson 1983), as the release does.
+Sample ``j`` of level ``m`` sits on full-resolution pixel ``j * 2**m``.
+
+Laplacian levels are counted from 1 (notes section 1, erratum): ``L_1 = G_0 - expand(G_1)`` is
+the finest band, 0.25..0.5 cycles/px, with centre ``2**-1.5``; level ``k`` has centre
+``2**-(k + 0.5)`` cycles/px and lives on the grid of ``G_{k-1}``.
+
+Min/max pyramids (paper section 4.2): level ``l`` holds the minimum (maximum) of each
+``2**l x 2**l`` block of the full-resolution image.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+from scipy import ndimage
+
+#: Burt-Adelson 5-tap binomial kernel; its variance is 1 px^2 at the level it filters.
+BINOMIAL_5 = np.array([1.0, 4.0, 6.0, 4.0, 1.0], dtype=np.float32) / 16.0
+
+
+def level_scale(level: int) -> int:
+    """Full-resolution pixels per sample of Gaussian level ``level``."""
+    return 1 << level
+
+
+def gaussian_sigma_px(level: int) -> float:
+    """Effective Gaussian std (full-res px) of Gaussian level ``level``: sum of 4**j, j < level.
+
+    Each reduce filters with variance 1 in its input's pixels, i.e. 4**j full-res px^2.
+    """
+    return float(np.sqrt((4.0**level - 1.0) / 3.0))
+
+
+@numba.njit(parallel=True, cache=True, fastmath=True)
+def _reduce_2d(img: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
+    h, w = img.shape
+    ho, wo = (h + 1) // 2, (w + 1) // 2
+    out = np.empty((ho, wo), dtype=np.float32)
+    k0, k1, k2 = np.float32(0.0625), np.float32(0.25), np.float32(0.375)
+    for i in numba.prange(ho):
+        r = 2 * i
+        rm2, rm1 = max(r - 2, 0), max(r - 1, 0)
+        rp1, rp2 = min(r + 1, h - 1), min(r + 2, h - 1)
+        row = np.empty(w, dtype=np.float32)
+        for x in range(w):
+            row[x] = (
+                k0 * (img[rm2, x] + img[rp2, x]) + k1 * (img[rm1, x] + img[rp1, x])
+                + k2 * img[r, x]
+            )
+        for j in range(wo):
+            c = 2 * j
+            out[i, j] = (
+                k0 * (row[max(c - 2, 0)] + row[min(c + 2, w - 1)])
+                + k1 * (row[max(c - 1, 0)] + row[min(c + 1, w - 1)])
+                + k2 * row[c]
+            )
+    return out
+
+
+@numba.njit(parallel=True, cache=True, fastmath=True)
+def _expand_2d(a: np.ndarray, ho: int, wo: int) -> np.ndarray:  # pragma: no cover - compiled
+    h, w = a.shape
+    out = np.empty((ho, wo), dtype=np.float32)
+    for y in numba.prange(ho):
+        i = y // 2
+        row = np.empty(w, dtype=np.float32)
+        if y % 2 == 0:
+            im1, ip1 = max(i - 1, 0), min(i + 1, h - 1)
+            for x in range(w):
+                row[x] = np.float32(0.125) * (a[im1, x] + a[ip1, x]) + np.float32(0.75) * a[i, x]
+        else:
+            ip1 = min(i + 1, h - 1)
+            for x in range(w):
+                row[x] = np.float32(0.5) * (a[i, x] + a[ip1, x])
+        for x in range(wo):
+            j = x // 2
+            if x % 2 == 0:
+                out[y, x] = np.float32(0.125) * (row[max(j - 1, 0)] + row[min(j + 1, w - 1)]) + (
+                    np.float32(0.75) * row[j]
+                )
+            else:
+                out[y, x] = np.float32(0.5) * (row[j] + row[min(j + 1, w - 1)])
+    return out
+
+
+def _per_channel(fn, image: np.ndarray, *args: int) -> np.ndarray:
+    image = np.ascontiguousarray(image, dtype=np.float32)
+    if image.ndim == 2:
+        return fn(image, *args)
+    return np.stack(
+        [fn(np.ascontiguousarray(image[..., c]), *args) for c in range(image.shape[2])], axis=-1
+    )
+
+
+def reduce(image: np.ndarray) -> np.ndarray:
+    """One Gaussian-pyramid step: binomial filter (replicated borders), keep every second sample.
+
+    Works on (H, W) or (H, W, C) float32 images.
+    """
+    return _per_channel(_reduce_2d, image)
+
+
+def expand(image: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """Inverse step of :func:`reduce`: upsample to ``shape`` (the finer level's size).
+
+    Zero insertion and filtering with the binomial kernel x 2, in polyphase form: even outputs
+    ``(a[i-1] + 6 a[i] + a[i+1]) / 8``, odd outputs ``(a[i] + a[i+1]) / 2``, borders replicated.
+    """
+    return _per_channel(_expand_2d, image, int(shape[0]), int(shape[1]))
+
+
+def gaussian_pyramid(image: np.ndarray, levels: int) -> list[np.ndarray]:
+    """``[G_0, ..., G_levels]`` with ``G_0`` the image itself (not copied)."""
+    pyr = [image]
+    for _ in range(levels):
+        if min(pyr[-1].shape[:2]) < 2:
+            break
+        pyr.append(reduce(pyr[-1]))
+    return pyr
+
+
+@numba.njit(parallel=True, cache=True, fastmath=True)
+def _abs_diff_box3(fine, up):  # pragma: no cover - compiled
+    h, w = fine.shape
+    out = np.empty((h, w), dtype=np.float32)
+    for y in numba.prange(h):
+        for x in range(w):
+            acc = np.float32(0.0)
+            for dy in range(-1, 2):
+                yy = min(max(y + dy, 0), h - 1)
+                for dx in range(-1, 2):
+                    xx = min(max(x + dx, 0), w - 1)
+                    acc += abs(fine[yy, xx] - up[yy, xx])
+            out[y, x] = acc / np.float32(9.0)
+    return out
+
+
+def smoothed_abs_laplacian(gaussian: list[np.ndarray], levels: int) -> dict[int, np.ndarray]:
+    """``|L_k|`` smoothed by a 3 x 3 mean on its own grid (notes 3.7), ``k = 1..levels``,
+    in one fused pass per level."""
+    out = {}
+    for k in range(1, min(levels, len(gaussian) - 1) + 1):
+        fine = np.ascontiguousarray(gaussian[k - 1], dtype=np.float32)
+        out[k] = _abs_diff_box3(fine, expand(gaussian[k], fine.shape[:2]))
+    return out
+
+
+def laplacian_levels(gaussian: list[np.ndarray], levels: int) -> dict[int, np.ndarray]:
+    """Laplacian bands ``{k: G_{k-1} - expand(G_k)}`` for ``k = 1..levels`` (notes section 1)."""
+    out = {}
+    for k in range(1, min(levels, len(gaussian) - 1) + 1):
+        fine = gaussian[k - 1]
+        out[k] = fine - expand(gaussian[k], fine.shape[:2])
+    return out
+
+
+def minmax_pyramid_level(image: np.ndarray, level: int) -> tuple[np.ndarray, np.ndarray]:
+    """Block minimum and maximum over ``2**level`` x ``2**level`` blocks (paper section 4.2).
+
+    Built level by level from 2 x 2 neighbourhoods as the paper describes; odd sizes replicate
+    their last row or column.
+    """
+    lo = hi = np.asarray(image)
+    for _ in range(level):
+        if lo.shape[0] % 2:
+            lo = np.concatenate([lo, lo[-1:]], axis=0)
+            hi = np.concatenate([hi, hi[-1:]], axis=0)
+        if lo.shape[1] % 2:
+            lo = np.concatenate([lo, lo[:, -1:]], axis=1)
+            hi = np.concatenate([hi, hi[:, -1:]], axis=1)
+        lo = np.minimum(
+            np.minimum(lo[0::2, 0::2], lo[1::2, 0::2]), np.minimum(lo[0::2, 1::2], lo[1::2, 1::2])
+        )
+        hi = np.maximum(
+            np.maximum(hi[0::2, 0::2], hi[1::2, 0::2]), np.maximum(hi[0::2, 1::2], hi[1::2, 1::2])
+        )
+    return lo, hi
+
+
+def sample_bilinear(grid: np.ndarray, x_px: np.ndarray, y_px: np.ndarray, level: int) -> np.ndarray:
+    """Bilinear sample of a level-``level`` grid at full-resolution coordinates (borders held)."""
+    s = float(level_scale(level))
+    return ndimage.map_coordinates(
+        grid, [np.asarray(y_px) / s, np.asarray(x_px) / s], order=1, mode="nearest"
+    ).astype(np.float32, copy=False)
+
+
+def sample_nearest(grid: np.ndarray, x_px: np.ndarray, y_px: np.ndarray, block: int) -> np.ndarray:
+    """The value of the ``block`` x ``block`` cell that contains each full-resolution pixel."""
+    iy = np.clip((np.asarray(y_px) + 0.5).astype(np.int64) // block, 0, grid.shape[0] - 1)
+    ix = np.clip((np.asarray(x_px) + 0.5).astype(np.int64) // block, 0, grid.shape[1] - 1)
+    return grid[iy, ix]
