@@ -7,7 +7,7 @@ from .errors import FovexpError
 from .geometry import Display, load_display
 from .io import read_image, write_image
 from .params import PAPER_TABLE2, EnhanceParams, ParameterTable, make_params
-from .pipeline import MAP_NAMES, EnhanceResult, Enhancer, enhance
+from .pipeline import MAP_NAMES, Enhancer, EnhanceResult, enhance
 
 __version__ = "0.1.0"
 

@@ -73,9 +73,8 @@ def _enhance(img, sigma, sat, pad, f_e):  # pragma: no cover - compiled
                     hi = n - 1 - lo
                     ya, yb = y + pad - lo, y + pad + hi + 1
                     xa, xb = x + pad - lo, x + pad + hi + 1
-                    avg = (sat[yb, xb, ch] - sat[ya, xb, ch] - sat[yb, xa, ch] + sat[ya, xa, ch]) / (
-                        n * n
-                    )
+                    box = sat[yb, xb, ch] - sat[ya, xb, ch] - sat[yb, xa, ch] + sat[ya, xa, ch]
+                    avg = box / (n * n)
                     acc += wgt * (avg + f_e * (1.0 + k) * (v - avg))
                 out[y, x, ch] = acc
     return out

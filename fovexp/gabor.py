@@ -167,7 +167,9 @@ WINDOW_MULTIPLE = 16
 
 
 @numba.njit(cache=True, fastmath=True)
-def _splat_band(out, y0, y1, pad, xs, ys, amp, kx, ky, lo, hi, r, a, nwin, er, ei):  # pragma: no cover
+def _splat_band(
+    out, y0, y1, pad, xs, ys, amp, kx, ky, lo, hi, r, a, nwin, er, ei
+):  # pragma: no cover - compiled
     """Add the kernels of impulses ``lo..hi`` to rows [y0, y1) of ``out`` (band-local rows,
     columns shifted by ``pad``). The kernel is truncated to the square of half-side ``r``
     (its envelope is at most 1 % on the square's edges), so each row is one fixed-width

@@ -206,10 +206,12 @@ class ViewingGeometry:
     def ppd(self, x_px: np.ndarray, y_px: np.ndarray) -> np.ndarray:
         """Local pixels per degree at pixels ``(x_px, y_px)``.
 
-        ``exact``: at angle theta off the screen normal a small visual angle spans
-        ``D / cos^2(theta)`` cm radially and ``D / cos(theta)`` tangentially; an isotropic blur
-        needs one number, so this is their geometric mean, ``D / cos^1.5(theta)``, per radian,
-        over the (geometric-mean) pixel pitch. On axis on the LG profile: 39.3 px/deg.
+        ``exact``: a pixel at distance ``L = D / cos(theta)`` from the eye (theta off the
+        screen normal) subtends ``pitch / L`` rad across the line of sight, so
+        ``ppd = (pi / 180) L / pitch``: 39.3 px/deg on axis on the LG profile, 51 at its
+        horizontal edge (a 10.9 arcmin blur there is about 9 px, notes section 2). Along the
+        radius the screen is foreshortened by a further cos(theta); an isotropic screen-space
+        blur cannot follow that, so the across-the-line-of-sight figure is used.
         ``linear`` and ``release``: the model's constant.
         """
         x_px = np.asarray(x_px, dtype=np.float64)
@@ -218,9 +220,8 @@ class ViewingGeometry:
             return np.full(np.broadcast(x_px, y_px).shape, self.ppd_constant)
         ux, uy = self._screen_cm(x_px, y_px)
         d = self.distance_cm
-        cos_theta = d / np.sqrt(ux * ux + uy * uy + d * d)
         pitch = math.sqrt(self.pitch_x_cm * self.pitch_y_cm)
-        return (math.pi / 180.0) * d / (pitch * cos_theta**1.5)
+        return (math.pi / 180.0) * np.sqrt(ux * ux + uy * uy + d * d) / pitch
 
     def grid(self) -> tuple[np.ndarray, np.ndarray]:
         """Broadcastable pixel-centre coordinates ``(x[None, :], y[:, None])``."""

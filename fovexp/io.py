@@ -32,7 +32,7 @@ def read_image(path: str | Path) -> np.ndarray:
     if not path.is_file():
         raise FovexpError(f"{path}: no such file")
     try:
-        raw = iio.imread(path)
+        raw = _read_png16(path) if _is_png16(path) else iio.imread(path)
     except Exception as exc:  # imageio raises many types for bad files
         raise FovexpError(f"{path}: cannot be read as an image ({type(exc).__name__})") from None
     if raw.ndim == 3 and raw.shape[2] == 1:
@@ -53,6 +53,21 @@ def read_image(path: str | Path) -> np.ndarray:
     if not np.isfinite(img).all():
         raise FovexpError(f"{path}: contains NaN or Inf pixels")
     return img
+
+
+def _is_png16(path: Path) -> bool:
+    """PNG with 16-bit samples (IHDR bit depth, byte 24): Pillow would read it as 8-bit."""
+    with open(path, "rb") as fh:
+        head = fh.read(25)
+    return head[:8] == b"\x89PNG\r\n\x1a\n" and len(head) == 25 and head[24] == 16
+
+
+def _read_png16(path: Path) -> np.ndarray:
+    import png
+
+    width, height, rows, info = png.Reader(filename=str(path)).asDirect()
+    data = np.vstack([np.asarray(r, dtype=np.uint16) for r in rows])
+    return data.reshape(height, width, info["planes"]) if info["planes"] > 1 else data
 
 
 def atomic_write_bytes(path: Path, write) -> None:
@@ -83,6 +98,20 @@ def write_image(path: str | Path, image: np.ndarray, bit_depth: int = 8) -> None
     v = np.clip(np.asarray(image, dtype=np.float64), 0.0, 1.0)
     top = 255 if bit_depth == 8 else 65535
     data = np.round(v * top).astype(np.uint8 if bit_depth == 8 else np.uint16)
+    if kind == "PNG" and bit_depth == 16:
+        # Pillow cannot write 16-bit colour PNGs; pypng can.
+        import png
+
+        planes = 1 if data.ndim == 2 else data.shape[2]
+        rows = data.reshape(data.shape[0], -1)
+
+        def write_png16(tmp: Path) -> None:
+            with open(tmp, "wb") as fh:
+                png.Writer(data.shape[1], data.shape[0], greyscale=planes == 1, bitdepth=16
+                           ).write(fh, rows)
+
+        atomic_write_bytes(path, write_png16)
+        return
     extra = {"quality": 95} if kind == "JPEG" else {}
     atomic_write_bytes(path, lambda tmp: iio.imwrite(tmp, data, extension=path.suffix, **extra))
 

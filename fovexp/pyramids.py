@@ -158,27 +158,18 @@ def laplacian_levels(gaussian: list[np.ndarray], levels: int) -> dict[int, np.nd
     return out
 
 
-def minmax_pyramid_level(image: np.ndarray, level: int) -> tuple[np.ndarray, np.ndarray]:
-    """Block minimum and maximum over ``2**level`` x ``2**level`` blocks (paper section 4.2).
-
-    Built level by level from 2 x 2 neighbourhoods as the paper describes; odd sizes replicate
-    their last row or column.
-    """
-    lo = hi = np.asarray(image)
+def block_extreme(image: np.ndarray, level: int, op: np.ufunc) -> np.ndarray:
+    """One level of a min (``op=np.minimum``) or max (``np.maximum``) pyramid: the extreme of
+    each ``2**level x 2**level`` block, built from 2 x 2 neighbourhoods level by level as the
+    paper describes (section 4.2); odd sizes replicate their last row or column."""
+    a = np.asarray(image)
     for _ in range(level):
-        if lo.shape[0] % 2:
-            lo = np.concatenate([lo, lo[-1:]], axis=0)
-            hi = np.concatenate([hi, hi[-1:]], axis=0)
-        if lo.shape[1] % 2:
-            lo = np.concatenate([lo, lo[:, -1:]], axis=1)
-            hi = np.concatenate([hi, hi[:, -1:]], axis=1)
-        lo = np.minimum(
-            np.minimum(lo[0::2, 0::2], lo[1::2, 0::2]), np.minimum(lo[0::2, 1::2], lo[1::2, 1::2])
-        )
-        hi = np.maximum(
-            np.maximum(hi[0::2, 0::2], hi[1::2, 0::2]), np.maximum(hi[0::2, 1::2], hi[1::2, 1::2])
-        )
-    return lo, hi
+        if a.shape[0] % 2:
+            a = np.concatenate([a, a[-1:]], axis=0)
+        if a.shape[1] % 2:
+            a = np.concatenate([a, a[:, -1:]], axis=1)
+        a = op(op(a[0::2, 0::2], a[1::2, 0::2]), op(a[0::2, 1::2], a[1::2, 1::2]))
+    return a
 
 
 def sample_bilinear(grid: np.ndarray, x_px: np.ndarray, y_px: np.ndarray, level: int) -> np.ndarray:

@@ -1,0 +1,1 @@
+from engine_helpers import sponza  # noqa: F401  (fixture)

@@ -1,0 +1,38 @@
+"""Shared inputs of the enhancer tests: generated textured images and the shared Sponza frame."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy import ndimage
+
+SPONZA = Path(__file__).resolve().parents[2] / "shared" / "stimuli" / "sponza-4k.jpg"
+
+
+def textured_image(height: int = 270, width: int = 480, seed: int = 0, rgb: bool = True):
+    """Display-encoded test image in [0.05, 0.95]: 1/f-like texture with a few flat patches and
+    sharp edges, so every stage has something to work on."""
+    rng = np.random.default_rng(seed)
+    tex = sum(
+        ndimage.gaussian_filter(rng.standard_normal((height, width)), s) * s**0.5
+        for s in (0.7, 1.5, 3.0, 6.0)
+    )
+    tex = (tex - tex.min()) / (tex.max() - tex.min())
+    yy, xx = np.mgrid[0:height, 0:width]
+    tex[(xx // 60 + yy // 60) % 5 == 0] = 0.5  # flat squares
+    tex = 0.05 + 0.9 * tex
+    if not rgb:
+        return tex.astype(np.float32)
+    tint = np.array([1.0, 0.85, 0.7])
+    return np.clip(tex[..., None] * tint, 0.0, 1.0).astype(np.float32)
+
+
+@pytest.fixture(scope="session")
+def sponza():
+    if not SPONZA.is_file():
+        pytest.skip(f"the shared 4K Sponza frame is absent ({SPONZA})")
+    from fovexp import read_image
+
+    return read_image(SPONZA)

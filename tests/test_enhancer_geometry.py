@@ -1,0 +1,108 @@
+"""Viewing geometry against the hand checks of ALGORITHM-NOTES section 2."""
+
+import math
+
+import numpy as np
+import pytest
+
+from fovexp import FovexpError, load_display
+from fovexp.acuity import t_high_cpd, t_low_cpd
+from fovexp.foveation import sigma_px
+from fovexp.geometry import ViewingGeometry, arcmin_to_px, cpd_to_cpp, cpp_to_cpd
+
+LG = load_display("lg-oled55cx")
+
+
+def test_horizontal_field_is_80_8_deg():
+    assert LG.horizontal_field_deg == pytest.approx(80.8, abs=0.05)
+
+
+def test_on_axis_ppd_and_nyquist():
+    g = ViewingGeometry.for_image(LG, 3840, 2160)
+    ppd = float(g.ppd(np.array(1919.5), np.array(1079.5)))
+    assert ppd == pytest.approx(39.3, abs=0.05)
+    assert float(cpp_to_cpd(0.5, ppd)) == pytest.approx(19.7, abs=0.05)
+
+
+def test_linear_approximation_is_width_over_field():
+    g = ViewingGeometry.for_image(LG, 3840, 2160, "linear")
+    assert g.ppd_constant == pytest.approx(3840 / 80.845, rel=1e-3)
+    # eccentricity is on-screen distance over that constant
+    e = g.eccentricity_deg(np.array([1919.5 + 475.0]), np.array([1079.5]), (1919.5, 1079.5))
+    assert float(e[0]) == pytest.approx(475.0 / g.ppd_constant)
+
+
+def test_ppd_grows_off_axis_on_a_flat_screen():
+    g = ViewingGeometry.for_image(LG, 3840, 2160)
+    x = np.array([1919.5, 2900.0, 3839.0])
+    p = g.ppd(x, np.full(3, 1079.5))
+    assert np.all(np.diff(p) > 0)
+
+
+def test_blur_at_40_deg_is_10_9_arcmin_about_9_px():
+    g = ViewingGeometry.for_image(LG, 3840, 2160)
+    # find the horizontal pixel at 40 deg from a central gaze
+    x = np.linspace(1920, 3839, 20000)
+    e = g.eccentricity_deg(x, np.full_like(x, 1079.5), g.gaze_px((0.5, 0.5)))
+    i = int(np.argmin(np.abs(e - 40.0)))
+    assert 0.34 * (e[i] - 8.0) == pytest.approx(10.9, abs=0.05)
+    s = float(sigma_px(e[i], g.ppd(x[i], 1079.5), 0.34, 8.0))
+    assert s == pytest.approx(9.0, rel=0.1)
+
+
+def test_exact_eccentricity_is_the_angle_between_rays():
+    g = ViewingGeometry.for_image(LG, 3840, 2160)
+    # corner pixel for a central gaze: atan(half diagonal / distance)
+    e = float(g.eccentricity_deg(np.array(0.0), np.array(0.0), g.gaze_px((0.5, 0.5))))
+    half_diag = math.hypot(60.9 - 121.8 / 3840 / 2, 34.25 - 68.5 / 2160 / 2)
+    assert e == pytest.approx(math.degrees(math.atan(half_diag / 71.5)), abs=1e-6)
+    # gaze off-centre: angle between the two rays, symmetric in its arguments
+    gz = g.gaze_px((0.2, 0.7))
+    e1 = g.eccentricity_deg(np.array(3000.0), np.array(400.0), gz)
+    e2 = g.eccentricity_deg(np.array(gz[0]), np.array(gz[1]), (3000.0, 400.0))
+    assert float(e1) == pytest.approx(float(e2))
+
+
+def test_smaller_image_is_a_coarser_rendering_of_the_same_view():
+    g4k = ViewingGeometry.for_image(LG, 3840, 2160)
+    g = ViewingGeometry.for_image(LG, 960, 540)
+    assert float(g.ppd(np.array(479.5), np.array(269.5))) == pytest.approx(
+        float(g4k.ppd(np.array(1919.5), np.array(1079.5))) / 4, rel=1e-9)
+    e = g.eccentricity_deg(np.array(0.0), np.array(0.0), g.gaze_px((0.5, 0.5)))
+    e4 = g4k.eccentricity_deg(np.array(1.5), np.array(1.5), g4k.gaze_px((0.5, 0.5)))
+    assert float(e) == pytest.approx(float(e4), abs=1e-6)
+
+
+def test_release_geometry_gives_6_px_at_30_deg_for_blur_rate_0_46875():
+    g = ViewingGeometry.for_image(LG, 3840, 2160, "release")
+    assert g.ppd_constant == pytest.approx(42.6667, abs=1e-3)
+    assert float(sigma_px(30.0, g.ppd_constant, 0.46875, 12.0)) == pytest.approx(6.0)
+
+
+def test_unit_conversions_round_trip():
+    assert float(cpd_to_cpp(cpp_to_cpd(0.2, 40.0), 40.0)) == pytest.approx(0.2)
+    assert float(arcmin_to_px(60.0, 40.0)) == pytest.approx(40.0)
+
+
+def test_thibos_table_and_extension():
+    assert float(t_low_cpd(30.0)) == 4.0 and float(t_high_cpd(30.0)) == 20.5
+    assert float(t_low_cpd(12.5)) == pytest.approx((10.5 + 8.0) / 2)
+    assert float(t_low_cpd(52.5)) == pytest.approx(2.5)  # release extension past 30 deg
+    assert float(t_high_cpd(80.0)) == 20.5
+
+
+@pytest.mark.parametrize("gaze", [(-0.1, 0.5), (0.5, 1.2), (float("nan"), 0.5)])
+def test_gaze_outside_the_screen_is_refused(gaze):
+    g = ViewingGeometry.for_image(LG, 3840, 2160)
+    with pytest.raises(FovexpError, match="outside the screen"):
+        g.gaze_px(gaze)
+
+
+def test_display_profile_with_a_missing_field_names_it(tmp_path):
+    p = tmp_path / "bad.yaml"
+    p.write_text("name: bad\nwidth_px: 100\nheight_px: 100\nwidth_cm: 10\nheight_cm: 10\n"
+                 "refresh_hz: 60\npeak_luminance_cd_m2: 100\ngamma: 2.2\n")
+    with pytest.raises(FovexpError, match="distance_cm"):
+        load_display(p)
+    with pytest.raises(FovexpError, match="not found"):
+        load_display("no-such-display")
