@@ -1,0 +1,439 @@
+"""Load and validate the runner's trial logs (docs/LOGS.md) for paper sections 6.3 and 7.1.
+
+Every row that does not reach the statistics is accounted for: it is either an error
+(:class:`~fovexp.errors.FovexpError` naming the file, line and problem) or an :class:`Exclusion`
+with the rule that removed it. The rules, applied in this order (docs/ANALYSIS.md):
+
+R1 torn last row
+    The last row of a ``trials.csv`` without its final newline, with the wrong field count or
+    with an unparsable value is an interrupted write (the runner writes each row in one fsync'ed
+    write ending in a newline): it is dropped, with a warning naming the file and line.
+R2 corrupt row
+    Any other row with the wrong field count, an unparsable or out-of-range value, or an empty
+    required value is an error: the file is damaged and nothing is guessed.
+R3 missing columns
+    A file whose header lacks a documented column is excluded as a whole (reported).
+R4 practice
+    Practice trials (``practice == 1``) are excluded.
+R5 duplicated trials
+    Rows with the same (experiment, participant, session, trial_index): identical copies are
+    merged into one; conflicting copies keep the last one written and exclude the others.
+R6 wrong parameter
+    In the paper's four experiments, rows whose ``adjusted_parameter`` is not the one the
+    experiment adjusts are excluded.
+R7 mixed protocol versions
+    Per experiment, the protocol version (``protocol_sha256``) run by the most participants is
+    kept (ties: more trials, then the later last trial); rows of other versions are excluded.
+R8 incomplete sessions
+    A session whose ``session-<id>.json`` records it as not completed is excluded; without a
+    readable completion state, a session with fewer trials than the largest session of the same
+    experiment and protocol version is excluded.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import re
+import warnings
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pandas as pd
+
+from fovexp.errors import FovexpError
+
+#: ``trials.csv`` columns in their documented order (docs/LOGS.md).
+COLUMNS: tuple[str, ...] = (
+    "participant", "session", "experiment", "protocol_sha256", "trial_index", "practice",
+    "repetition", "image", "blur_rate", "method", "adjusted_parameter", "f_e", "s_k", "s_f",
+    "start_value", "final_value", "response_time_s", "wheel_events", "blanked_fraction",
+    "dropped_frames", "tracker", "seed", "software_version", "timestamp",
+)
+STR_COLUMNS = frozenset({
+    "participant", "session", "experiment", "protocol_sha256", "image", "method",
+    "adjusted_parameter", "tracker", "software_version", "timestamp",
+})
+INT_COLUMNS = frozenset({"trial_index", "repetition", "wheel_events", "dropped_frames", "seed"})
+BOOL_COLUMNS = frozenset({"practice"})
+FLOAT_COLUMNS = frozenset({
+    "blur_rate", "f_e", "s_k", "s_f", "start_value", "final_value", "response_time_s",
+    "blanked_fraction",
+})
+#: Columns the analysis cannot do without; an empty value there is a corrupt row.
+REQUIRED_VALUES: tuple[str, ...] = (
+    "participant", "session", "experiment", "protocol_sha256", "trial_index", "practice",
+    "image", "blur_rate", "method", "adjusted_parameter", "final_value",
+)
+METHODS = frozenset({"foveated", "contrast", "ours"})
+ADJUSTED = frozenset({"f_e", "s_k", "s_f", "blur_rate"})
+#: The parameter each of the paper's experiments adjusts (sections 6.2, 7.1).
+EXPERIMENT_PARAMETER: dict[str, str] = {
+    "calibration-fe": "f_e",
+    "calibration-sk": "s_k",
+    "calibration-sf": "s_f",
+    "validation": "blur_rate",
+}
+_PARTICIPANT_RE = re.compile(r"^[A-Za-z0-9_-]{1,32}$")
+_ISO_RE = re.compile(
+    r"^\d{4}-\d{2}-\d{2}[T ]\d{2}:\d{2}(:\d{2}(\.\d+)?)?(Z|[+-]\d{2}(:?\d{2})?)?$"
+)
+_COMPLETE_WORDS = frozenset({"complete", "completed", "finished", "done"})
+_INCOMPLETE_WORDS = frozenset({
+    "incomplete", "aborted", "interrupted", "running", "in_progress", "in-progress", "started",
+    "crashed", "failed",
+})
+
+RULES: dict[str, str] = {
+    "R1 torn last row": "last row of a file without its final newline, with the wrong field "
+    "count or with an unparsable value (an interrupted write): dropped with a warning",
+    "R2 corrupt row": "any other malformed row: an error naming the file, line and column",
+    "R3 missing columns": "a file whose header lacks a documented column: whole file excluded",
+    "R4 practice": "practice trials (practice = 1): excluded",
+    "R5 duplicated trial": "same experiment, participant, session and trial_index more than once: "
+    "identical copies merged, conflicting copies keep the last one written",
+    "R6 wrong parameter": "a row of calibration-fe/-sk/-sf or validation whose "
+    "adjusted_parameter is not the experiment's (f_e/s_k/s_f/blur_rate): excluded",
+    "R7 mixed protocol versions": "per experiment, only the protocol version run by the most "
+    "participants (ties: more trials, then the later last trial) is kept",
+    "R8 incomplete session": "a session recorded as not completed in session-<id>.json (or, "
+    "without one, with fewer trials than the largest session of its experiment and protocol "
+    "version): excluded",
+}
+
+
+@dataclass(frozen=True)
+class Exclusion:
+    """Trials removed from the analysis by one rule (or a warning that removed nothing)."""
+
+    rule: str
+    file: str
+    detail: str
+    n_trials: int = 0
+    experiment: str = ""
+    participant: str = ""
+    session: str = ""
+
+
+@dataclass
+class Dataset:
+    """The included trials of any number of participants and sessions, and what was removed.
+
+    ``trials`` holds one row per included trial with the documented columns (typed) plus
+    ``file`` and ``line`` (where it came from).
+    """
+
+    root: Path
+    trials: pd.DataFrame
+    files: list[Path]
+    exclusions: list[Exclusion] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+
+    def experiment(self, name: str) -> pd.DataFrame:
+        """The included trials of experiment ``name`` (may be empty)."""
+        return self.trials[self.trials["experiment"] == name]
+
+    @property
+    def experiments(self) -> list[str]:
+        return sorted(self.trials["experiment"].unique())
+
+
+def _parse_value(column: str, text: str) -> object:
+    """One field, typed; raises ValueError with a short reason."""
+    text = text.strip()
+    if text == "":
+        if column in REQUIRED_VALUES:
+            raise ValueError("is empty but required")
+        return None if column in STR_COLUMNS else math.nan
+    if column in FLOAT_COLUMNS:
+        try:
+            value = float(text)
+        except ValueError:
+            raise ValueError("is not a number") from None
+        if not math.isfinite(value):
+            raise ValueError("is not a finite number")
+        return value
+    if column in INT_COLUMNS:
+        try:
+            return int(text)
+        except ValueError:
+            raise ValueError("is not an integer") from None
+    if column in BOOL_COLUMNS:
+        low = text.lower()
+        if low in ("1", "true"):
+            return True
+        if low in ("0", "false"):
+            return False
+        raise ValueError("is not 0 or 1")
+    if column == "participant" and not _PARTICIPANT_RE.match(text):
+        raise ValueError("is not a valid participant ID ([A-Za-z0-9_-]{1,32})")
+    if column == "method" and text not in METHODS:
+        raise ValueError(f"is not a method ({', '.join(sorted(METHODS))})")
+    if column == "adjusted_parameter" and text not in ADJUSTED:
+        raise ValueError(f"is not an adjustable parameter ({', '.join(sorted(ADJUSTED))})")
+    if column == "timestamp" and not _ISO_RE.match(text):
+        raise ValueError("is not an ISO 8601 time")
+    return text
+
+
+def read_trials_file(path: Path) -> tuple[pd.DataFrame, list[Exclusion]]:
+    """Read one ``trials.csv``: rules R1 (torn last row), R2 (corrupt row), R3 (missing columns).
+
+    Returns the parsed rows (all of them, practice included) and the exclusions/warnings.
+    Raises :class:`FovexpError` on a corrupt row other than the last one.
+    """
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise FovexpError(f"{path}: cannot read: {exc.strerror}") from None
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise FovexpError(f"{path}: not UTF-8 text (byte {exc.start})") from None
+    empty = pd.DataFrame(columns=[*COLUMNS, "file", "line"])
+    if not text.strip():
+        return empty, [Exclusion("R3 missing columns", str(path), "empty file (no header)")]
+    rows = list(csv.reader(text.splitlines()))
+    header = [h.strip() for h in rows[0]]
+    missing = [c for c in COLUMNS if c not in header]
+    if missing:
+        return empty, [Exclusion(
+            "R3 missing columns", str(path), f"header lacks {', '.join(missing)}",
+            n_trials=max(0, len(rows) - 1),
+        )]
+    exclusions: list[Exclusion] = []
+    extra = [h for h in header if h not in COLUMNS]
+    if extra:
+        exclusions.append(
+            Exclusion("note", str(path), f"extra columns ignored: {', '.join(extra)}")
+        )
+    index = {c: header.index(c) for c in COLUMNS}
+    # Blank lines are not rows (csv writers never emit them); line numbers stay the file's.
+    data = [(i + 1, r) for i, r in enumerate(rows) if i > 0 and any(f.strip() for f in r)]
+    parsed: list[dict[str, object]] = []
+    for k, (line, fields) in enumerate(data):
+        last = k == len(data) - 1
+        problem = None
+        record: dict[str, object] = {}
+        if last and line == len(rows) and not text.endswith(("\n", "\r")):
+            problem = "no final newline"
+        elif len(fields) != len(header):
+            problem = f"{len(fields)} fields, expected {len(header)}"
+        else:
+            for col in COLUMNS:
+                value = fields[index[col]]
+                try:
+                    record[col] = _parse_value(col, value)
+                except ValueError as exc:
+                    problem = f"column {col}: {value.strip()!r} {exc}"
+                    break
+        if problem is not None:
+            if last:
+                msg = f"line {line}: torn last row dropped ({problem})"
+                warnings.warn(f"{path}: {msg}", stacklevel=2)
+                exclusions.append(Exclusion("R1 torn last row", str(path), msg, n_trials=1))
+                continue
+            raise FovexpError(f"{path}: line {line}: {problem}")
+        record["file"] = str(path)
+        record["line"] = line
+        parsed.append(record)
+    frame = pd.DataFrame(parsed, columns=[*COLUMNS, "file", "line"]) if parsed else empty
+    if not parsed:
+        exclusions.append(Exclusion("note", str(path), "no trials"))
+    return frame, exclusions
+
+
+def find_trial_files(root: Path) -> list[Path]:
+    """All ``trials.csv`` under ``root`` (a results folder, an experiment or a participant)."""
+    root = Path(root)
+    if not root.exists():
+        raise FovexpError(f"{root}: no such folder")
+    if root.is_file():
+        return [root]
+    files = sorted(root.rglob("trials.csv"))
+    if not files:
+        raise FovexpError(
+            f"{root}: no trials.csv found (expected <experiment>/<participant>/trials.csv)"
+        )
+    return files
+
+
+def _session_state(folder: Path, session: str) -> bool | None:
+    """Completion state from ``session-<id>.json``: True, False, or None when not recorded."""
+    path = folder / f"session-{session}.json"
+    if not path.is_file():
+        return None
+    try:
+        info = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+    if not isinstance(info, Mapping):
+        return None
+    # The runner's key is not fixed in LOGS.md; accept the plausible spellings.
+    for key in ("completed", "complete", "is_complete", "finished"):
+        if isinstance(info.get(key), bool):
+            return bool(info[key])
+    for key in ("completion", "completion_state", "state", "status"):
+        value = info.get(key)
+        if isinstance(value, Mapping):
+            for sub in ("completed", "complete"):
+                if isinstance(value.get(sub), bool):
+                    return bool(value[sub])
+            value = value.get("state", value.get("status"))
+        if isinstance(value, str):
+            low = value.strip().lower()
+            if low in _COMPLETE_WORDS:
+                return True
+            if low in _INCOMPLETE_WORDS:
+                return False
+    return None
+
+
+def _exclude(frame: pd.DataFrame, mask: pd.Series, rule: str, detail: str,
+             out: list[Exclusion]) -> pd.DataFrame:
+    """Drop ``mask`` rows, one Exclusion per (file, session)."""
+    gone = frame[mask]
+    for (file, exp, part, sess), grp in gone.groupby(
+        ["file", "experiment", "participant", "session"], sort=True
+    ):
+        out.append(Exclusion(rule, str(file), detail, len(grp), str(exp), str(part), str(sess)))
+    return frame[~mask]
+
+
+def load_results(
+    root: str | Path,
+    *,
+    include_incomplete: bool = False,
+    protocol: Mapping[str, str] | None = None,
+) -> Dataset:
+    """Load every ``trials.csv`` under ``root`` and apply rules R1-R8 (see module docstring).
+
+    ``include_incomplete`` keeps incomplete sessions (R8 then only reports them);
+    ``protocol`` maps an experiment to the ``protocol_sha256`` (or a prefix) to keep instead of
+    the majority version (R7). Raises :class:`FovexpError` for an empty or missing folder, a
+    corrupt row, or when no trial is left.
+    """
+    root = Path(root)
+    files = find_trial_files(root)
+    frames: list[pd.DataFrame] = []
+    exclusions: list[Exclusion] = []
+    notes: list[str] = []
+    for path in files:
+        frame, excl = read_trials_file(path)
+        exclusions.extend(excl)
+        if len(frame):
+            frames.append(frame)
+            names = set(frame["participant"])
+            if path.parent.name not in names:
+                notes.append(f"{path}: folder name {path.parent.name!r} is not the participant "
+                             f"column ({', '.join(sorted(names))}); the column is used")
+    if not frames:
+        raise FovexpError(f"{root}: no usable trials in {len(files)} trials.csv file(s)"
+                          + _first_reason(exclusions))
+    trials = pd.concat(frames, ignore_index=True)
+    trials = _typed(trials)
+
+    # R4 practice.
+    trials = _exclude(trials, trials["practice"], "R4 practice", "practice trial", exclusions)
+
+    # R5 duplicated trials.
+    key = ["experiment", "participant", "session", "trial_index"]
+    dup = trials.duplicated(key, keep=False)
+    if dup.any():
+        content = [c for c in COLUMNS if c not in ("timestamp",)]
+        drop = pd.Series(False, index=trials.index)
+        for k, grp in trials[dup].groupby(key, sort=True):
+            keep_idx = grp.index[-1]  # file order: the last one written
+            identical = len(grp[content].astype(str).drop_duplicates()) == 1
+            detail = (f"trial_index {k[3]} appears {len(grp)} times "
+                      + ("(identical copies merged)" if identical
+                         else f"with different values; kept {grp.loc[keep_idx, 'file']} line "
+                              f"{grp.loc[keep_idx, 'line']}"))
+            drop[grp.index[:-1]] = True
+            exclusions.append(Exclusion("R5 duplicated trial", str(grp["file"].iloc[0]), detail,
+                                        len(grp) - 1, k[0], k[1], k[2]))
+        trials = trials[~drop]
+
+    # R6 wrong parameter for the paper's experiments.
+    expected = trials["experiment"].map(EXPERIMENT_PARAMETER)
+    wrong = expected.notna() & (expected != trials["adjusted_parameter"])
+    if wrong.any():
+        trials = _exclude(trials, wrong, "R6 wrong parameter",
+                          "adjusted_parameter is not the experiment's", exclusions)
+
+    # R7 mixed protocol versions.
+    protocol = dict(protocol or {})
+    for exp, grp in list(trials.groupby("experiment", sort=True)):
+        versions = grp.groupby("protocol_sha256").agg(
+            participants=("participant", "nunique"), n=("trial_index", "size"),
+            last=("timestamp", lambda s: max((str(v) for v in s if v), default="")),
+        )
+        if exp in protocol:
+            matches = [v for v in versions.index if str(v).startswith(protocol[exp])]
+            if len(matches) != 1:
+                raise FovexpError(f"experiment {exp}: protocol {protocol[exp]!r} matches "
+                                  f"{len(matches)} of the logged versions "
+                                  f"({', '.join(v[:12] for v in versions.index)})")
+            keep = matches[0]
+        elif len(versions) > 1:
+            keep = versions.sort_values(["participants", "n", "last"], ascending=False).index[0]
+        else:
+            continue
+        other = (trials["experiment"] == exp) & (trials["protocol_sha256"] != keep)
+        if other.any():
+            trials = _exclude(trials, other, "R7 mixed protocol versions",
+                              f"protocol {_short(trials.loc[other, 'protocol_sha256'])} "
+                              f"differs from the kept {keep[:12]}", exclusions)
+
+    # R8 incomplete sessions.
+    sess_key = ["experiment", "protocol_sha256", "participant", "session"]
+    sizes = trials.groupby(sess_key, sort=True).agg(n=("trial_index", "size"),
+                                                    file=("file", "first"))
+    largest = sizes.groupby(level=["experiment", "protocol_sha256"])["n"].transform("max")
+    for (exp, sha, part, sess), row in sizes.iterrows():
+        state = _session_state(Path(row["file"]).parent, str(sess))
+        if state is True:
+            continue
+        if state is False:
+            reason = f"session-{sess}.json records it as not completed ({row['n']} trials)"
+        elif row["n"] < largest[(exp, sha, part, sess)]:
+            reason = (f"{row['n']} trials, fewer than the {largest[(exp, sha, part, sess)]} of "
+                      f"the largest session (no completion state in session-{sess}.json)")
+        else:
+            continue
+        mask = ((trials["experiment"] == exp) & (trials["participant"] == part)
+                & (trials["session"] == sess) & (trials["protocol_sha256"] == sha))
+        if include_incomplete:
+            exclusions.append(Exclusion("R8 incomplete session", str(row["file"]),
+                                        reason + "; kept (--include-incomplete)", 0,
+                                        str(exp), str(part), str(sess)))
+        else:
+            trials = _exclude(trials, mask, "R8 incomplete session", reason, exclusions)
+
+    if trials.empty:
+        raise FovexpError(f"{root}: no trials left after the exclusion rules"
+                          + _first_reason(exclusions))
+    return Dataset(root=root, trials=trials.reset_index(drop=True), files=files,
+                   exclusions=exclusions, notes=notes)
+
+
+def _short(values: Iterable[str]) -> str:
+    return ", ".join(sorted({str(v)[:12] for v in values}))
+
+
+def _first_reason(exclusions: list[Exclusion]) -> str:
+    real = [e for e in exclusions if e.rule != "note"] or exclusions
+    return f" (e.g. {real[0].file}: {real[0].detail})" if real else ""
+
+
+def _typed(frame: pd.DataFrame) -> pd.DataFrame:
+    frame = frame.copy()
+    for col in FLOAT_COLUMNS:
+        frame[col] = pd.to_numeric(frame[col], errors="coerce").astype(float)
+    for col in INT_COLUMNS:
+        frame[col] = pd.array(frame[col], dtype="Int64")
+    frame["practice"] = frame["practice"].astype(bool)
+    frame["line"] = frame["line"].astype(int)
+    return frame

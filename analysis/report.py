@@ -1,0 +1,294 @@
+"""``fovexp analyze``: trial logs -> tables, figures, statistics and a Markdown report
+(paper sections 6.3, 7.1 and 7.3).
+
+Output folder layout::
+
+    report.md                      everything below, gathered, with the exclusions
+    table2.yaml                    the lab's Table 2 as a ParameterTable (the enhancer reads it)
+    tables/table2.{csv,md,tex,yaml}
+    tables/calibration-fe.csv, calibration-sk.csv, calibration-sk-lines.csv, calibration-sf.csv
+    tables/<experiment>-summary.csv, -overall.csv, -tests.csv, -sampling.csv
+    tables/exclusions.csv
+    figures/calibration.{png,pdf}, <experiment>.{png,pdf}, <experiment>-sampling.{png,pdf}
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+
+import pandas as pd
+
+from fovexp.errors import FovexpError
+from fovexp.params import PAPER_TABLE2
+
+from . import figures as figs
+from .calibration import (
+    Calibration,
+    calibrate,
+    fe_summary,
+    sk_lines,
+    sk_summary,
+    table2_markdown,
+    write_table2,
+)
+from .loading import RULES, Dataset, load_results
+from .validation import ValidationResult, validate
+
+CALIBRATION_EXPERIMENTS = ("calibration-fe", "calibration-sk", "calibration-sf")
+
+
+@dataclass
+class Analysis:
+    """Everything ``fovexp analyze`` computed, and the files it wrote."""
+
+    data: Dataset
+    out: Path
+    calibration: Calibration | None = None
+    validations: list[ValidationResult] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+    files: list[Path] = field(default_factory=list)
+
+    @property
+    def report(self) -> Path:
+        return self.out / "report.md"
+
+
+def _md_table(frame: pd.DataFrame, digits: int = 3) -> str:
+    """A DataFrame as a Markdown table (floats to ``digits`` significant decimals)."""
+    def cell(v: object) -> str:
+        if isinstance(v, float):
+            if math.isnan(v):
+                return ""
+            if abs(v) < 1e-3 and v != 0:
+                return f"{v:.2e}"
+            return f"{v:.{digits}f}"
+        return str(v)
+    head = "| " + " | ".join(map(str, frame.columns)) + " |"
+    rule = "|" + "---|" * len(frame.columns)
+    body = ["| " + " | ".join(cell(v) for v in row) + " |" for row in frame.itertuples(False)]
+    return "\n".join([head, rule, *body]) + "\n"
+
+
+def _p(p: float) -> str:
+    return "n/a" if math.isnan(p) else ("p < 0.001" if p < 0.001 else f"p = {p:.3f}")
+
+
+def run_analysis(
+    results: str | Path,
+    out: str | Path,
+    *,
+    include_incomplete: bool = False,
+    protocol: Mapping[str, str] | None = None,
+    figures: bool = True,
+    table_source: str | None = None,
+) -> Analysis:
+    """Analyse every experiment under ``results`` and write the report into ``out``.
+
+    Calibration (section 6.3) needs calibration-fe, -sk and -sf; every experiment whose trials
+    adjust the blur-rate is analysed as a validation experiment (section 7.1).
+    """
+    results = Path(results)
+    out = Path(out)
+    data = load_results(results, include_incomplete=include_incomplete, protocol=protocol)
+    ana = Analysis(data=data, out=out)
+    tables = out / "tables"
+    fig_dir = out / "figures"
+    tables.mkdir(parents=True, exist_ok=True)
+
+    present = [e for e in CALIBRATION_EXPERIMENTS if not data.experiment(e).empty]
+    sections: list[str] = []
+    if len(present) == 3:
+        calib = calibrate(*(data.experiment(e) for e in CALIBRATION_EXPERIMENTS))
+        ana.calibration = calib
+        source = table_source or f"fovexp analyze {results} ({datetime.now(timezone.utc):%Y-%m-%d})"
+        paths = write_table2(calib, tables, source)
+        calib.parameter_table(source).save(out / "table2.yaml")
+        ana.files += [*paths.values(), out / "table2.yaml"]
+        for name, frame in (("calibration-fe", calib.fe), ("calibration-sk", calib.sk),
+                            ("calibration-sf", calib.sf), ("calibration-sk-lines",
+                                                           _lines_frame(calib))):
+            frame.to_csv(tables / f"{name}.csv", index=False, float_format="%.6g")
+            ana.files.append(tables / f"{name}.csv")
+        if figures:
+            ana.files += figs.calibration_figure(calib, fig_dir / "calibration")
+        sections.append(_calibration_md(calib, figures))
+    elif present:
+        # Partial calibration: report what can be computed, say what is missing.
+        missing = [e for e in CALIBRATION_EXPERIMENTS if e not in present]
+        ana.notes.append(f"calibration incomplete: no trials of {', '.join(missing)}; "
+                         "Table 2 not computed")
+        parts = ["## Calibration (section 6.3)\n",
+                 f"Table 2 needs all three calibration experiments; missing: "
+                 f"{', '.join(missing)}.\n"]
+        if "calibration-fe" in present:
+            fe = fe_summary(data.experiment("calibration-fe"))
+            fe.to_csv(tables / "calibration-fe.csv", index=False, float_format="%.6g")
+            parts += ["### f_e per blur-rate\n", _md_table(fe)]
+        if "calibration-sk" in present:
+            sk = sk_summary(data.experiment("calibration-sk"))
+            sk.to_csv(tables / "calibration-sk.csv", index=False, float_format="%.6g")
+            lines = _lines_frame_from(sk_lines(sk))
+            parts += ["### s_k per (blur-rate, s_f)\n", _md_table(sk),
+                      "### s_k = slope * s_f + intercept\n", _md_table(lines)]
+        sections.append("\n".join(parts))
+
+    validation_exps = sorted(set(data.trials.loc[data.trials["adjusted_parameter"] == "blur_rate",
+                                                 "experiment"]))
+    for exp in validation_exps:
+        res = validate(data.experiment(exp), exp)
+        ana.validations.append(res)
+        for name, frame in (("summary", res.summary), ("overall", res.overall),
+                            ("tests", res.tests), ("sampling", res.sampling)):
+            frame.to_csv(tables / f"{exp}-{name}.csv", index=False, float_format="%.6g")
+            ana.files.append(tables / f"{exp}-{name}.csv")
+        if figures:
+            ana.files += figs.validation_figure(res, fig_dir / exp)
+            if len(res.sampling):
+                ana.files += figs.sampling_figure(res, fig_dir / f"{exp}-sampling")
+        sections.append(_validation_md(res, figures))
+
+    other = [e for e in data.experiments
+             if e not in CALIBRATION_EXPERIMENTS and e not in validation_exps]
+    if other:
+        ana.notes.append(f"experiments not analysed (no analysis defined): {', '.join(other)}")
+
+    excl = pd.DataFrame([e.__dict__ for e in data.exclusions],
+                        columns=["rule", "experiment", "participant", "session", "n_trials",
+                                 "file", "detail"])
+    excl.to_csv(tables / "exclusions.csv", index=False)
+    ana.files.append(tables / "exclusions.csv")
+
+    text = _report_md(ana, sections, results)
+    ana.report.write_text(text)
+    ana.files.append(ana.report)
+    return ana
+
+
+def _lines_frame_from(lines: Mapping) -> pd.DataFrame:
+    return pd.DataFrame([{"blur_rate": br, "slope": ln.slope, "intercept": ln.intercept,
+                          "r2": ln.r2, "n_levels": ln.n} for br, ln in sorted(lines.items())])
+
+
+def _lines_frame(calib: Calibration) -> pd.DataFrame:
+    return _lines_frame_from(calib.lines)
+
+
+def _calibration_md(calib: Calibration, figures: bool) -> str:
+    paper = pd.DataFrame([r.model_dump() for r in PAPER_TABLE2.rows])
+    parts = [
+        "## Calibration (section 6.3)\n",
+        "Means ± SEM across participants (each participant's images and repetitions averaged "
+        "first).\n",
+        "### Table 2: parameters per foveation level\n",
+        table2_markdown(calib.table),
+        "Files: `tables/table2.csv`, `tables/table2.md`, `tables/table2.tex`; the enhancer reads "
+        "`table2.yaml` (ParameterTable).\n",
+        "The paper's Table 2 for comparison:\n",
+        _md_table(paper, 2),
+        "### f_e per blur-rate (calibration-fe)\n",
+        _md_table(calib.fe),
+        "### s_k per (blur-rate, s_f) (calibration-sk)\n",
+        _md_table(calib.sk),
+        "Least-squares line s_k = slope * s_f + intercept per blur-rate (fitted to the means "
+        "above; calibration-sf sets s_k with it):\n",
+        _md_table(_lines_frame(calib)),
+        "### Final s_f and its s_k (calibration-sf)\n",
+        "s_k is the group line at the mean s_f; its SEM is sqrt((slope x SEM(s_f))^2 + "
+        "SEM_line^2), SEM_line = SEM across participants of their own lines at that s_f.\n",
+        _md_table(calib.sf),
+    ]
+    if figures:
+        parts.append("![Calibration results](figures/calibration.png)\n")
+    return "\n".join(parts)
+
+
+def _validation_md(res: ValidationResult, figures: bool) -> str:
+    parts = [f"## Validation: {res.experiment} (section 7.1)\n",
+             "Mean selected blur-rate ± SEM across participants, per scene and method:\n",
+             _md_table(res.summary),
+             "Over all scenes (each participant's mean over scenes):\n",
+             _md_table(res.overall)]
+    if len(res.tests):
+        main = res.tests.iloc[0]
+        parts += [
+            "### Paired t-test, ours vs contrast\n",
+            f"All scenes, paired by participant x scene: t({int(main['df'])}) = "
+            f"{main['t']:.2f}, {_p(main['p'])}, d_z = {main['d_z']:.2f}, mean difference "
+            f"{main['mean_diff']:.3f} [95% CI {main['ci_low']:.3f}, {main['ci_high']:.3f}] "
+            "arcmin/deg.\n",
+            "Rows: all scenes (pairs = participant x scene), participant means (pairs = "
+            "participants, scenes averaged; does not count a participant's scenes as "
+            "independent), then each scene (pairs = participants).\n",
+            _md_table(res.tests),
+            "### Estimated sampling-rate reduction (section 7.3)\n",
+            "SR_ours / SR_contrast = blur_rate_contrast / blur_rate_ours; reduction = 1 - ratio.\n",
+            _md_table(res.sampling),
+        ]
+    for n in res.notes:
+        parts.append(f"Note: {n}\n")
+    if figures:
+        parts.append(f"![{res.experiment}](figures/{res.experiment}.png)\n")
+        if len(res.sampling):
+            parts.append(f"![{res.experiment} sampling](figures/{res.experiment}-sampling.png)\n")
+    return "\n".join(parts)
+
+
+def _report_md(ana: Analysis, sections: list[str], results: Path) -> str:
+    t = ana.data.trials
+    overview = (t.groupby("experiment")
+                .agg(participants=("participant", "nunique"), sessions=("session", "nunique"),
+                     trials=("trial_index", "size"),
+                     protocol=("protocol_sha256", lambda s: ", ".join(sorted({v[:12] for v in s}))))
+                .reset_index())
+    parts = [
+        "# fovexp analysis report\n",
+        f"Results folder: `{results}` ({len(ana.data.files)} trials.csv files). "
+        f"Generated {datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC.\n",
+        "## Data included\n",
+        _md_table(overview),
+        *sections,
+        "## Exclusions\n",
+        "Rules, applied in this order (docs/ANALYSIS.md):\n",
+        *[f"- **{rule}**: {text}" for rule, text in RULES.items()],
+        "",
+    ]
+    excl = [e for e in ana.data.exclusions if e.rule != "note"]
+    if excl:
+        frame = pd.DataFrame([{"rule": e.rule, "experiment": e.experiment,
+                               "participant": e.participant, "session": e.session,
+                               "trials": e.n_trials, "file": _rel(e.file, results),
+                               "detail": e.detail} for e in excl])
+        counts = frame.groupby("rule")["trials"].sum().reset_index()
+        parts += ["Trials removed per rule:\n", _md_table(counts)]
+        # Practice exclusions are expected in every session: counted above, listed in the CSV.
+        details = frame[frame["rule"] != "R4 practice"]
+        if len(details):
+            parts += ["Details (practice trials per session: `tables/exclusions.csv`):\n",
+                      _md_table(details)]
+    else:
+        parts.append("Nothing was excluded.\n")
+    notes = [f"{e.file}: {e.detail}" for e in ana.data.exclusions if e.rule == "note"]
+    notes += ana.data.notes + ana.notes
+    if notes:
+        parts += ["### Notes\n", *[f"- {n}" for n in notes], ""]
+    return "\n".join(parts)
+
+
+def _rel(path: str, root: Path) -> str:
+    """``path`` relative to the results folder where it lies inside it (shorter tables)."""
+    try:
+        return str(Path(path).relative_to(root))
+    except ValueError:
+        return path
+
+
+def analyze(results: str | Path, out: str | Path, **kwargs: object) -> Analysis:
+    """Alias of :func:`run_analysis` (the ``fovexp analyze`` command)."""
+    try:
+        return run_analysis(results, out, **kwargs)  # type: ignore[arg-type]
+    except OSError as exc:
+        raise FovexpError(f"{exc.filename or out}: {exc.strerror}") from None

@@ -1,0 +1,123 @@
+"""Descriptive statistics, the paired t-test and the least-squares line (paper sections 6.3, 7.1).
+
+All tests go through :mod:`scipy.stats`; the hand formulas are in the docstrings and checked
+against scipy in tests/test_analysis_stats.py.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass
+
+import numpy as np
+from scipy import stats
+
+from fovexp.errors import FovexpError
+
+
+def mean_sem(values: Sequence[float] | np.ndarray) -> tuple[float, float, int]:
+    """(mean, standard error of the mean, n); SEM = sd(ddof=1) / sqrt(n), NaN for n < 2.
+
+    The error bars of the paper's calibration and validation plots are SEMs (section 6.2).
+    """
+    x = np.asarray(values, dtype=float)
+    x = x[np.isfinite(x)]
+    n = int(x.size)
+    if n == 0:
+        return math.nan, math.nan, 0
+    mean = float(x.mean())
+    sem = float(stats.sem(x, ddof=1)) if n > 1 else math.nan
+    return mean, sem, n
+
+
+@dataclass(frozen=True)
+class PairedTTest:
+    """Paired (dependent-samples) t-test of ``a - b`` against 0, two-sided.
+
+    ``d_z`` is Cohen's d for paired data, mean(diff) / sd(diff); ``ci_low``/``ci_high`` the 95 %
+    confidence interval of the mean difference, mean +- t_{0.975, n-1} * sd / sqrt(n).
+    """
+
+    n: int
+    mean_a: float
+    mean_b: float
+    mean_diff: float
+    sd_diff: float
+    t: float
+    df: int
+    p: float
+    d_z: float
+    ci_low: float
+    ci_high: float
+
+    def as_dict(self) -> dict[str, float]:
+        return asdict(self)
+
+
+def paired_ttest(a: Sequence[float] | np.ndarray, b: Sequence[float] | np.ndarray,
+                 confidence: float = 0.95) -> PairedTTest:
+    """Paired t-test of ``a`` vs ``b`` (paper section 7.1: ours vs contrast, "t-test").
+
+    Uses :func:`scipy.stats.ttest_rel`; needs at least two pairs, else the statistics are NaN.
+    """
+    a = np.asarray(a, dtype=float)
+    b = np.asarray(b, dtype=float)
+    if a.shape != b.shape or a.ndim != 1:
+        raise FovexpError(f"paired t-test needs two equally long 1-D samples, got {a.shape} "
+                          f"and {b.shape}")
+    n = int(a.size)
+    d = a - b
+    nan = math.nan
+    if n < 2:
+        m = float(d.mean()) if n else nan
+        return PairedTTest(n, float(a.mean()) if n else nan, float(b.mean()) if n else nan,
+                           m, nan, nan, max(n - 1, 0), nan, nan, nan, nan)
+    res = stats.ttest_rel(a, b)
+    sd = float(d.std(ddof=1))
+    ci = res.confidence_interval(confidence_level=confidence)
+    mean_d = float(d.mean())
+    if sd == 0.0:
+        # Every pair differs by the same amount: t is infinite or undefined, so is d_z.
+        d_z = math.copysign(math.inf, mean_d) if mean_d else nan
+    else:
+        d_z = mean_d / sd
+    return PairedTTest(
+        n=n, mean_a=float(a.mean()), mean_b=float(b.mean()), mean_diff=mean_d, sd_diff=sd,
+        t=float(res.statistic), df=int(res.df), p=float(res.pvalue), d_z=float(d_z),
+        ci_low=float(ci.low), ci_high=float(ci.high),
+    )
+
+
+@dataclass(frozen=True)
+class Line:
+    """Least-squares line y = slope * x + intercept (paper section 6.2: s_k against s_f)."""
+
+    slope: float
+    intercept: float
+    r2: float
+    n: int
+
+    def __call__(self, x: float | np.ndarray) -> float | np.ndarray:
+        return self.slope * x + self.intercept
+
+
+def linear_fit(x: Sequence[float] | np.ndarray, y: Sequence[float] | np.ndarray) -> Line:
+    """Ordinary least squares via :func:`scipy.stats.linregress`; needs two distinct x."""
+    x = np.asarray(x, dtype=float)
+    y = np.asarray(y, dtype=float)
+    if len(np.unique(x)) < 2:
+        raise FovexpError(f"a line needs at least two distinct x values, got {np.unique(x)}")
+    res = stats.linregress(x, y)
+    return Line(float(res.slope), float(res.intercept), float(res.rvalue**2), int(x.size))
+
+
+def sampling_rate_ratio(blur_rate_new: float, blur_rate_base: float) -> float:
+    """SR_new / SR_base = blur_rate_base / blur_rate_new (paper section 7.3, eq. SR).
+
+    With SR(x) = 1 / (4 sigma(x)) and sigma proportional to the blur-rate past the fovea, the
+    net sampling rate scales with 1 / blur-rate. The reduction is ``1 - ratio``.
+    """
+    if not (blur_rate_new > 0 and blur_rate_base > 0):
+        return math.nan
+    return blur_rate_base / blur_rate_new

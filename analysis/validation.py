@@ -1,0 +1,96 @@
+"""Validation experiment results (paper section 7.1, Figure "validation"; section 7.3, eq. SR).
+
+Participants chose, per scene and method, the highest blur-rate at which foveation was not
+visible. Reported here:
+
+* per scene and method the mean blur-rate +- SEM across participants (each participant's
+  repetitions averaged first);
+* the paired t-test ``ours`` vs ``contrast``, paired by participant x scene, overall and per scene
+  (pairs = participants), with t, df, p, Cohen's d_z and the 95 % CI of the mean difference; and,
+  as a check that does not treat a participant's scenes as independent, the same test on each
+  participant's mean over scenes;
+* the estimated sampling-rate reduction of ours over contrast, 1 - SR_ours / SR_contrast with
+  SR_ours / SR_contrast = blur_rate_contrast / blur_rate_ours (section 7.3), from the mean
+  blur-rates per scene and overall.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import pandas as pd
+
+from fovexp.errors import FovexpError
+
+from .calibration import summarize
+from .stats import paired_ttest, sampling_rate_ratio
+
+TEST_COLUMNS = ["scope", "n", "mean_ours", "mean_contrast", "mean_diff", "sd_diff", "t", "df",
+                "p", "d_z", "ci_low", "ci_high"]
+
+
+@dataclass
+class ValidationResult:
+    """Section 7.1 results of one validation experiment."""
+
+    experiment: str
+    summary: pd.DataFrame  # image, method, mean, sem, n, n_trials
+    overall: pd.DataFrame  # method, mean, sem, n, n_trials
+    tests: pd.DataFrame  # TEST_COLUMNS; scope = "all scenes", "participant means", or a scene
+    sampling: pd.DataFrame  # scope, blur_rate_contrast, blur_rate_ours, sr_ratio, reduction_pct
+    notes: list[str] = field(default_factory=list)
+
+
+def _test_row(scope: str, ours: pd.Series, contrast: pd.Series) -> dict:
+    r = paired_ttest(ours.to_numpy(), contrast.to_numpy())
+    return {"scope": scope, "n": r.n, "mean_ours": r.mean_a, "mean_contrast": r.mean_b,
+            "mean_diff": r.mean_diff, "sd_diff": r.sd_diff, "t": r.t, "df": r.df, "p": r.p,
+            "d_z": r.d_z, "ci_low": r.ci_low, "ci_high": r.ci_high}
+
+
+def _sampling_row(scope: str, contrast: float, ours: float) -> dict:
+    ratio = sampling_rate_ratio(ours, contrast)
+    return {"scope": scope, "blur_rate_contrast": contrast, "blur_rate_ours": ours,
+            "sr_ratio": ratio, "reduction_pct": 100.0 * (1.0 - ratio)}
+
+
+def validate(trials: pd.DataFrame, experiment: str = "validation") -> ValidationResult:
+    """Section 7.1 statistics from the trials of one validation experiment."""
+    sel = trials[trials["adjusted_parameter"] == "blur_rate"]
+    if sel.empty:
+        raise FovexpError(f"{experiment}: no trials adjusting blur_rate")
+    notes: list[str] = []
+    summary = summarize(sel, ["image", "method"])
+    overall = summarize(sel, ["method"])
+    cell = sel.groupby(["participant", "image", "method"])["final_value"].mean().unstack("method")
+    tests: list[dict] = []
+    sampling: list[dict] = []
+    if {"ours", "contrast"} <= set(cell.columns):
+        pairs = cell[["ours", "contrast"]]
+        lone = pairs.isna().any(axis=1)
+        if lone.any():
+            notes.append(f"{int(lone.sum())} participant x scene cell(s) lack one of the two "
+                         "methods and are left out of the paired tests")
+        pairs = pairs[~lone]
+        if pairs.empty:
+            raise FovexpError(f"{experiment}: no participant x scene has both ours and contrast")
+        tests.append(_test_row("all scenes", pairs["ours"], pairs["contrast"]))
+        per_part = pairs.groupby(level="participant").mean()
+        tests.append(_test_row("participant means", per_part["ours"], per_part["contrast"]))
+        for scene, grp in pairs.groupby(level="image", sort=True):
+            tests.append(_test_row(str(scene), grp["ours"], grp["contrast"]))
+        sampling.append(_sampling_row("all scenes", float(pairs["contrast"].mean()),
+                                      float(pairs["ours"].mean())))
+        means = summary.pivot(index="image", columns="method", values="mean")
+        for scene, row in means.iterrows():
+            sampling.append(_sampling_row(str(scene), float(row["contrast"]), float(row["ours"])))
+    else:
+        notes.append("ours and contrast are not both present: no t-test or sampling-rate "
+                     f"estimate (methods: {', '.join(map(str, cell.columns))})")
+    return ValidationResult(
+        experiment=experiment, summary=summary, overall=overall,
+        tests=pd.DataFrame(tests, columns=TEST_COLUMNS),
+        sampling=pd.DataFrame(sampling, columns=["scope", "blur_rate_contrast", "blur_rate_ours",
+                                                 "sr_ratio", "reduction_pct"]),
+        notes=notes,
+    )

@@ -1,0 +1,115 @@
+"""``fovexp run``: run one of the protocols with a participant (docs/EXPERIMENT.md).
+
+``fovexp.cli`` registers it with :func:`add_run_parser`; :func:`run_command` returns the exit
+status: 0 finished, 2 bad input (one line on stderr, nothing opened), 3 aborted by the operator,
+130 interrupted by a signal. The last two leave a session that ``--resume`` continues.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Any
+
+from fovexp.errors import FovexpError
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not WIDTHxHEIGHT") from None
+    if not (16 <= w <= 16384 and 16 <= h <= 16384) or w % 2:
+        raise argparse.ArgumentTypeError(f"{text!r}: need an even width and sizes of 16..16384")
+    return w, h
+
+
+def add_run_parser(subparsers: Any) -> argparse.ArgumentParser:
+    """Add the ``run`` subcommand to ``subparsers`` (an argparse sub-parser action)."""
+    p = subparsers.add_parser(
+        "run", help="run an experiment protocol with a participant",
+        description="Run one of the paper's adjustment experiments (protocols/*.yaml).")
+    p.add_argument("protocol", type=Path, help="protocol YAML, e.g. protocols/calibration-fe.yaml")
+    p.add_argument("--participant", required=True, help="participant ID ([A-Za-z0-9_-]{1,32})")
+    p.add_argument("--tracker", choices=["tobii", "simulated", "mouse"], default=None,
+                   help="gaze source (default: tobii; simulated with --dry-run)")
+    p.add_argument("--tracker-address", default=None,
+                   help="Tobii tracker address or serial number (default: the first found)")
+    p.add_argument("--dry-run", action="store_true",
+                   help="simulated gaze and participant, small window, no display check")
+    p.add_argument("--resume", action="store_true",
+                   help="continue this participant's last incomplete session")
+    p.add_argument("--new-session", action="store_true",
+                   help="start a new session although an incomplete one exists")
+    p.add_argument("--results", type=Path, default=Path("results"),
+                   help="results root (default: ./results)")
+    p.add_argument("--window", type=_size, default=None, metavar="WxH",
+                   help="window size instead of the display profile's (dry run: 480x270)")
+    p.add_argument("--windowed", action="store_true", help="not full screen (pilots)")
+    p.add_argument("--skip-display-check", action="store_true",
+                   help="do not stop when the refresh rate or window size differ from the profile")
+    p.add_argument("--limit-trials", type=int, default=None, metavar="N",
+                   help="only the first N main trials of the randomised order (tests, pilots)")
+    p.add_argument("--practice", type=int, default=None, metavar="N",
+                   help="practice trials (default: the protocol's)")
+    g = p.add_argument_group("simulated participant (--dry-run)")
+    g.add_argument("--sim-truth", type=Path, default=None,
+                   help="YAML ground truth (table, sk_slope, validation_blur_rate, noise_sd)")
+    g.add_argument("--sim-noise-scale", type=float, default=1.0,
+                   help="multiply the truth file's noise sd (0: noise-free)")
+    g.add_argument("--sim-speed", type=float, default=4.0,
+                   help="time compression of the participant's behaviour (default 4)")
+    g.add_argument("--sim-seed", type=int, default=None, help="seed of the simulated participant")
+    p.set_defaults(func=run_command)
+    return p
+
+
+def run_command(args: argparse.Namespace) -> int:
+    """Validate everything, then run the session; errors print one line and return 2."""
+    from .session import EXIT_ERROR, Session, SessionOptions
+
+    try:
+        from .participant import SimTruth
+        from .protocol import load_protocol
+        from .validation import check_participant
+
+        check_participant(args.participant)
+        if args.limit_trials is not None and args.limit_trials < 1:
+            raise FovexpError("--limit-trials must be at least 1")
+        if args.practice is not None and args.practice < 0:
+            raise FovexpError("--practice must be 0 or more")
+        if args.sim_speed <= 0 or args.sim_noise_scale < 0:
+            raise FovexpError("--sim-speed must be > 0 and --sim-noise-scale >= 0")
+        if args.resume and args.new_session:
+            raise FovexpError("--resume and --new-session exclude each other")
+        tracker = args.tracker or ("simulated" if args.dry_run else "tobii")
+        truth = SimTruth.load(args.sim_truth) if args.sim_truth else SimTruth()
+        protocol = load_protocol(args.protocol)
+        opts = SessionOptions(
+            participant=args.participant, results_root=args.results, tracker=tracker,
+            dry_run=args.dry_run, resume=args.resume, new_session=args.new_session,
+            limit_trials=args.limit_trials, practice_trials=args.practice,
+            window_size=args.window or ((480, 270) if args.dry_run else None),
+            fullscreen=not (args.windowed or args.dry_run),
+            skip_display_check=args.skip_display_check, tracker_address=args.tracker_address,
+            sim_truth=truth, sim_speed=args.sim_speed, sim_noise_scale=args.sim_noise_scale,
+            sim_seed=args.sim_seed,
+        )
+        session = Session(protocol, opts)
+        if not session.remaining and session.info.get("completed"):
+            print(f"session {session.session_id}: nothing left to run", file=sys.stderr)
+            return 0
+        # A tracker that is absent fails here, before any window opens.
+        gaze = session.make_gaze()
+        print(f"fovexp run: {protocol.experiment}, participant {args.participant}, session "
+              f"{session.session_id}, {len(session.remaining)} of {len(session.trials)} trials "
+              f"to run -> {session.folder}", file=sys.stderr)
+        code = session.run(gaze=gaze)
+    except FovexpError as exc:
+        print(f"fovexp run: error: {exc}", file=sys.stderr)
+        return EXIT_ERROR
+    messages = {0: "finished", 3: "aborted by the operator; continue with --resume",
+                130: "interrupted; continue with --resume"}
+    print(f"fovexp run: session {session.session_id} {messages.get(code, code)}", file=sys.stderr)
+    return code

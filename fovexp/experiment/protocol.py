@@ -1,0 +1,425 @@
+"""Experiment protocols: YAML files validated before any window opens.
+
+A protocol describes one of the paper's adjustment experiments (section 6.2 "Experiment
+Procedure" for ``calibration-fe``, ``calibration-sk``, ``calibration-sf``; section 7.1 for
+``validation``): which parameter the wheel adjusts, its range, steps and start value, the
+conditions (images x blur-rates x methods x s_f values) and their repetitions, the seeded
+randomised order, the display profile, and where the parameters that are not adjusted come from
+(a constant, a condition, Table 2, or an earlier experiment's results folder).
+
+Relative paths inside a protocol are relative to the protocol file's folder.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from fovexp.errors import FovexpError
+
+from .stimuli import StimulusSet
+from .validation import first_error
+
+Parameter = Literal["f_e", "s_k", "s_f", "blur_rate"]
+MethodName = Literal["foveated", "contrast", "ours"]
+
+#: Bounds every value must respect (those of :class:`fovexp.EnhanceParams`).
+PARAM_BOUNDS: dict[str, tuple[float, float]] = {
+    "f_e": (0.0, 2.0),
+    "s_k": (0.0, 200.0),
+    "s_f": (0.0, 50.0),
+    "blur_rate": (0.0, 5.0),
+}
+#: Parameters each method uses besides the blur-rate (paper sections 5, 6.2).
+METHOD_NEEDS: dict[str, tuple[str, ...]] = {
+    "foveated": (),
+    "contrast": ("f_e",),
+    "ours": ("f_e", "s_k", "s_f"),
+}
+PAPER_TABLE_NAMES = ("paper-table2", "table2")
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class AdjustSpec(_Strict):
+    """The adjusted parameter: range, a coarse and a fine step per wheel notch, start value."""
+
+    parameter: Parameter
+    range: tuple[float, float]
+    step: float = Field(gt=0)
+    fine_step: float = Field(gt=0)
+    #: a fixed value, or ``random`` (uniform in the range, from the session seed)
+    start: float | Literal["random"] = "random"
+
+    @model_validator(mode="after")
+    def _check(self) -> AdjustSpec:
+        lo, hi = self.range
+        blo, bhi = PARAM_BOUNDS[self.parameter]
+        if not lo < hi:
+            raise ValueError(f"range [{lo}, {hi}] must have low < high")
+        if lo < blo or hi > bhi:
+            raise ValueError(
+                f"range [{lo}, {hi}] is outside what {self.parameter} allows [{blo}, {bhi}]"
+            )
+        if self.fine_step > self.step:
+            raise ValueError("fine_step must not exceed step")
+        if self.step > hi - lo:
+            raise ValueError(f"step {self.step} is larger than the range {hi - lo}")
+        if isinstance(self.start, float) and not lo <= self.start <= hi:
+            raise ValueError(f"start {self.start} is outside the range [{lo}, {hi}]")
+        return self
+
+
+class ParamSource(_Strict):
+    """Where a parameter that is not adjusted comes from; exactly one key is set.
+
+    ``value``: a constant. ``condition``: the trial's condition (``s_f_values``).
+    ``table``: ``paper-table2``, a ParameterTable YAML, or a calibration root folder holding
+    ``calibration-fe/-sk/-sf`` results (``analysis.derive.parameter_table``), interpolated by
+    blur-rate. ``fe_results``: a calibration-fe results folder (``fe_by_blur_rate``).
+    ``sk_line_results``: a calibration-sk results folder; s_k = slope * s_f + intercept per
+    blur-rate (``sk_line_by_blur_rate``).
+    """
+
+    value: float | None = None
+    condition: bool = False
+    table: str | None = None
+    fe_results: str | None = None
+    sk_line_results: str | None = None
+
+    @model_validator(mode="after")
+    def _one(self) -> ParamSource:
+        n = sum(
+            x is not None for x in (self.value, self.table, self.fe_results, self.sk_line_results)
+        ) + int(self.condition)
+        if n != 1:
+            raise ValueError(
+                "exactly one of value, condition, table, fe_results, sk_line_results must be set"
+            )
+        return self
+
+
+class FixationSpec(_Strict):
+    #: gaze farther than this from the cross blanks the next frame (paper section 6.1: 1.25 deg)
+    radius_deg: float = Field(default=1.25, gt=0, le=20)
+    cross_size_deg: float = Field(default=0.6, gt=0, le=10)
+    #: gaze older than this counts as lost (s)
+    gaze_timeout_s: float = Field(default=0.05, gt=0, le=2)
+
+
+class TrackerSpec(_Strict):
+    sampling_hz: float = Field(default=600, gt=0, le=2000)
+    #: refuse to start when a validation's accuracy (median error, worse eye) exceeds this (deg)
+    max_accuracy_deg: float = Field(default=1.0, gt=0, le=10)
+    calibration_points: Literal[5, 9] = 9
+    validation_points: int = Field(default=5, ge=1, le=13)
+
+
+class Protocol(_Strict):
+    """A whole experiment (see the module docstring)."""
+
+    experiment: str = Field(pattern=r"^[a-z0-9][a-z0-9_-]{0,40}$")
+    title: str = ""
+    paper_section: str = ""
+    display: str
+    geometry: Literal["exact", "linear", "release"] = "exact"
+    preset: Literal["paper", "release"] = "paper"
+    stimuli: str = "../stimuli/manifest.yaml"
+    images: list[str] = Field(min_length=1)
+    methods: list[MethodName] = Field(min_length=1)
+    blur_rates: list[float] | None = None
+    s_f_values: list[float] | None = None
+    adjust: AdjustSpec
+    parameters: dict[Literal["f_e", "s_k", "s_f"], ParamSource] = Field(default_factory=dict)
+    repetitions: int = Field(default=1, ge=1, le=100)
+    seed: int = Field(ge=0, le=2**31 - 1)
+    practice_trials: int = Field(default=2, ge=0, le=50)
+    break_every: int = Field(default=0, ge=0)
+    impulses: int = Field(default=64, ge=1, le=512)
+    fixation: FixationSpec = FixationSpec()
+    tracker: TrackerSpec = TrackerSpec()
+    instructions: str = ""
+
+    @model_validator(mode="after")
+    def _consistent(self) -> Protocol:
+        p = self.adjust.parameter
+        if len(set(self.images)) != len(self.images):
+            raise ValueError("images: duplicate ids")
+        if p == "blur_rate":
+            if self.blur_rates:
+                raise ValueError("blur_rates: not allowed when the blur-rate is adjusted")
+        elif not self.blur_rates:
+            raise ValueError("blur_rates: required (one or more) unless adjust.parameter is "
+                             "blur_rate")
+        for br in self.blur_rates or []:
+            if not 0.0 <= br <= PARAM_BOUNDS["blur_rate"][1]:
+                raise ValueError(f"blur_rates: {br} is outside [0, 5] arcmin/deg")
+        for sf in self.s_f_values or []:
+            if not 0.0 < sf <= PARAM_BOUNDS["s_f"][1]:
+                raise ValueError(f"s_f_values: {sf} is outside (0, 50]")
+        if p in self.parameters:
+            raise ValueError(f"parameters.{p}: {p} is the adjusted parameter")
+        needed = {n for m in self.methods for n in METHOD_NEEDS[m]} - {p}
+        if p in ("f_e", "s_k", "s_f") and not any(p in METHOD_NEEDS[m] for m in self.methods):
+            raise ValueError(f"adjust.parameter: no method in {self.methods} uses {p}")
+        for n in sorted(needed):
+            if n not in self.parameters:
+                raise ValueError(f"parameters.{n}: required (methods {self.methods} use it)")
+        for n, src in self.parameters.items():
+            if src.condition and (n != "s_f" or not self.s_f_values):
+                raise ValueError(f"parameters.{n}.condition: only s_f can come from the "
+                                 "conditions, and then s_f_values must be given")
+            if src.value is not None:
+                lo, hi = PARAM_BOUNDS[n]
+                if not lo <= src.value <= hi:
+                    raise ValueError(f"parameters.{n}.value: {src.value} outside [{lo}, {hi}]")
+            if src.fe_results is not None and n != "f_e":
+                raise ValueError(f"parameters.{n}.fe_results: only for f_e")
+            if src.sk_line_results is not None and n != "s_k":
+                raise ValueError(f"parameters.{n}.sk_line_results: only for s_k")
+        if self.s_f_values and not (
+            "s_f" in self.parameters and self.parameters["s_f"].condition
+        ):
+            raise ValueError("s_f_values: given but parameters.s_f is not {condition: true}")
+        return self
+
+
+@dataclass(frozen=True)
+class Trial:
+    """One trial of a session's plan."""
+
+    index: int
+    practice: bool
+    repetition: int
+    image: str
+    method: str
+    blur_rate: float | None  # None when the blur-rate is adjusted
+    s_f: float | None  # the s_f condition, if any
+    start_value: float
+
+
+@dataclass
+class LoadedProtocol:
+    """A validated protocol with its resolved files and parameter sources."""
+
+    path: Path
+    sha256: str
+    text: str
+    spec: Protocol
+    stimuli: StimulusSet
+    image_paths: dict[str, Path]
+    display_name: str
+    #: functions (blur_rate, s_f or None) -> value, for the parameters that are not adjusted
+    sources: dict[str, Callable[[float, float | None], float]] = field(default_factory=dict)
+    dependency_folders: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def experiment(self) -> str:
+        return self.spec.experiment
+
+    def parameter_values(self, trial: Trial, value: float) -> dict[str, float | None]:
+        """f_e, s_k, s_f and blur-rate in effect when the adjusted parameter is ``value``."""
+        adj = self.spec.adjust.parameter
+        out: dict[str, float | None] = {"f_e": None, "s_k": None, "s_f": None,
+                                        "blur_rate": trial.blur_rate}
+        out[adj] = float(value)
+        br = float(out["blur_rate"])  # type: ignore[arg-type]
+        needs = METHOD_NEEDS[trial.method]
+        # s_f first: an s_k line needs it (section 6.2, "Bandwidth scaling").
+        for name in ("s_f", "f_e", "s_k"):
+            if name == adj or name not in needs:
+                continue
+            sf = out["s_f"] if out["s_f"] is not None else trial.s_f
+            out[name] = float(self.sources[name](br, sf))
+        return out
+
+    def plan(self, participant: str, limit: int | None = None,
+             practice: int | None = None) -> tuple[int, list[Trial]]:
+        """The session seed and the trial list: practice first, then the randomised conditions.
+
+        The order depends only on the protocol's seed and the participant, so ``--resume``
+        regenerates the same plan. ``limit`` keeps the first ``limit`` main trials (tests).
+        """
+        seed = session_seed(self.spec.seed, participant)
+        rng = np.random.default_rng(seed)
+        s = self.spec
+        conds = list(itertools.product(
+            range(s.repetitions), s.images, s.blur_rates or [None], s.methods,
+            s.s_f_values or [None],
+        ))
+        order = rng.permutation(len(conds))
+        n_practice = s.practice_trials if practice is None else practice
+        prng = np.random.default_rng(seed + 1)
+        practice_conds = [conds[int(i)] for i in prng.integers(0, len(conds), n_practice)]
+        main = [conds[int(i)] for i in order]
+        if limit is not None:
+            main = main[:limit]
+        lo, hi = s.adjust.range
+        trials = []
+        for k, (cond, is_practice) in enumerate(
+            [(c, True) for c in practice_conds] + [(c, False) for c in main]
+        ):
+            rep, image, br, method, sf = cond
+            start = s.adjust.start
+            # Drawn from a per-trial stream so the start value does not depend on the limit.
+            srng = np.random.default_rng([seed, k])
+            start_value = float(srng.uniform(lo, hi)) if start == "random" else float(start)
+            trials.append(Trial(k, is_practice, rep if not is_practice else 0, image, method,
+                                br, sf, start_value))
+        return seed, trials
+
+
+def session_seed(protocol_seed: int, participant: str) -> int:
+    """Per-participant seed for the order, start values and noise (logged in ``seed``)."""
+    h = hashlib.sha256(f"{protocol_seed}:{participant}".encode()).digest()
+    return int.from_bytes(h[:4], "little") & 0x7FFFFFFF
+
+
+def _resolve_path(base: Path, rel: str) -> Path:
+    p = Path(rel).expanduser()
+    return p if p.is_absolute() else (base / p).resolve()
+
+
+def load_protocol(path: str | Path, check_dependencies: bool = True) -> LoadedProtocol:
+    """Load and validate a protocol, its images and its dependencies, before any window opens.
+
+    Raises :class:`FovexpError` naming the file and the key for an unknown key, an out-of-range
+    value, an image missing from the manifest or disk, or a missing dependency folder.
+    """
+    path = Path(path)
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise FovexpError(f"cannot read protocol {path}: {exc.strerror}") from None
+    text = raw.decode("utf-8", errors="replace")
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise FovexpError(f"protocol {path} is not valid YAML: {exc}") from None
+    if not isinstance(data, dict):
+        raise FovexpError(f"protocol {path} must be a mapping of keys")
+    try:
+        spec = Protocol.model_validate(data)
+    except ValidationError as exc:
+        raise FovexpError(f"protocol {path}: {first_error(exc)}") from None
+    base = path.resolve().parent
+
+    from fovexp import load_display
+
+    disp = spec.display
+    if disp.endswith((".yaml", ".yml")):
+        disp = str(_resolve_path(base, disp))
+    try:
+        load_display(disp)
+    except FovexpError as exc:
+        raise FovexpError(f"protocol {path}: display: {exc}") from None
+
+    stim = StimulusSet(_resolve_path(base, spec.stimuli))
+    image_paths = {
+        img: stim.check(img, f"protocol {path}: images[{i}]") for i, img in enumerate(spec.images)
+    }
+    lp = LoadedProtocol(path=path, sha256=hashlib.sha256(raw).hexdigest(), text=text, spec=spec,
+                        stimuli=stim, image_paths=image_paths, display_name=disp)
+    for name, src in spec.parameters.items():
+        lp.sources[name] = _make_source(path, base, name, src, spec, lp, check_dependencies)
+    return lp
+
+
+def _interp(where: str, table: dict[float, float], needed: list[float]) -> Callable[[float], float]:
+    xs = sorted(table)
+    ys = [table[x] for x in xs]
+    for br in needed:
+        # Calibration dependencies must cover the blur-rates asked for; no extrapolation.
+        if br < xs[0] - 1e-9 or br > xs[-1] + 1e-9:
+            raise FovexpError(f"{where}: results cover blur-rates {xs}, not {br}")
+    return lambda br: float(np.interp(br, xs, ys))
+
+
+def _make_source(path: Path, base: Path, name: str, src: ParamSource, spec: Protocol,
+                 lp: LoadedProtocol, check: bool) -> Callable[[float, float | None], float]:
+    where = f"protocol {path}: parameters.{name}"
+    if src.value is not None:
+        v = float(src.value)
+        return lambda br, sf: v
+    if src.condition:
+        def from_condition(br: float, sf: float | None) -> float:
+            assert sf is not None
+            return float(sf)
+        return from_condition
+    needed = list(spec.blur_rates or [])
+    if src.table is not None:
+        if src.table in PAPER_TABLE_NAMES:
+            from fovexp import PAPER_TABLE2
+            table = PAPER_TABLE2
+        else:
+            tpath = _resolve_path(base, src.table)
+            lp.dependency_folders[name] = str(tpath)
+            if tpath.is_dir():
+                _require_results(where + ".table", tpath, check, nested=True)
+                from analysis.derive import parameter_table
+                table = _call(where + ".table", parameter_table, tpath)
+            elif tpath.is_file():
+                from fovexp import ParameterTable
+                table = ParameterTable.load(tpath)
+            else:
+                raise FovexpError(f"{where}.table: {tpath} does not exist (a parameter table "
+                                  "YAML or a calibration results folder)")
+        k = ("f_e", "s_k", "s_f").index(name)
+        return lambda br, sf: table.at(br)[k]
+    if src.fe_results is not None:
+        folder = _resolve_path(base, src.fe_results)
+        lp.dependency_folders[name] = str(folder)
+        _require_results(where + ".fe_results", folder, check)
+        from analysis.derive import fe_by_blur_rate
+        fe = _call(where + ".fe_results", fe_by_blur_rate, folder)
+        f = _interp(where + ".fe_results", fe, needed)
+        return lambda br, sf: f(br)
+    folder = _resolve_path(base, src.sk_line_results)  # type: ignore[arg-type]
+    lp.dependency_folders[name] = str(folder)
+    _require_results(where + ".sk_line_results", folder, check)
+    from analysis.derive import sk_line_by_blur_rate
+    lines = _call(where + ".sk_line_results", sk_line_by_blur_rate, folder)
+    slope = _interp(where + ".sk_line_results", {b: v[0] for b, v in lines.items()}, needed)
+    icpt = _interp(where + ".sk_line_results", {b: v[1] for b, v in lines.items()}, needed)
+
+    def sk_line(br: float, sf: float | None) -> float:
+        assert sf is not None
+        lo, hi = PARAM_BOUNDS["s_k"]
+        return float(min(max(slope(br) * sf + icpt(br), lo), hi))
+
+    return sk_line
+
+
+def _require_results(where: str, folder: Path, check: bool, nested: bool = False) -> None:
+    if not folder.is_dir():
+        raise FovexpError(f"{where}: results folder {folder} does not exist "
+                          "(run the experiment it depends on first, or fix the path)")
+    pattern = "*/*/trials.csv" if nested else "*/trials.csv"
+    if check and not any(folder.glob(pattern)):
+        raise FovexpError(f"{where}: results folder {folder} holds no trials.csv")
+
+
+def _call(where: str, fn: Callable, folder: Path):  # type: ignore[type-arg]
+    try:
+        out = fn(folder)
+    except FovexpError as exc:
+        raise FovexpError(f"{where}: {exc}") from None
+    if not out:
+        raise FovexpError(f"{where}: no usable trials in {folder}")
+    if isinstance(out, dict):
+        for k, v in out.items():
+            vals = v if isinstance(v, tuple) else (v,)
+            if not all(math.isfinite(float(x)) for x in vals):
+                raise FovexpError(f"{where}: non-finite result at blur-rate {k} in {folder}")
+    return out

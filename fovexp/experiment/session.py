@@ -1,0 +1,630 @@
+"""A session: plan, resume, tracker set-up, instructions, practice, trials, breaks, logs.
+
+The frame loop of a trial follows paper section 6.1 ("Task"): the reference's left half on the
+left, the mirrored half processed with the current value on the right, a fixation cross on the
+seam; the wheel changes the value, Enter confirms; whenever the gaze leaves the 1.25 deg window
+around the cross (or is invalid or lost) the next frame is black. The window itself is a
+:class:`Screen` (``fovexp.experiment.window.PsychoScreen``); everything here runs without one
+except :meth:`Session.run`.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import os
+import platform
+import signal
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+
+from fovexp.errors import FovexpError
+
+from .gaze import (
+    BlankingMonitor,
+    FixationGeometry,
+    GazeSample,
+    MouseGaze,
+    SimGazeParams,
+    SimulatedGaze,
+    sample_row,
+)
+from .logs import (
+    BLANKING_COLUMNS,
+    FRAME_COLUMNS,
+    GAZE_COLUMNS,
+    BatchLog,
+    PeriodicFlusher,
+    TrialLog,
+    read_trials,
+    write_json_atomic,
+)
+from .participant import SimTruth, SimulatedParticipant
+from .protocol import LoadedProtocol, Trial
+from .quality import target_points, validation_result
+from .stimuli import load_stimulus, split_screen
+from .trial import InputEvent, Key, TrialState, ValueAdjuster
+from .validation import check_participant
+
+EXIT_OK = 0
+EXIT_ERROR = 2
+EXIT_ABORTED = 3
+EXIT_INTERRUPTED = 130
+
+
+class Screen(Protocol):
+    """What a session needs from its window (``window.PsychoScreen``)."""
+
+    size: tuple[int, int]
+
+    def check_display(self, display: Any) -> dict[str, Any]: ...
+    def message(self, text: str, keys: list[str] | None, timeout_s: float | None) -> str | None: ...
+    def show_point(self, x: float, y: float) -> None: ...
+    def set_reference(self, left: np.ndarray) -> None: ...
+    def set_test(self, right: np.ndarray) -> None: ...
+    def draw(self, blank: bool) -> float: ...
+    def poll_input(self) -> list[InputEvent]: ...
+    def mouse_position(self) -> tuple[float, float] | None: ...
+    def close(self) -> None: ...
+
+
+@dataclass
+class SessionOptions:
+    """Everything the CLI decides (docs/EXPERIMENT.md lists the flags)."""
+
+    participant: str
+    results_root: Path = Path("results")
+    tracker: str = "tobii"  # tobii / simulated / mouse
+    dry_run: bool = False
+    resume: bool = False
+    new_session: bool = False
+    limit_trials: int | None = None
+    practice_trials: int | None = None
+    window_size: tuple[int, int] | None = None
+    fullscreen: bool = True
+    skip_display_check: bool = False
+    tracker_address: str | None = None
+    sim_truth: SimTruth = field(default_factory=SimTruth)
+    sim_speed: float = 4.0
+    sim_noise_scale: float = 1.0
+    sim_seed: int | None = None
+    sim_gaze: SimGazeParams | None = None
+    #: seconds of each instruction/break screen in a dry run (no key presses there)
+    dry_message_s: float = 0.2
+
+
+class Aborted(Exception):
+    """The operator quit (Escape then Q); progress is saved."""
+
+
+class Interrupted(Exception):
+    """SIGINT/SIGTERM: stop at once; progress is saved."""
+
+
+def software_version() -> str:
+    try:
+        from importlib.metadata import version
+
+        return version("fovexp")
+    except Exception:
+        import fovexp
+
+        return str(getattr(fovexp, "__version__", "unknown"))
+
+
+def _versions() -> dict[str, str]:
+    out = {"python": platform.python_version(), "fovexp": software_version(),
+           "platform": platform.platform()}
+    for mod in ("numpy", "scipy", "pydantic", "psychopy", "pyglet", "tobii_research"):
+        m = sys.modules.get(mod)
+        if m is None:
+            try:
+                m = __import__(mod)
+            except Exception:
+                continue
+        out[mod] = str(getattr(m, "__version__", "?"))
+    return out
+
+
+def now_iso() -> str:
+    return _dt.datetime.now().astimezone().isoformat(timespec="milliseconds")
+
+
+def new_session_id(folder: Path) -> str:
+    """``YYYYmmdd-HHMMSS``; waits a second if that id is taken in ``folder``."""
+    while True:
+        sid = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
+        if not (folder / f"session-{sid}.json").exists():
+            return sid
+        time.sleep(0.2)
+
+
+def find_sessions(folder: Path) -> list[dict[str, Any]]:
+    out = []
+    for p in sorted(folder.glob("session-*.json")):
+        try:
+            info = json.loads(p.read_text())
+        except (OSError, json.JSONDecodeError):
+            continue
+        info["_path"] = str(p)
+        out.append(info)
+    return out
+
+
+class Session:
+    """One participant's run of one protocol (see the module docstring)."""
+
+    def __init__(self, protocol: LoadedProtocol, opts: SessionOptions) -> None:
+        from fovexp import load_display
+
+        self.protocol = protocol
+        self.opts = opts
+        self.participant = check_participant(opts.participant)
+        if opts.dry_run and opts.tracker not in ("simulated", "scripted"):
+            raise FovexpError("--dry-run uses simulated gaze: leave out --tracker or use "
+                              "--tracker simulated")
+        self.display = load_display(protocol.display_name)
+        self.folder = Path(opts.results_root) / protocol.experiment / self.participant
+        self.folder.mkdir(parents=True, exist_ok=True)
+        self.fixation = FixationGeometry(self.display, protocol.spec.geometry)
+        self._prepare_session()
+        self.gaze: Any = None
+        self.screen: Any = None
+        self.renderer: Any = None
+        self.sim: SimulatedParticipant | None = None
+        self.events: list[dict[str, Any]] = []
+
+    # -- plan and resume (no window) -----------------------------------------------------------
+    def _prepare_session(self) -> None:
+        opts, proto = self.opts, self.protocol
+        sessions = find_sessions(self.folder)
+        incomplete = [s for s in sessions if not s.get("completed")]
+        self.info: dict[str, Any]
+        if opts.resume:
+            if not incomplete:
+                raise FovexpError(
+                    f"--resume: no incomplete session of {proto.experiment} for participant "
+                    f"{self.participant} in {self.folder}")
+            info = incomplete[-1]
+            info.pop("_path", None)
+            if info.get("protocol_sha256") != proto.sha256:
+                raise FovexpError(
+                    f"--resume: protocol {proto.path} changed since session {info['session']} "
+                    f"started (sha256 {proto.sha256[:12]}... vs "
+                    f"{str(info.get('protocol_sha256'))[:12]}...); resuming would mix protocol "
+                    "versions")
+            self.session_id = str(info["session"])
+            plan = info.get("plan", {})
+            self.limit = plan.get("limit_trials")
+            self.practice = plan.get("practice_trials")
+            self.info = info
+        else:
+            if incomplete and not opts.new_session:
+                sid = incomplete[-1].get("session")
+                raise FovexpError(
+                    f"participant {self.participant} has an incomplete session {sid} of "
+                    f"{proto.experiment} in {self.folder}: add --resume to continue it, or "
+                    "--new-session to start a new one")
+            self.session_id = new_session_id(self.folder)
+            self.limit, self.practice = opts.limit_trials, opts.practice_trials
+            self.info = {}
+        self.seed, self.trials = proto.plan(self.participant, self.limit, self.practice)
+        rows, _ = read_trials(self.folder / "trials.csv")
+        self.done = {int(r["trial_index"]) for r in rows if r["session"] == self.session_id}
+        self.remaining = [t for t in self.trials if t.index not in self.done]
+
+    def _session_path(self) -> Path:
+        return self.folder / f"session-{self.session_id}.json"
+
+    def _write_info(self, **update: Any) -> None:
+        self.info.update(update)
+        write_json_atomic(self._session_path(), self.info)
+
+    def _start_info(self) -> None:
+        proto, opts = self.protocol, self.opts
+        run = {"started": now_iso(), "dry_run": opts.dry_run, "tracker": opts.tracker,
+               "pid": os.getpid(), "remaining_trials": len(self.remaining)}
+        if not self.info:
+            self.info = {
+                "session": self.session_id,
+                "participant": self.participant,
+                "experiment": proto.experiment,
+                "protocol_path": str(proto.path),
+                "protocol_sha256": proto.sha256,
+                "protocol": proto.text,
+                "dependencies": proto.dependency_folders,
+                "display": self.display.model_dump(),
+                "seed": self.seed,
+                "plan": {"limit_trials": self.limit, "practice_trials": self.practice,
+                         "n_trials": len(self.trials)},
+                "software_version": software_version(),
+                "started": run["started"],
+                "ended": None,
+                "state": "running",
+                "completed": False,
+                "runs": [],
+                "tracker_quality": [],
+                "events": [],
+            }
+        self.info["runs"].append(run)
+        self.info["versions"] = _versions()
+        if opts.dry_run:
+            self.info["simulated_participant"] = {
+                "truth": opts.sim_truth.model_dump(), "speed": opts.sim_speed,
+                "noise_scale": opts.sim_noise_scale, "seed": self._sim_seed()}
+        self._write_info(state="running", completed=False)
+
+    def _sim_seed(self) -> int:
+        return self.opts.sim_seed if self.opts.sim_seed is not None else self.seed
+
+    # -- gaze ----------------------------------------------------------------------------------
+    def make_gaze(self) -> Any:
+        """The gaze source; ``--tracker tobii`` fails here, before a window opens."""
+        kind = self.opts.tracker
+        if kind == "tobii":
+            from .tobii import TobiiGaze
+
+            return TobiiGaze(self.protocol.spec.tracker.sampling_hz, self.opts.tracker_address)
+        if kind == "simulated":
+            n_runs = len(self.info.get("runs", [])) if self.info else 0
+            params = self.opts.sim_gaze or SimGazeParams(
+                rate_hz=self.protocol.spec.tracker.sampling_hz)
+            # A resumed run gets fresh gaze noise (different seed) but stays reproducible.
+            return SimulatedGaze(self.fixation, seed=self._sim_seed() + 7919 * n_runs,
+                                 params=params)
+        if kind == "mouse":
+            return MouseGaze()
+        raise FovexpError(f"--tracker {kind!r}: choose tobii, simulated or mouse")
+
+    # -- the run -------------------------------------------------------------------------------
+    def run(self, screen_factory: Any = None, gaze: Any = None) -> int:
+        """Run the remaining trials; returns an exit status (0 done, 3 aborted, 130 killed)."""
+        proto = self.protocol
+        if not self.remaining and self.info.get("completed"):
+            return EXIT_OK
+        self.gaze = gaze if gaze is not None else self.make_gaze()
+        if screen_factory is None:
+            from .window import PsychoScreen
+
+            screen_factory = PsychoScreen
+        # The window and its display check come first: a failed check writes nothing.
+        size = self.opts.window_size or (self.display.width_px, self.display.height_px)
+        self.screen = screen_factory(
+            size=size, fullscreen=self.opts.fullscreen and not self.opts.dry_run,
+            cross_px=self._cross_px(size), dry_run=self.opts.dry_run,
+            refresh_hz=self.display.refresh_hz)
+        if not (self.opts.dry_run or self.opts.skip_display_check):
+            check = self.screen.check_display(self.display)  # closes the window on failure
+        else:
+            check = {"skipped": True,
+                     "reason": "dry run" if self.opts.dry_run else "--skip-display-check"}
+        if isinstance(self.gaze, MouseGaze):
+            self.gaze.position = self.screen.mouse_position
+        self._start_info()
+        self._write_info(display_check=check)
+        self.trial_log = TrialLog(self.folder / "trials.csv")
+        sid = self.session_id
+        self.gaze_log = BatchLog(self.folder / f"gaze-{sid}.csv", GAZE_COLUMNS)
+        self.frame_log = BatchLog(self.folder / f"frames-{sid}.csv", FRAME_COLUMNS)
+        self.blank_log = BatchLog(self.folder / f"blanking-{sid}.csv", BLANKING_COLUMNS)
+        flusher = PeriodicFlusher([self.gaze_log, self.frame_log, self.blank_log]).start()
+        old_handlers = self._install_signals()
+        state = "interrupted"
+        code = EXIT_INTERRUPTED
+        try:
+            from .render import TestRenderer
+
+            self.renderer = TestRenderer(self.display, proto.spec.preset)
+            self.gaze.start()
+            self._write_info(tracker=self.gaze.info())
+            if self.opts.dry_run:
+                self.sim = SimulatedParticipant(self.opts.sim_truth, self._sim_seed() + 1,
+                                                self.opts.sim_speed, self.opts.sim_noise_scale)
+            self._tracker_setup()
+            self._instructions()
+            self._trials()
+            state, code = "completed", EXIT_OK
+            self._message("Thank you - this part is finished.", ["space", "return"], 3.0)
+        except Aborted:
+            state, code = "aborted", EXIT_ABORTED
+        except Interrupted:
+            state, code = "interrupted", EXIT_INTERRUPTED
+        finally:
+            self._restore_signals(old_handlers)
+            flusher.stop()
+            for closer in (getattr(self.renderer, "close", None), self.gaze.stop,
+                           getattr(self.screen, "close", None)):
+                if closer is not None:
+                    try:
+                        closer()
+                    except Exception:  # closing after an error must not hide the error
+                        pass
+            done = {int(r["trial_index"]) for r in self.trial_log.rows
+                    if r["session"] == self.session_id} if hasattr(self, "trial_log") else set()
+            complete = state == "completed" and len(done) == len(self.trials)
+            self._write_info(state=state if not (state == "completed" and not complete)
+                             else "incomplete", completed=complete, ended=now_iso(),
+                             n_completed=len(done), events=self.info.get("events", []))
+        return code
+
+    def _cross_px(self, size: tuple[int, int]) -> float:
+        """Cross size in window pixels from the protocol's degrees at the screen centre."""
+        ppd = self.fixation.ppd_centre * size[0] / self.display.width_px
+        return max(7.0, self.protocol.spec.fixation.cross_size_deg * ppd)
+
+    def _install_signals(self) -> dict[int, Any]:
+        def handler(signum: int, frame: Any) -> None:
+            raise Interrupted(f"signal {signum}")
+
+        old = {}
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            try:
+                old[sig] = signal.signal(sig, handler)
+            except ValueError:  # not the main thread (tests): leave signals alone
+                pass
+        return old
+
+    def _restore_signals(self, old: dict[int, Any]) -> None:
+        for sig, h in old.items():
+            signal.signal(sig, h)
+
+    def _event(self, kind: str, **detail: Any) -> None:
+        self.info.setdefault("events", []).append({"time": now_iso(), "event": kind, **detail})
+        self._write_info()
+
+    def _message(self, text: str, keys: list[str], timeout_s: float | None = None) -> str | None:
+        if self.opts.dry_run:
+            return self.screen.message(text, keys, self.opts.dry_message_s)
+        return self.screen.message(text, keys, timeout_s)
+
+    # -- tracker calibration and validation ------------------------------------------------------
+    def _tracker_setup(self) -> None:
+        """Calibrate (Tobii) and validate; refuse to start when accuracy is worse than the
+        protocol's limit (``tracker.max_accuracy_deg``)."""
+        spec = self.protocol.spec.tracker
+        if self.opts.tracker == "mouse" or self.opts.tracker == "scripted":
+            self.info["tracker_quality"].append({"time": now_iso(), "skipped": self.opts.tracker})
+            self._write_info()
+            return
+        while True:
+            if self.opts.tracker == "tobii":
+                self._message("Eye-tracker calibration: look at each dot until it moves.\n\n"
+                              "Press Space to start.", ["space"])
+                cal = self.gaze.calibrate(target_points(spec.calibration_points),
+                                          self._show_calibration_point)
+            else:
+                cal = {"status": "simulated"}
+            per_target = []
+            for x, y in target_points(spec.validation_points):
+                self.screen.show_point(x, y)
+                per_target.append(((x, y), self._collect(x, y)))
+            res = validation_result(self.fixation, per_target, spec.max_accuracy_deg)
+            self.info["tracker_quality"].append(
+                {"time": now_iso(), "calibration": cal, "validation": res.to_dict()})
+            self._write_info()
+            if res.passed:
+                self._message(f"Eye tracker OK. {res.summary()}", ["space"], 1.0)
+                return
+            key = self._message(
+                f"Eye-tracker accuracy {res.accuracy_deg:.2f} deg is worse than the protocol's "
+                f"limit {spec.max_accuracy_deg} deg.\n{res.summary()}\n\n"
+                "R: recalibrate    Q: quit", ["r", "q"])
+            if key != "r":
+                self._event("validation_failed", accuracy_deg=res.accuracy_deg)
+                raise FovexpError(
+                    f"eye-tracker validation failed: accuracy {res.accuracy_deg:.2f} deg > limit "
+                    f"{spec.max_accuracy_deg} deg ({res.summary()})")
+
+    def _show_calibration_point(self, x: float, y: float) -> None:
+        self.screen.show_point(x, y)
+        t_end = time.monotonic() + 1.0
+        while time.monotonic() < t_end:
+            self.screen.show_point(x, y)
+
+    def _collect(self, x: float, y: float, settle_s: float = 0.5,
+                 collect_s: float = 0.8) -> list[GazeSample]:
+        if isinstance(self.gaze, SimulatedGaze):
+            self.gaze.poll()  # discard the stream while the simulated eye "looks" at the dot
+            return self.gaze.fixate((x, y), int(collect_s * self.gaze.p.rate_hz))
+        t0 = time.monotonic()
+        out: list[GazeSample] = []
+        while time.monotonic() - t0 < settle_s + collect_s:
+            self.screen.show_point(x, y)
+            s = self.gaze.poll()
+            if time.monotonic() - t0 >= settle_s:
+                out.extend(s)
+        return out
+
+    # -- instructions, practice, trials, breaks --------------------------------------------------
+    def _instructions(self) -> None:
+        text = self.protocol.spec.instructions.strip() or "Adjust the right half to match the left."
+        resumed = " (continuing where the last session stopped)" if self.done else ""
+        self._message(f"{self.protocol.spec.title}{resumed}\n\n{text}\n\nPress Space to start.",
+                      ["space"])
+
+    def _trials(self) -> None:
+        spec = self.protocol.spec
+        main_done_this_run = 0
+        practice_announced = False
+        main_announced = bool(self.done)
+        for trial in self.remaining:
+            if trial.practice and not practice_announced:
+                practice_announced = True
+                self._message("Practice trials first.\n\nPress Space.", ["space"])
+            if not trial.practice and not main_announced:
+                main_announced = True
+                if practice_announced:
+                    self._message("Practice finished. The experiment starts now.\n\n"
+                                  "Press Space.", ["space"])
+            while True:
+                outcome = self._run_trial(trial)
+                if outcome == "done":
+                    break
+                if outcome == "pause":
+                    self._event("paused", trial_index=trial.index)
+                    # Waits for the operator even in a dry run (no auto-continue).
+                    key = self.screen.message(
+                        "Paused.\n\nSpace: continue (this trial starts again)\n"
+                        "Q: quit - progress is saved; continue later with --resume",
+                        ["space", "q"], None)
+                    if key == "q":
+                        self._event("aborted", trial_index=trial.index)
+                        raise Aborted()
+                elif outcome == "disconnected":
+                    self._wait_reconnect(trial)
+            if not trial.practice:
+                main_done_this_run += 1
+                left = len([t for t in self.remaining if t.index > trial.index])
+                if spec.break_every and left and main_done_this_run % spec.break_every == 0:
+                    self._message(f"Break. {left} trials to go.\n\nPress Space to continue.",
+                                  ["space"])
+
+    def _wait_reconnect(self, trial: Trial) -> None:
+        """Tracker lost mid-session: screen blanked, a message, wait; Q quits (saved)."""
+        self._event("tracker_disconnected", trial_index=trial.index)
+        text = ("The eye tracker connection was lost. The trial will start again when it is "
+                "back.\n\nQ: quit (progress is saved; continue later with --resume)")
+        while not self.gaze.connected:
+            for ev in self.gaze.poll_events():
+                self._event(ev.kind, **ev.detail)
+            key = self.screen.message(text, ["q"], 0.1)
+            if key == "q":
+                self._event("aborted", trial_index=trial.index)
+                raise Aborted()
+        self._event("tracker_reconnected", trial_index=trial.index)
+
+    def _params(self, trial: Trial, value: float) -> Any:
+        from fovexp import EnhanceParams
+
+        vals = self.protocol.parameter_values(trial, value)
+        spec = self.protocol.spec
+        return EnhanceParams(method=trial.method, blur_rate=vals["blur_rate"], f_e=vals["f_e"],
+                             s_k=vals["s_k"], s_f=vals["s_f"], impulses=spec.impulses,
+                             seed=self.seed, preset=spec.preset)
+
+    def _load_frame(self, trial: Trial) -> np.ndarray:
+        size = self.screen.size
+        img = load_stimulus(self.protocol.image_paths[trial.image], size)
+        return split_screen(img)
+
+    def _run_trial(self, trial: Trial) -> str:
+        """One trial; returns ``done``, ``pause`` or ``disconnected``."""
+        spec = self.protocol.spec
+        adj = spec.adjust
+        frame = self._load_frame(trial)
+        w = frame.shape[1]
+        self.screen.set_reference(frame[:, : w // 2])
+        adjuster = ValueAdjuster(adj.range[0], adj.range[1], adj.step, adj.fine_step,
+                                 trial.start_value)
+        refresh = self.display.refresh_hz if not self.opts.dry_run else self.screen.refresh_hz
+        st = TrialState(adjuster, refresh)
+        self.renderer.set_image(frame)
+        first = self.renderer.request(self._params(trial, adjuster.value))
+        # The cross alone while the first frame of the trial is computed.
+        while True:
+            try:
+                _, _, right, _ = self.renderer.wait(first, timeout=0.05)
+                break
+            except TimeoutError:
+                self.screen.draw(blank=True)
+                self.gaze_log.extend(self._gaze_rows(None, self.gaze.poll()))
+        self.screen.set_test(right)
+        monitor = BlankingMonitor(self.fixation, spec.fixation.radius_deg,
+                                  spec.fixation.gaze_timeout_s)
+        if self.sim is not None:
+            self.sim.begin(adj.parameter, trial.method, trial.blur_rate, trial.s_f,
+                           adj.range[0], adj.range[1], adj.step, adj.fine_step)
+        # Samples from before the stimulus belong to no trial, but they tell the monitor where
+        # the gaze is, so the first frame is not blanked as "lost".
+        early = self.gaze.poll()
+        monitor.update(early, self.gaze.now_us())
+        self.gaze_log.extend(self._gaze_rows(None, early))
+        decision = None
+        frame_rows = []
+        while True:
+            for ev in self.gaze.poll_events():
+                self._event(ev.kind, trial_index=trial.index, **ev.detail)
+            if not self.gaze.connected:
+                # The interrupted attempt's frames stay in the frame log; the trial restarts.
+                self._flush_frames(frame_rows)
+                return "disconnected"
+            samples = self.gaze.poll()
+            decision = monitor.update(samples, self.gaze.now_us())
+            self.gaze_log.extend(self._gaze_rows(trial.index, samples))
+            events = self.screen.poll_input()
+            if self.sim is not None and st.t_start is not None:
+                t_trial = time.monotonic() - st.t_start
+                events = events + self.sim.poll(t_trial, st.value, not decision.blank)
+            outcome = st.handle(events)
+            if outcome == "pause":
+                self._flush_frames(frame_rows)
+                return "pause"
+            if outcome == "confirm":
+                break
+            if outcome == "changed":
+                self.renderer.request(self._params(trial, st.value))
+            got = self.renderer.poll()
+            if got is not None:
+                self.screen.set_test(got[2])
+            t = self.screen.draw(blank=decision.blank)
+            dt, dropped = st.flip(t, decision.blank, decision.reason)
+            frame_rows.append((trial.index, st.n_frames - 1, round(t, 6),
+                               None if dt is None else round(dt, 6), dropped, decision.blank,
+                               st.value))
+        st.finish(time.monotonic())
+        self._flush_frames(frame_rows)
+        self.blank_log.extend(
+            (trial.index, round(e.start_s, 6), round(e.end_s, 6) if e.end_s is not None else None,
+             e.frames, e.reason) for e in st.blanking.episodes)
+        # Side logs first (synced), then the trial row: the row is the commit point.
+        for log in (self.gaze_log, self.frame_log, self.blank_log):
+            log.flush(sync=True)
+        self.trial_log.append(self._row(trial, st))
+        self.done.add(trial.index)
+        return "done"
+
+    def _flush_frames(self, rows: list[tuple[Any, ...]]) -> None:
+        self.frame_log.extend(rows)
+        rows.clear()
+
+    def _gaze_rows(self, trial_index: int | None, samples: list[GazeSample]) -> list[Any]:
+        return [sample_row(trial_index, s, self.fixation.eccentricity(s.point)) for s in samples]
+
+    def _row(self, trial: Trial, st: TrialState) -> dict[str, Any]:
+        spec = self.protocol.spec
+        vals = self.protocol.parameter_values(trial, st.value)
+        return {
+            "participant": self.participant,
+            "session": self.session_id,
+            "experiment": spec.experiment,
+            "protocol_sha256": self.protocol.sha256,
+            "trial_index": trial.index,
+            "practice": trial.practice,
+            "repetition": trial.repetition,
+            "image": trial.image,
+            "blur_rate": vals["blur_rate"],
+            "method": trial.method,
+            "adjusted_parameter": spec.adjust.parameter,
+            "f_e": vals["f_e"],
+            "s_k": vals["s_k"],
+            "s_f": vals["s_f"],
+            "start_value": st.start_value,
+            "final_value": st.value,
+            "response_time_s": round(st.response_time_s, 4),
+            "wheel_events": st.adjuster.notches,
+            "blanked_fraction": round(st.blanking.fraction, 5),
+            "dropped_frames": st.timer.dropped,
+            "tracker": self.opts.tracker,
+            "seed": self.seed,
+            "software_version": software_version(),
+            "timestamp": now_iso(),
+        }
+
+
+__all__ = ["Session", "SessionOptions", "Screen", "Key", "EXIT_OK", "EXIT_ERROR",
+           "EXIT_ABORTED", "EXIT_INTERRUPTED"]

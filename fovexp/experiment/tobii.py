@@ -1,0 +1,259 @@
+"""Tobii Pro eye trackers through tobii-research (paper section 6.1: Tobii Pro Spectrum, 600 Hz).
+
+The gaze callback runs on the SDK's thread and only appends the SDK's sample dictionary to a
+:class:`~fovexp.experiment.gaze.SampleBuffer`; conversion, the blanking decision and disk writes
+happen in the frame loop and the log writer. Samples keep the tracker's own device and system
+timestamps (microseconds). Connection loss/restoration and gaze output frequency changes arrive
+as notifications; a stall of the sample stream and a measured rate off the nominal one are
+noticed too.
+
+tobii-research ships Linux wheels for Python 3.10 only; without it, or without a tracker,
+``--tracker tobii`` stops with a clear message before any window opens.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from fovexp.errors import FovexpError
+
+from .gaze import GazeSample, SampleBuffer, SourceEvent, monotonic_us
+
+
+def import_tobii() -> Any:
+    """The ``tobii_research`` module, or a FovexpError saying how to get it."""
+    try:
+        import tobii_research
+    except ImportError as exc:
+        raise FovexpError(
+            "--tracker tobii needs the tobii-research package (pip install "
+            "'fovexp[tracker]'; Linux wheels exist for Python 3.10 only): " + str(exc)
+        ) from None
+    return tobii_research
+
+
+def _num(v: Any) -> float:
+    try:
+        f = float(v)
+    except (TypeError, ValueError):
+        return math.nan
+    return f
+
+
+def sample_from_sdk(d: dict[str, Any]) -> GazeSample:
+    """A gaze sample from the SDK's dictionary (``subscribe_to(..., as_dictionary=True)``).
+
+    ``*_gaze_point_on_display_area`` is already normalised with origin top-left, the runner's
+    convention; validity is per eye (``*_gaze_point_validity``: 1 valid, 0 invalid).
+    """
+    lx, ly = (d.get("left_gaze_point_on_display_area") or (math.nan, math.nan))[:2]
+    rx, ry = (d.get("right_gaze_point_on_display_area") or (math.nan, math.nan))[:2]
+    lv = bool(d.get("left_gaze_point_validity")) and math.isfinite(_num(lx))
+    rv = bool(d.get("right_gaze_point_validity")) and math.isfinite(_num(rx))
+    return GazeSample(int(d["device_time_stamp"]), int(d["system_time_stamp"]),
+                      _num(lx), _num(ly), lv, _num(rx), _num(ry), rv)
+
+
+class TobiiGaze:
+    """A Tobii Pro tracker as a gaze source.
+
+    ``tracker`` may be given (an object with the ``tobii_research.EyeTracker`` interface; tests
+    pass a stand-in for the absent hardware); otherwise the first tracker found (or the one whose
+    address or serial number is ``address``) is used.
+    """
+
+    name = "tobii"
+
+    def __init__(self, frequency_hz: float = 600.0, address: str | None = None,
+                 tracker: Any = None, stall_s: float = 0.5, rate_tolerance: float = 0.1) -> None:
+        self.tr = import_tobii()
+        if tracker is None:
+            try:
+                found = list(self.tr.find_all_eyetrackers())
+            except Exception as exc:  # the SDK raises its own types; any failure means no tracker
+                raise FovexpError(f"searching for Tobii eye trackers failed: {exc}") from None
+            if address:
+                found = [t for t in found if address in (t.address, t.serial_number)]
+            if not found:
+                where = f" matching {address!r}" if address else ""
+                raise FovexpError(
+                    f"no Tobii eye tracker found{where}: check that it is connected and powered, "
+                    "and that Tobii Pro Eye Tracker Manager sees it (or run with --tracker "
+                    "simulated / mouse for a pilot)"
+                )
+            tracker = found[0]
+        self.tracker = tracker
+        self.frequency_hz = float(frequency_hz)
+        self.buffer = SampleBuffer(maxlen=int(self.frequency_hz * 120))
+        self._notes = SampleBuffer(maxlen=1000)
+        self._connected = True
+        self._subscribed = False
+        self._last_sample_us: int | None = None
+        self._stalled = False
+        self._stall_us = int(stall_s * 1e6)
+        self._rate_tol = rate_tolerance
+        self._recent_dev: list[int] = []
+        self._rate_flagged = False
+
+    # -- SDK callbacks: append only ------------------------------------------------------------
+    def _on_gaze(self, data: dict[str, Any]) -> None:
+        self.buffer.append(data)
+
+    def _on_lost(self, data: Any) -> None:
+        self._notes.append(("connection_lost", data))
+
+    def _on_restored(self, data: Any) -> None:
+        self._notes.append(("connection_restored", data))
+
+    def _on_frequency(self, data: Any) -> None:
+        self._notes.append(("frequency_changed", data))
+
+    # -- lifecycle -----------------------------------------------------------------------------
+    def start(self) -> None:
+        tr = self.tr
+        try:
+            freqs = [float(f) for f in self.tracker.get_all_gaze_output_frequencies()]
+            if not any(abs(f - self.frequency_hz) < 0.5 for f in freqs):
+                raise FovexpError(
+                    f"the Tobii tracker {self.tracker.model} offers {freqs} Hz, not the "
+                    f"protocol's {self.frequency_hz:g} Hz"
+                )
+            self.tracker.set_gaze_output_frequency(self.frequency_hz)
+            self.tracker.subscribe_to(tr.EYETRACKER_GAZE_DATA, self._on_gaze, as_dictionary=True)
+            self.tracker.subscribe_to(tr.EYETRACKER_NOTIFICATION_CONNECTION_LOST, self._on_lost,
+                                      as_dictionary=True)
+            self.tracker.subscribe_to(tr.EYETRACKER_NOTIFICATION_CONNECTION_RESTORED,
+                                      self._on_restored, as_dictionary=True)
+            self.tracker.subscribe_to(tr.EYETRACKER_NOTIFICATION_GAZE_OUTPUT_FREQUENCY_CHANGED,
+                                      self._on_frequency, as_dictionary=True)
+        except FovexpError:
+            raise
+        except Exception as exc:
+            raise FovexpError(f"starting the Tobii gaze stream failed: {exc}") from None
+        self._subscribed = True
+        self._last_sample_us = self.now_us()
+
+    def stop(self) -> None:
+        if not self._subscribed:
+            return
+        for kind, cb in ((self.tr.EYETRACKER_GAZE_DATA, self._on_gaze),
+                         (self.tr.EYETRACKER_NOTIFICATION_CONNECTION_LOST, self._on_lost),
+                         (self.tr.EYETRACKER_NOTIFICATION_CONNECTION_RESTORED, self._on_restored),
+                         (self.tr.EYETRACKER_NOTIFICATION_GAZE_OUTPUT_FREQUENCY_CHANGED,
+                          self._on_frequency)):
+            try:
+                self.tracker.unsubscribe_from(kind, cb)
+            except Exception:  # shutting down: a failed unsubscribe must not hide the real error
+                pass
+        self._subscribed = False
+
+    def now_us(self) -> int:
+        """The SDK's system clock, the one its ``system_time_stamp`` uses."""
+        try:
+            return int(self.tr.get_system_time_stamp())
+        except Exception:
+            return monotonic_us()
+
+    @property
+    def connected(self) -> bool:
+        return self._connected and not self._stalled
+
+    def info(self) -> dict[str, Any]:
+        t = self.tracker
+        out: dict[str, Any] = {"name": "tobii", "frequency_hz": self.frequency_hz}
+        for k in ("model", "serial_number", "address", "device_name", "firmware_version",
+                  "runtime_version"):
+            try:
+                out[k] = str(getattr(t, k))
+            except Exception:
+                out[k] = None
+        try:
+            out["sdk_version"] = str(self.tr.__version__)
+        except AttributeError:
+            pass
+        return out
+
+    # -- frame loop side -----------------------------------------------------------------------
+    def poll(self) -> list[GazeSample]:
+        raw = self.buffer.drain()
+        out = []
+        for d in raw:
+            try:
+                out.append(sample_from_sdk(d))
+            except (KeyError, TypeError, ValueError):
+                continue  # a malformed sample counts as lost
+        if out:
+            self._last_sample_us = out[-1].system_time_us
+            self._recent_dev.extend(s.device_time_us for s in out)
+            self._recent_dev = self._recent_dev[-int(self.frequency_hz):]
+        return out
+
+    def poll_events(self) -> list[SourceEvent]:
+        events = []
+        for kind, data in self._notes.drain():
+            detail = dict(data) if isinstance(data, dict) else {"data": repr(data)}
+            ts = int(detail.get("system_time_stamp", self.now_us()))
+            if kind == "connection_lost":
+                self._connected = False
+            elif kind == "connection_restored":
+                self._connected = True
+            events.append(SourceEvent(kind, ts, detail))
+        now = self.now_us()
+        stalled = (self._last_sample_us is not None and self._subscribed
+                   and now - self._last_sample_us > self._stall_us)
+        if stalled != self._stalled:
+            self._stalled = stalled
+            events.append(SourceEvent("stream_stalled" if stalled else "stream_resumed", now, {}))
+        rate = self.measured_rate_hz()
+        if rate is not None:
+            off = abs(rate - self.frequency_hz) > self._rate_tol * self.frequency_hz
+            if off != self._rate_flagged:
+                self._rate_flagged = off
+                events.append(SourceEvent("rate_deviation" if off else "rate_ok", now,
+                                          {"measured_hz": rate, "nominal_hz": self.frequency_hz}))
+        return events
+
+    def measured_rate_hz(self) -> float | None:
+        """Sampling rate from the last second of device timestamps (None: too few samples)."""
+        ts = self._recent_dev
+        if len(ts) < max(10, int(0.25 * self.frequency_hz)):
+            return None
+        span = (ts[-1] - ts[0]) / 1e6
+        return (len(ts) - 1) / span if span > 0 else None
+
+    # -- calibration ---------------------------------------------------------------------------
+    def calibrate(self, points: Sequence[tuple[float, float]], show_point: Any) -> dict[str, Any]:
+        """Screen-based calibration: ``show_point(x, y)`` draws the target and waits for the
+        participant to fixate it; the SDK then collects data there.
+
+        Returns a summary; raises FovexpError when the SDK reports failure.
+        """
+        tr = self.tr
+        cal = tr.ScreenBasedCalibration(self.tracker)
+        cal.enter_calibration_mode()
+        try:
+            for x, y in points:
+                show_point(x, y)
+                if cal.collect_data(x, y) != tr.CALIBRATION_STATUS_SUCCESS:
+                    # The SDK's advice: try a point once more before giving up on it.
+                    cal.collect_data(x, y)
+            result = cal.compute_and_apply()
+        finally:
+            cal.leave_calibration_mode()
+        status = str(result.status)
+        used = len(result.calibration_points)
+        if result.status == tr.CALIBRATION_STATUS_FAILURE:
+            raise FovexpError(f"Tobii calibration failed ({used} of {len(points)} points usable)")
+        return {"status": status, "points_used": used, "points": [list(p) for p in points]}
+
+
+def rate_of(samples: Sequence[GazeSample]) -> float:
+    """Mean sampling rate (Hz) from device timestamps."""
+    if len(samples) < 2:
+        return math.nan
+    t = np.array([s.device_time_us for s in samples], dtype=np.float64)
+    return float((len(t) - 1) / ((t[-1] - t[0]) / 1e6))

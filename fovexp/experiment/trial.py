@@ -1,0 +1,169 @@
+"""One adjustment trial, without a window: value stepping, input events, frame timing, blanking
+episodes, and the trial's result row.
+
+Paper section 6.1 ("Task"): the participant changes one parameter with the mouse wheel, the test
+half updates in real time, Enter confirms. Here each wheel notch moves the value by the
+protocol's coarse step, or by the fine step while the modifier (Shift) is held; values are clamped
+to the protocol's range.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+
+@dataclass(frozen=True)
+class Wheel:
+    """``notches`` wheel notches (positive: value up); ``fine`` while the modifier is held."""
+
+    notches: int
+    fine: bool = False
+
+
+@dataclass(frozen=True)
+class Key:
+    """A key press: ``enter`` (confirm), ``escape`` (pause), ``space``, ``q`` ..."""
+
+    name: str
+
+
+InputEvent = Wheel | Key
+
+
+class ValueAdjuster:
+    """The adjusted value, moved in coarse or fine steps and clamped to ``[lo, hi]``."""
+
+    def __init__(self, lo: float, hi: float, step: float, fine_step: float, start: float) -> None:
+        if not lo < hi:
+            raise ValueError("lo must be < hi")
+        self.lo, self.hi, self.step, self.fine_step = lo, hi, step, fine_step
+        self.value = self.clamp(start)
+        self.notches = 0
+
+    def clamp(self, v: float) -> float:
+        return min(max(float(v), self.lo), self.hi)
+
+    def apply(self, ev: Wheel) -> bool:
+        """Move by ``ev``; returns True when the value changed. Every notch counts as a wheel
+        event, also one that hits the end of the range."""
+        self.notches += abs(ev.notches)
+        step = self.fine_step if ev.fine else self.step
+        # Rounded so repeated steps do not accumulate binary floating-point drift.
+        new = self.clamp(round(self.value + ev.notches * step, 10))
+        changed = new != self.value
+        self.value = new
+        return changed
+
+
+class FrameTimer:
+    """Frame intervals of a trial; a frame whose interval exceeds 1.5 refresh periods counts as
+    dropped (docs/LOGS.md, ``dropped_frames``)."""
+
+    def __init__(self, refresh_hz: float) -> None:
+        self.period = 1.0 / refresh_hz
+        self.last: float | None = None
+        self.intervals: list[float] = []
+        self.dropped = 0
+
+    def flip(self, t: float) -> tuple[float | None, bool]:
+        if self.last is None:
+            self.last = t
+            return None, False
+        dt = t - self.last
+        self.last = t
+        self.intervals.append(dt)
+        dropped = dt > 1.5 * self.period
+        self.dropped += int(dropped)
+        return dt, dropped
+
+
+@dataclass
+class Episode:
+    start_s: float
+    end_s: float | None
+    frames: int
+    reason: str
+
+
+@dataclass
+class BlankingLog:
+    """Blanking episodes (runs of consecutive black frames) of one trial."""
+
+    episodes: list[Episode] = field(default_factory=list)
+    frames: int = 0
+    blanked: int = 0
+
+    def frame(self, t_s: float, blank: bool, reason: str) -> None:
+        self.frames += 1
+        cur = self.episodes[-1] if self.episodes and self.episodes[-1].end_s is None else None
+        if blank:
+            self.blanked += 1
+            if cur is None:
+                self.episodes.append(Episode(t_s, None, 1, reason))
+            else:
+                cur.frames += 1
+        elif cur is not None:
+            cur.end_s = t_s
+
+    def close(self, t_s: float) -> None:
+        if self.episodes and self.episodes[-1].end_s is None:
+            self.episodes[-1].end_s = t_s
+
+    @property
+    def fraction(self) -> float:
+        return self.blanked / self.frames if self.frames else 0.0
+
+
+class TrialState:
+    """The state of one trial between its first frame and Enter.
+
+    ``handle`` consumes input events and returns ``"changed"``, ``"confirm"``, ``"pause"`` or
+    None; ``flip`` records a shown frame (its time, whether it was black and why).
+    """
+
+    def __init__(self, adjuster: ValueAdjuster, refresh_hz: float) -> None:
+        self.adjuster = adjuster
+        self.start_value = adjuster.value
+        self.timer = FrameTimer(refresh_hz)
+        self.blanking = BlankingLog()
+        self.t_start: float | None = None
+        self.t_end: float | None = None
+        self.n_frames = 0
+
+    @property
+    def value(self) -> float:
+        return self.adjuster.value
+
+    def handle(self, events: list[InputEvent]) -> str | None:
+        outcome = None
+        for ev in events:
+            if isinstance(ev, Wheel):
+                if self.t_start is None:
+                    continue  # before the stimulus is first shown the wheel does nothing
+                if self.adjuster.apply(ev):
+                    outcome = "changed"
+            elif ev.name in ("return", "enter", "num_enter"):
+                if self.t_start is not None:
+                    return "confirm"
+            elif ev.name == "escape":
+                return "pause"
+        return outcome
+
+    def flip(self, t: float, blank: bool, reason: str) -> tuple[float | None, bool]:
+        if self.t_start is None:
+            self.t_start = t
+        self.n_frames += 1
+        self.blanking.frame(t - self.t_start, blank, reason)
+        return self.timer.flip(t)
+
+    def finish(self, t: float) -> None:
+        self.t_end = t
+        if self.t_start is not None:
+            self.blanking.close(t - self.t_start)
+
+    @property
+    def response_time_s(self) -> float:
+        if self.t_start is None or self.t_end is None:
+            return math.nan
+        return self.t_end - self.t_start

@@ -1,0 +1,216 @@
+"""The PsychoPy window: the only module that imports psychopy (lazily, when a session opens).
+
+It draws the split screen of paper section 6.1 (reference half left, processed mirror right,
+fixation cross on the seam), black frames when the gaze check says so (the cross stays, so the
+participant can find it again), text screens and calibration targets, and reads the wheel
+(Shift held: fine step) and the keys. Under Xvfb there is no vsync, so a dry run paces flips to
+``refresh_hz`` itself.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+
+from fovexp.errors import FovexpError
+
+from .trial import InputEvent, Key, Wheel
+
+KEYS = ["return", "num_enter", "escape", "space", "q", "r"]
+#: measured refresh may differ from the profile by this fraction (a 120 Hz screen run at 60 Hz
+#: is off by 50 %, far outside it)
+REFRESH_TOLERANCE = 0.05
+
+
+class PsychoScreen:
+    """A PsychoPy window of ``size`` pixels (the stimulus fills it)."""
+
+    def __init__(self, size: tuple[int, int], fullscreen: bool = True, cross_px: float = 20.0,
+                 dry_run: bool = False, refresh_hz: float = 60.0) -> None:
+        from psychopy import logging as plog
+
+        plog.console.setLevel(plog.ERROR)
+        from psychopy import event, visual
+        from pyglet.window import key as pkey
+
+        self._event = event
+        self.size = (int(size[0]), int(size[1]))
+        self.dry_run = dry_run
+        # In a dry run flips are paced to 60 Hz (Xvfb has no vsync).
+        self.refresh_hz = 60.0 if dry_run else float(refresh_hz)
+        w, h = self.size
+        try:
+            self.win = visual.Window(
+                size=self.size, fullscr=fullscreen, units="pix", color=(-1, -1, -1),
+                colorSpace="rgb", allowGUI=not fullscreen, winType="pyglet",
+                checkTiming=False, waitBlanking=not dry_run, useFBO=False,
+                gammaErrorPolicy="ignore",
+            )
+        except Exception as exc:
+            raise FovexpError(f"cannot open a window ({exc}); is DISPLAY set? "
+                              "(a dry run on a server needs Xvfb)") from None
+        self._keys = pkey.KeyStateHandler()
+        self._pkey = pkey
+        self._wheel: list[tuple[float, bool]] = []
+        # Our own pyglet handlers: PsychoPy's wheel handler drops scroll events whenever a
+        # psychopy.hardware.mouse.Mouse exists, and the modifier must be read at scroll time.
+        self.win.winHandle.push_handlers(self._keys, on_mouse_scroll=self._on_scroll)
+        self.mouse = event.Mouse(win=self.win, visible=not fullscreen)
+        half = (w // 2, h)
+        self.left = visual.ImageStim(self.win, image=np.zeros((h, w // 2, 3)), size=half,
+                                     pos=(-w / 4, 0), units="pix", interpolate=False)
+        self.right = visual.ImageStim(self.win, image=np.zeros((h, w // 2, 3)), size=half,
+                                      pos=(w / 4, 0), units="pix", interpolate=False)
+        arm = max(7.0, float(cross_px))
+        thick = max(2.0, round(arm / 10))
+        self.cross = [
+            visual.Rect(self.win, width=arm, height=thick, pos=(0, 0), fillColor=(1, -1, -1),
+                        lineColor=None, units="pix"),
+            visual.Rect(self.win, width=thick, height=arm, pos=(0, 0), fillColor=(1, -1, -1),
+                        lineColor=None, units="pix"),
+        ]
+        self.text = visual.TextStim(self.win, text="", color=(0.8, 0.8, 0.8), units="pix",
+                                    height=max(12, h // 30), wrapWidth=0.8 * w)
+        self.dot = visual.Circle(self.win, radius=max(6, h // 60), fillColor=(1, 1, 1),
+                                 lineColor=None, units="pix")
+        self.dot_centre = visual.Circle(self.win, radius=max(2, h // 250),
+                                        fillColor=(-1, -1, -1), lineColor=None, units="pix")
+        self._last_flip: float | None = None
+        #: keep a copy of every frame shown in ``last_frame`` (tests; slow)
+        self.capture = False
+        self.last_frame: np.ndarray | None = None
+
+    # -- checks --------------------------------------------------------------------------------
+    def check_display(self, display: Any) -> dict[str, Any]:
+        """Measured refresh rate and window pixel size against the profile (issue item 2).
+
+        Raises FovexpError with what was measured and expected; ``--skip-display-check``
+        overrides.
+        """
+        measured = self.win.getActualFrameRate(nIdentical=20, nMaxFrames=240,
+                                               nWarmUpFrames=20, threshold=1)
+        size = tuple(int(v) for v in self.win.size)
+        fb = tuple(int(v) for v in getattr(self.win, "frameBufferSize", size))
+        info = {"measured_refresh_hz": measured, "window_size": size, "framebuffer_size": fb,
+                "profile": display.name, "profile_refresh_hz": display.refresh_hz,
+                "profile_size": (display.width_px, display.height_px)}
+        problems = []
+        if measured is None:
+            problems.append("the refresh rate could not be measured (frame times unstable)")
+        elif abs(measured - display.refresh_hz) > REFRESH_TOLERANCE * display.refresh_hz:
+            problems.append(f"measured refresh {measured:.1f} Hz, profile {display.name!r} says "
+                            f"{display.refresh_hz:g} Hz (set the display mode, or check that "
+                            "vsync is on)")
+        expected = (display.width_px, display.height_px)
+        if size != expected or fb != expected:
+            problems.append(f"window is {size[0]}x{size[1]} px (framebuffer {fb[0]}x{fb[1]}), "
+                            f"profile {display.name!r} says {expected[0]}x{expected[1]} "
+                            "(desktop scaling or a different display mode?)")
+        if problems:
+            self.close()
+            raise FovexpError("display check failed: " + "; ".join(problems)
+                              + " -- fix the display, or rerun with --skip-display-check")
+        return info
+
+    # -- drawing -------------------------------------------------------------------------------
+    @staticmethod
+    def _tex(img: np.ndarray) -> np.ndarray:
+        # Display-encoded [0, 1] values go to the screen unchanged (this PsychoPy maps float
+        # textures [0, 1] -> [0, 255]; tests/test_experiment_window.py checks a ramp). Numpy
+        # textures are drawn bottom row first, so rows are flipped to keep row 0 at the top.
+        return np.ascontiguousarray(np.asarray(img, dtype=np.float32)[::-1])
+
+    def set_reference(self, left: np.ndarray) -> None:
+        self.left.image = self._tex(left)
+
+    def set_test(self, right: np.ndarray) -> None:
+        self.right.image = self._tex(right)
+
+    def _flip(self) -> float:
+        if self.capture:
+            # The back buffer just before the flip is exactly the frame about to be shown.
+            self.last_frame = np.asarray(self.win._getFrame(buffer="back"))
+        self.win.flip()
+        t = time.monotonic()
+        if self.dry_run:
+            period = 1.0 / self.refresh_hz
+            if self._last_flip is not None and t - self._last_flip < period:
+                time.sleep(period - (t - self._last_flip))
+                t = time.monotonic()
+        self._last_flip = t
+        return t
+
+    def draw(self, blank: bool) -> float:
+        """Draw the next frame (black but for the cross when ``blank``); returns its time."""
+        if not blank:
+            self.left.draw()
+            self.right.draw()
+        for c in self.cross:
+            c.draw()
+        return self._flip()
+
+    def show_point(self, x: float, y: float) -> None:
+        w, h = self.size
+        pos = ((x - 0.5) * w, (0.5 - y) * h)
+        self.dot.pos = pos
+        self.dot_centre.pos = pos
+        self.dot.draw()
+        self.dot_centre.draw()
+        self._flip()
+
+    def message(self, text: str, keys: list[str] | None, timeout_s: float | None) -> str | None:
+        """Show ``text`` until one of ``keys`` is pressed (returned) or ``timeout_s`` passes."""
+        self._event.clearEvents()
+        self.text.text = text
+        t0 = time.monotonic()
+        while True:
+            self.text.draw()
+            self._flip()
+            if keys:
+                got = self._event.getKeys(keyList=keys)
+                if got:
+                    return got[0]
+            if timeout_s is not None and time.monotonic() - t0 >= timeout_s:
+                return None
+
+    # -- input ---------------------------------------------------------------------------------
+    def _on_scroll(self, x: float, y: float, scroll_x: float, scroll_y: float) -> None:
+        k = self._pkey
+        fine = bool(self._keys[k.LSHIFT] or self._keys[k.RSHIFT])
+        self._wheel.append((float(scroll_y), fine))
+        # returning None lets PsychoPy's own handler run too
+
+    def poll_input(self) -> list[InputEvent]:
+        """Wheel notches since the last call (merged per modifier state, in order) and keys."""
+        self.win.winHandle.dispatch_events()
+        out: list[InputEvent] = []
+        events, self._wheel = self._wheel, []
+        for dy, fine in events:
+            n = int(round(dy))
+            if not n:
+                continue
+            last = out[-1] if out else None
+            if isinstance(last, Wheel) and last.fine == fine:
+                out[-1] = Wheel(last.notches + n, fine)
+            else:
+                out.append(Wheel(n, fine))
+        out = [w for w in out if not isinstance(w, Wheel) or w.notches]
+        for name in self._event.getKeys(keyList=KEYS):
+            out.append(Key(name))
+        return out
+
+    def mouse_position(self) -> tuple[float, float] | None:
+        x, y = self.mouse.getPos()
+        w, h = self.size
+        nx, ny = float(x) / w + 0.5, 0.5 - float(y) / h
+        if not (0 <= nx <= 1 and 0 <= ny <= 1):
+            return None
+        return nx, ny
+
+    def close(self) -> None:
+        try:
+            self.win.close()
+        except Exception:  # already closed (display check) or the X server went away
+            pass

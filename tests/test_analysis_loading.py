@@ -1,0 +1,254 @@
+"""Loading and validation of trial logs: each exclusion rule of docs/ANALYSIS.md (R1-R8), and the
+clear errors for empty folders, non-numeric values and corrupt rows."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from analysis_fixtures import SHA, Noise, Truth, session_id, simulate_rows, write_trials
+
+from analysis.loading import COLUMNS, load_results, read_trials_file
+from fovexp.errors import FovexpError
+
+
+def rows(exp: str = "calibration-fe", pid: str = "P01", k: int = 0, seed: int = 0,
+         sha: str = SHA, practice: int = 2) -> list[dict]:
+    return simulate_rows(exp, pid, session_id(k), np.random.default_rng(seed), Truth(), Noise(),
+                         practice=practice, sha=sha)
+
+
+def rules(ds) -> list[str]:
+    return [e.rule for e in ds.exclusions if e.rule != "note"]
+
+
+def test_clean_file_loads_typed(tmp_path: Path) -> None:
+    write_trials(tmp_path / "calibration-fe" / "P01", rows())
+    ds = load_results(tmp_path)
+    t = ds.trials
+    assert len(t) == 15  # 3 blur-rates x 5 images; the 2 practice trials are out (R4)
+    assert rules(ds) == ["R4 practice"]
+    assert t["final_value"].dtype == float and t["trial_index"].dtype == "Int64"
+    assert not t["practice"].any()
+    assert list(t.columns[: len(COLUMNS)]) == list(COLUMNS)
+
+
+def test_torn_last_row_dropped_with_warning(tmp_path: Path) -> None:
+    path = write_trials(tmp_path / "calibration-fe" / "P01", rows())
+    text = path.read_text()
+    path.write_text(text[: len(text) - 40])  # cut the last row mid-write
+    with pytest.warns(UserWarning, match="torn last row"):
+        ds = load_results(tmp_path)
+    assert len(ds.trials) == 14
+    torn = [e for e in ds.exclusions if e.rule == "R1 torn last row"]
+    assert len(torn) == 1 and str(path) in torn[0].file and "line 18" in torn[0].detail
+
+
+def test_torn_last_row_unparsable_value(tmp_path: Path) -> None:
+    path = write_trials(tmp_path / "calibration-fe" / "P01", rows())
+    lines = path.read_text().splitlines()
+    fields = lines[-1].split(",")
+    fields[COLUMNS.index("final_value")] = "0.1x"
+    path.write_text("\n".join([*lines[:-1], ",".join(fields)]) + "\n")
+    with pytest.warns(UserWarning, match="final_value"):
+        ds = load_results(tmp_path)
+    assert len(ds.trials) == 14
+
+
+def test_torn_last_row_without_newline_or_short(tmp_path: Path) -> None:
+    path = write_trials(tmp_path / "calibration-fe" / "P01", rows())
+    text = path.read_text()
+    path.write_text(text[:-1])  # every value parses, but the final newline never came
+    with pytest.warns(UserWarning, match="no final newline"):
+        assert len(load_results(tmp_path).trials) == 14
+    lines = text.splitlines()
+    path.write_text("\n".join([*lines[:-1], ",".join(lines[-1].split(",")[:10])]) + "\n")
+    with pytest.warns(UserWarning, match="10 fields, expected 24"):
+        assert len(load_results(tmp_path).trials) == 14
+
+
+@pytest.mark.parametrize("column,value,problem", [
+    ("blur_rate", "abc", "is not a number"),
+    ("final_value", "", "is empty but required"),
+    ("trial_index", "1.5", "is not an integer"),
+    ("practice", "2", "is not 0 or 1"),
+    ("participant", "P 01", "participant ID"),
+    ("method", "noise", "is not a method"),
+    ("final_value", "nan", "finite"),
+])
+def test_corrupt_middle_row_is_an_error(tmp_path: Path, column: str, value: str,
+                                        problem: str) -> None:
+    path = write_trials(tmp_path / "calibration-fe" / "P01", rows())
+    lines = path.read_text().splitlines()
+    fields = lines[3].split(",")
+    fields[COLUMNS.index(column)] = value
+    lines[3] = ",".join(fields)
+    path.write_text("\n".join(lines) + "\n")
+    with pytest.raises(FovexpError) as err:
+        load_results(tmp_path)
+    msg = str(err.value)
+    assert str(path) in msg and "line 4" in msg and column in msg and problem in msg
+
+
+def test_wrong_field_count_middle_row_is_an_error(tmp_path: Path) -> None:
+    path = write_trials(tmp_path / "calibration-fe" / "P01", rows())
+    lines = path.read_text().splitlines()
+    lines[5] = lines[5] + ",extra"
+    path.write_text("\n".join(lines) + "\n")
+    with pytest.raises(FovexpError, match=r"line 6: 25 fields, expected 24"):
+        load_results(tmp_path)
+
+
+def test_empty_and_missing_folders(tmp_path: Path) -> None:
+    with pytest.raises(FovexpError, match="no trials.csv found"):
+        load_results(tmp_path)
+    with pytest.raises(FovexpError, match="no such folder"):
+        load_results(tmp_path / "nope")
+
+
+def test_header_only_and_empty_files(tmp_path: Path) -> None:
+    write_trials(tmp_path / "validation" / "P01", [])
+    (tmp_path / "validation" / "P02").mkdir()
+    (tmp_path / "validation" / "P02" / "trials.csv").write_text("")
+    with pytest.raises(FovexpError, match="no usable trials in 2 trials.csv"):
+        load_results(tmp_path)
+
+
+def test_missing_column_excludes_file(tmp_path: Path) -> None:
+    write_trials(tmp_path / "calibration-fe" / "P01", rows())
+    cols = tuple(c for c in COLUMNS if c != "seed")
+    write_trials(tmp_path / "calibration-fe" / "P02", rows(pid="P02", k=1), columns=cols)
+    ds = load_results(tmp_path)
+    assert set(ds.trials["participant"]) == {"P01"}
+    miss = [e for e in ds.exclusions if e.rule == "R3 missing columns"]
+    assert len(miss) == 1 and "seed" in miss[0].detail and "P02" in miss[0].file
+    assert miss[0].n_trials == 17
+    # only such files: a clear error
+    with pytest.raises(FovexpError, match="header lacks seed"):
+        load_results(tmp_path / "calibration-fe" / "P02")
+
+
+def test_duplicated_trials(tmp_path: Path) -> None:
+    r = rows(practice=0)
+    copy = dict(r[3])
+    conflict = dict(r[4], final_value=0.39)
+    path = write_trials(tmp_path / "calibration-fe" / "P01", [*r, copy, conflict])
+    ds = load_results(tmp_path)
+    assert len(ds.trials) == 15
+    dups = [e for e in ds.exclusions if e.rule == "R5 duplicated trial"]
+    assert len(dups) == 2
+    assert any("identical copies merged" in e.detail for e in dups)
+    assert any("different values" in e.detail and "line 18" in e.detail for e in dups)
+    kept = ds.trials.loc[ds.trials["trial_index"] == r[4]["trial_index"], "final_value"]
+    assert kept.tolist() == [0.39]  # the last one written
+    assert str(path) in dups[0].file
+
+
+def test_wrong_parameter_excluded(tmp_path: Path) -> None:
+    r = rows(practice=0)
+    r[0] = dict(r[0], adjusted_parameter="s_k")
+    write_trials(tmp_path / "calibration-fe" / "P01", r)
+    ds = load_results(tmp_path)
+    assert len(ds.trials) == 14 and "R6 wrong parameter" in rules(ds)
+
+
+def test_mixed_protocol_versions(tmp_path: Path) -> None:
+    for p in range(3):
+        write_trials(tmp_path / "calibration-fe" / f"P0{p}", rows(pid=f"P0{p}", k=p, seed=p))
+    write_trials(tmp_path / "calibration-fe" / "P09", rows(pid="P09", k=9, sha="b" * 64))
+    ds = load_results(tmp_path)
+    assert set(ds.trials["participant"]) == {"P00", "P01", "P02"}
+    mixed = [e for e in ds.exclusions if e.rule == "R7 mixed protocol versions"]
+    assert len(mixed) == 1 and mixed[0].participant == "P09" and mixed[0].n_trials == 15
+    assert "bbbbbbbbbbbb" in mixed[0].detail
+    chosen = load_results(tmp_path, protocol={"calibration-fe": "bbbb"})
+    assert set(chosen.trials["participant"]) == {"P09"}
+    with pytest.raises(FovexpError, match="matches 0"):
+        load_results(tmp_path, protocol={"calibration-fe": "c"})
+
+
+def test_incomplete_session_from_json(tmp_path: Path) -> None:
+    write_trials(tmp_path / "calibration-fe" / "P01", rows())
+    write_trials(tmp_path / "calibration-fe" / "P02", rows(pid="P02", k=1), completed=False)
+    ds = load_results(tmp_path)
+    assert set(ds.trials["participant"]) == {"P01"}
+    inc = [e for e in ds.exclusions if e.rule == "R8 incomplete session"]
+    assert len(inc) == 1 and "not completed" in inc[0].detail and inc[0].n_trials == 15
+    kept = load_results(tmp_path, include_incomplete=True)
+    assert set(kept.trials["participant"]) == {"P01", "P02"}
+    assert "R8 incomplete session" in rules(kept)
+
+
+def test_incomplete_session_from_trial_count(tmp_path: Path) -> None:
+    write_trials(tmp_path / "calibration-fe" / "P01", rows(), completed=None)
+    write_trials(tmp_path / "calibration-fe" / "P02", rows(pid="P02", k=1)[:10], completed=None)
+    ds = load_results(tmp_path)
+    assert set(ds.trials["participant"]) == {"P01"}
+    inc = [e for e in ds.exclusions if e.rule == "R8 incomplete session"]
+    assert "8 trials, fewer than the 15" in inc[0].detail
+
+
+def test_session_json_completed_overrides_count(tmp_path: Path) -> None:
+    # a completed session may have fewer trials (e.g. a shorter protocol run): JSON wins
+    write_trials(tmp_path / "calibration-fe" / "P01", rows())
+    write_trials(tmp_path / "calibration-fe" / "P02", rows(pid="P02", k=1)[:10])
+    ds = load_results(tmp_path)
+    assert set(ds.trials["participant"]) == {"P01", "P02"}
+
+
+def test_session_json_state_spellings(tmp_path: Path) -> None:
+    folder = tmp_path / "calibration-fe" / "P01"
+    write_trials(folder, rows(), completed=None)
+    write_trials(tmp_path / "calibration-fe" / "P02", rows(pid="P02", k=1), completed=None)
+    (folder / f"session-{session_id(0)}.json").write_text(json.dumps({"state": "aborted"}))
+    ds = load_results(tmp_path)
+    assert set(ds.trials["participant"]) == {"P02"}
+
+
+def test_resumed_session_appends(tmp_path: Path) -> None:
+    # --resume appends to the same file with the same session ID: one complete session
+    r = rows()
+    folder = tmp_path / "calibration-fe" / "P01"
+    write_trials(folder, r[:9], completed=False)
+    write_trials(folder, r[9:], completed=True, append=True)
+    ds = load_results(tmp_path)
+    assert len(ds.trials) == 15 and ds.trials["session"].nunique() == 1
+
+
+def test_read_trials_file_reports_extra_columns(tmp_path: Path) -> None:
+    path = write_trials(tmp_path / "x" / "P01", rows(), columns=(*COLUMNS, "note"))
+    frame, excl = read_trials_file(path)
+    assert len(frame) == 17
+    assert any("extra columns ignored: note" in e.detail for e in excl)
+
+
+def test_participant_folder_mismatch_is_noted(tmp_path: Path) -> None:
+    write_trials(tmp_path / "calibration-fe" / "someone", rows())
+    ds = load_results(tmp_path)
+    assert any("folder name 'someone'" in n for n in ds.notes)
+
+
+def test_runner_writer_round_trip(tmp_path: Path) -> None:
+    """Rows written by the runner's own TrialLog (and its session JSON) load unchanged."""
+    logs = pytest.importorskip("fovexp.experiment.logs")
+    folder = tmp_path / "calibration-fe" / "P01"
+    r = rows()
+    log = logs.TrialLog(folder / "trials.csv")
+    for row in r:
+        log.append({**row, "practice": bool(row["practice"])})
+    logs.write_json_atomic(folder / f"session-{session_id(0)}.json",
+                           {"session": session_id(0), "state": "completed", "completed": True})
+    ds = load_results(tmp_path)
+    assert len(ds.trials) == 15
+    main = [x for x in r if not x["practice"]]
+    got = ds.trials.sort_values("trial_index")
+    assert got["final_value"].tolist() == [x["final_value"] for x in main]
+    assert got["s_k"].isna().all()  # empty in the log, NaN here
+    # a session the runner marked incomplete is excluded (R8)
+    logs.write_json_atomic(folder / f"session-{session_id(0)}.json",
+                           {"session": session_id(0), "state": "interrupted", "completed": False})
+    write_trials(tmp_path / "calibration-fe" / "P02", rows(pid="P02", k=1))
+    ds = load_results(tmp_path)
+    assert set(ds.trials["participant"]) == {"P02"}

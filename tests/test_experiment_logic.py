@@ -1,0 +1,316 @@
+"""Window-free runner logic: value stepping, the blanking decision, gaze simulation, the
+simulated participant, validation metrics and crash-safe logs."""
+
+from __future__ import annotations
+
+import math
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from fovexp import load_display
+from fovexp.errors import FovexpError
+from fovexp.experiment.gaze import (
+    BlankingMonitor,
+    FixationGeometry,
+    GazeSample,
+    SimGazeParams,
+    SimulatedGaze,
+)
+from fovexp.experiment.logs import TRIAL_COLUMNS, BatchLog, TrialLog, read_trials
+from fovexp.experiment.participant import SimTruth, SimulatedParticipant
+from fovexp.experiment.quality import validation_result
+from fovexp.experiment.trial import BlankingLog, FrameTimer, Key, TrialState, ValueAdjuster, Wheel
+
+DISPLAY = load_display("lg-oled55cx")
+
+
+@pytest.fixture(scope="module")
+def fix() -> FixationGeometry:
+    return FixationGeometry(DISPLAY, "exact")
+
+
+def point_at(fix: FixationGeometry, ecc: float, angle: float = 0.0) -> tuple[float, float]:
+    """The normalised screen point at ``ecc`` degrees from the cross in direction ``angle``,
+    found by bisection on the geometry's own eccentricity."""
+    lo, hi = 0.0, 0.45
+    d = np.array([math.cos(angle), math.sin(angle)])
+    for _ in range(80):
+        mid = 0.5 * (lo + hi)
+        p = (0.5 + mid * d[0], 0.5 + mid * d[1] * DISPLAY.width_px / DISPLAY.height_px)
+        if fix.eccentricity(p) < ecc:
+            lo = mid
+        else:
+            hi = mid
+    r = 0.5 * (lo + hi)
+    return 0.5 + r * d[0], 0.5 + r * d[1] * DISPLAY.width_px / DISPLAY.height_px
+
+
+def sample(t_us: int, p: tuple[float, float] | None, left_ok: bool = True,
+           right_ok: bool = True) -> GazeSample:
+    x, y = p if p is not None else (math.nan, math.nan)
+    return GazeSample(t_us, t_us, x, y, left_ok and p is not None, x, y,
+                      right_ok and p is not None)
+
+
+# -- value stepping --------------------------------------------------------------------------
+
+def test_adjuster_steps_and_clamps() -> None:
+    a = ValueAdjuster(0.0, 0.4, 0.02, 0.005, 0.1)
+    assert a.apply(Wheel(3)) and a.value == pytest.approx(0.16)
+    assert a.apply(Wheel(-2, fine=True)) and a.value == pytest.approx(0.15)
+    a.apply(Wheel(100))
+    assert a.value == 0.4
+    assert not a.apply(Wheel(1))  # at the end of the range: no change, still counted
+    assert a.notches == 3 + 2 + 100 + 1
+    a.apply(Wheel(-1000))
+    assert a.value == 0.0
+
+
+@given(st.lists(st.tuples(st.integers(-5, 5), st.booleans()), max_size=200))
+@settings(max_examples=50, deadline=None)
+def test_adjuster_never_leaves_range(moves: list[tuple[int, bool]]) -> None:
+    a = ValueAdjuster(0.0, 45.0, 1.5, 0.25, 20.0)
+    for n, fine in moves:
+        a.apply(Wheel(n, fine))
+        assert 0.0 <= a.value <= 45.0
+        # Values stay on the step grid (no floating-point drift).
+        assert abs(a.value * 4 - round(a.value * 4)) < 1e-6
+
+
+def test_trial_state_confirm_and_pause() -> None:
+    s = TrialState(ValueAdjuster(0, 1, 0.1, 0.01, 0.5), 60.0)
+    assert s.handle([Wheel(1), Key("return")]) is None  # nothing counts before the first frame
+    s.flip(10.0, False, "")
+    assert s.handle([Wheel(2)]) == "changed" and s.value == pytest.approx(0.7)
+    assert s.handle([Key("escape")]) == "pause"
+    assert s.handle([Key("return")]) == "confirm"
+    s.finish(11.5)
+    assert s.response_time_s == pytest.approx(1.5)
+
+
+def test_frame_timer_counts_dropped() -> None:
+    t = FrameTimer(120.0)
+    times = [0, 1 / 120, 2 / 120, 4 / 120, 5 / 120, 5.5 / 120 + 1 / 120]
+    for x in times:
+        t.flip(x)
+    assert t.dropped == 1 and len(t.intervals) == 5
+
+
+def test_blanking_log_episodes() -> None:
+    b = BlankingLog()
+    pattern = [0, 0, 1, 1, 1, 0, 0, 1, 0, 1, 1]
+    for i, blank in enumerate(pattern):
+        b.frame(i * 0.01, bool(blank), "outside" if blank else "")
+    b.close(0.2)
+    assert [(round(e.start_s, 3), round(e.end_s, 3), e.frames) for e in b.episodes] == [
+        (0.02, 0.05, 3), (0.07, 0.08, 1), (0.09, 0.2, 2)]
+    assert b.fraction == pytest.approx(6 / 11)
+
+
+# -- blanking decision -----------------------------------------------------------------------
+
+def test_blanking_switches_exactly_at_radius(fix: FixationGeometry) -> None:
+    """Paper section 6.1: gaze farther than 1.25 deg from the cross -> black; back -> shown."""
+    mon = BlankingMonitor(fix, 1.25, timeout_s=0.05)
+    eccs = [0.0, 0.5, 1.0, 1.2, 1.249, 1.2499, 1.2501, 1.251, 1.5, 3.0, 1.2501, 1.2499, 0.3]
+    for angle in (0.0, math.pi / 2, 2.3, -0.7):
+        for i, e in enumerate(eccs):
+            p = point_at(fix, e, angle)
+            assert fix.eccentricity(p) == pytest.approx(e, abs=1e-6)
+            d = mon.update([sample(1000 * i, p)], 1000 * i)
+            assert d.blank == (e > 1.25), (angle, e)
+            assert d.reason == ("outside" if e > 1.25 else "")
+
+
+def test_blanking_invalid_lost_and_off_screen(fix: FixationGeometry) -> None:
+    mon = BlankingMonitor(fix, 1.25, timeout_s=0.05)
+    assert mon.update([], 0).reason == "lost"  # nothing yet
+    c = (0.5, 0.5)
+    assert not mon.update([sample(0, c)], 0).blank
+    assert mon.update([sample(1000, None)], 1000).reason == "invalid"
+    # One valid eye is enough (its position is used).
+    one = GazeSample(2000, 2000, 0.5, 0.5, True, math.nan, math.nan, False)
+    assert not mon.update([one], 2000).blank
+    assert not mon.update([], 2000 + 49_000).blank
+    assert mon.update([], 2000 + 51_000).reason == "lost"  # stream stalled
+    assert mon.update([sample(60_000, (1.2, 0.5))], 60_000).reason == "outside"
+    # The latest sample decides: an excursion that is back by the frame is not blanked.
+    far = point_at(fix, 3.0)
+    assert not mon.update([sample(70_000, far), sample(71_000, c)], 71_000).blank
+
+
+# -- simulated gaze --------------------------------------------------------------------------
+
+def test_simulated_gaze_is_seeded_and_plausible(fix: FixationGeometry) -> None:
+    clock = [0]
+    params = SimGazeParams(saccade_rate=0.5, blink_rate=0.5)
+    a = SimulatedGaze(fix, seed=5, params=params, clock_us=lambda: clock[0])
+    b = SimulatedGaze(fix, seed=5, params=params, clock_us=lambda: clock[0])
+    a.start()
+    b.start()
+    sa, sb = [], []
+    for step in range(1, 201):  # 20 s, polled at irregular intervals for one of the two
+        clock[0] = step * 100_000
+        sa += a.poll()
+        if step % 3 == 0 or step == 200:
+            sb += b.poll()
+    assert len(sa) == len(sb) == 600 * 20 + 1
+    assert sa == sb
+    dt = np.diff([s.system_time_us for s in sa])
+    assert np.all(np.abs(dt - 1e6 / 600) <= 1)
+    ecc = np.array([fix.eccentricity(s.point) for s in sa])
+    valid = np.isfinite(ecc)
+    assert 0.9 < valid.mean() < 1.0  # blinks and dropouts
+    assert np.median(ecc[valid]) < 0.6  # mostly fixating
+    assert (ecc[valid] > 1.25).mean() > 0.005  # but sometimes looking away
+
+
+# -- simulated participant -------------------------------------------------------------------
+
+@pytest.mark.parametrize(("param", "lo", "hi", "step", "fine", "start"), [
+    ("f_e", 0.0, 0.4, 0.02, 0.005, 0.39),
+    ("s_k", 0.0, 45.0, 1.5, 0.25, 2.0),
+    ("blur_rate", 0.0, 1.5, 0.02, 0.005, 0.0),
+])
+def test_participant_reaches_noise_free_target(param, lo, hi, step, fine, start) -> None:
+    truth = SimTruth()
+    p = SimulatedParticipant(truth, seed=3, speed=1.0, noise_scale=0.0)
+    adj = ValueAdjuster(lo, hi, step, fine, start)
+    target = p.begin(param, "ours", 0.34, 1.9, lo, hi, step, fine)
+    assert target == pytest.approx(truth.value(param, "ours", 0.34, 1.9))
+    t, overshoot, rt = 0.0, 0.0, None
+    while t < 60:
+        for ev in p.poll(t, adj.value, True):
+            if isinstance(ev, Key):
+                rt = t
+                break
+            adj.apply(ev)
+            overshoot = max(overshoot, (adj.value - target) * np.sign(target - start))
+        if rt is not None:
+            break
+        t += 0.01
+    assert rt is not None and 1.0 < rt < 30.0
+    assert abs(adj.value - target) <= fine / 2 + 1e-9
+    assert overshoot >= step - 1e-9  # it overshoots with coarse steps, then corrects
+
+
+def test_participant_waits_while_blanked() -> None:
+    p = SimulatedParticipant(SimTruth(), seed=1, speed=1.0)
+    p.begin("f_e", "contrast", 0.34, None, 0, 0.4, 0.02, 0.005)
+    assert all(p.poll(t / 10, 0.0, False) == [] for t in range(100))
+
+
+def test_sim_truth_yaml(tmp_path: Path) -> None:
+    f = tmp_path / "truth.yaml"
+    f.write_text("sk_slope: -2\nnoise_sd: {s_k: 0.5}\nvalidation_blur_rate: {ours: 0.7}\n"
+                 "table: {source: x, rows: [{blur_rate: 0.1, f_e: 0.1, s_k: 10, s_f: 2}, "
+                 "{blur_rate: 0.5, f_e: 0.3, s_k: 20, s_f: 3}]}\n")
+    t = SimTruth.load(f)
+    assert t.value("f_e", "contrast", 0.3, None) == pytest.approx(0.2)
+    assert t.value("s_k", "ours", 0.3, 3.5) == pytest.approx(15 - 2 * (3.5 - 2.5))
+    assert t.value("blur_rate", "ours", None, None) == 0.7
+    f.write_text("sk_slop: 1\n")
+    with pytest.raises(FovexpError, match="unknown key 'sk_slop'"):
+        SimTruth.load(f)
+
+
+# -- validation quality ----------------------------------------------------------------------
+
+def test_validation_metrics(fix: FixationGeometry) -> None:
+    targets = [(0.5, 0.5), (0.3, 0.3), (0.7, 0.7)]
+    per_target = []
+    for tx, ty in targets:
+        # Left eye exactly 0.5 deg off to the right of each target, right eye on target;
+        # every 10th sample lost on the right eye.
+        samples = []
+        for i in range(100):
+            lx, ly = point_at_offset(fix, (tx, ty), 0.5)
+            samples.append(GazeSample(i, i, lx, ly, True, tx, ty, i % 10 != 0))
+        per_target.append(((tx, ty), samples))
+    res = validation_result(fix, per_target, limit_deg=0.4)
+    assert res.left.accuracy_deg == pytest.approx(0.5, abs=0.01)
+    assert res.right.accuracy_deg == pytest.approx(0.0, abs=1e-6)
+    assert res.left.precision_rms_s2s_deg == pytest.approx(0.0, abs=1e-6)
+    assert res.right.data_loss == pytest.approx(0.1) and res.left.data_loss == 0
+    assert not res.passed and res.to_dict()["accuracy_deg"] == pytest.approx(0.5, abs=0.01)
+
+
+def point_at_offset(fix: FixationGeometry, target: tuple[float, float], deg: float):
+    lo, hi = 0.0, 0.2
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        if fix.angle_between((target[0] + mid, target[1]), target) < deg:
+            lo = mid
+        else:
+            hi = mid
+    return target[0] + lo, target[1]
+
+
+# -- logs ------------------------------------------------------------------------------------
+
+def row(i: int, session: str = "20260101-000000") -> dict:
+    r = dict.fromkeys(TRIAL_COLUMNS)
+    r.update(participant="P01", session=session, experiment="calibration-fe",
+             protocol_sha256="ab" * 32, trial_index=i, practice=i == 0, repetition=0,
+             image="scene-00", blur_rate=0.34, method="contrast", adjusted_parameter="f_e",
+             f_e=0.1 * i, start_value=0.2, final_value=0.1 * i, response_time_s=1.5,
+             wheel_events=4, blanked_fraction=0.0, dropped_frames=0, tracker="simulated",
+             seed=1, software_version="0.1.0", timestamp="2026-01-01T00:00:00+00:00")
+    return r
+
+
+def test_trial_log_round_trip_and_torn_tail(tmp_path: Path) -> None:
+    path = tmp_path / "trials.csv"
+    log = TrialLog(path)
+    for i in range(3):
+        log.append(row(i))
+    rows, n = read_trials(path)
+    assert [r["trial_index"] for r in rows] == [0, 1, 2] and n == path.stat().st_size
+    assert rows[0]["practice"] is True and rows[1]["s_k"] is None
+    assert rows[2]["final_value"] == pytest.approx(0.2)
+    # Every cut of the last row's bytes reads as the first two rows (torn row dropped).
+    full = path.read_bytes()
+    last_start = full.rfind(b"\n", 0, len(full) - 1) + 1
+    for cut in range(last_start + 1, len(full)):
+        path.write_bytes(full[:cut])
+        with warnings.catch_warnings(record=True) as w:
+            warnings.simplefilter("always")
+            rows, n = read_trials(path)
+        assert [r["trial_index"] for r in rows] == [0, 1], cut
+        assert n == last_start and any("torn" in str(x.message) for x in w)
+    # Reopening cuts the torn tail off, so the next row starts on a fresh line.
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        log = TrialLog(path)
+    log.append(row(2))
+    rows, _ = read_trials(path)
+    assert [r["trial_index"] for r in rows] == [0, 1, 2]
+    assert (tmp_path / "trials.csv.torn").exists()
+
+
+def test_corrupt_middle_row_is_an_error(tmp_path: Path) -> None:
+    path = tmp_path / "trials.csv"
+    log = TrialLog(path)
+    for i in range(3):
+        log.append(row(i))
+    lines = path.read_text().splitlines(keepends=True)
+    lines[2] = lines[2].replace(",contrast,", ",contrast,extra,")
+    path.write_text("".join(lines))
+    with pytest.raises(FovexpError, match="line 3 is corrupt"):
+        read_trials(path)
+
+
+def test_batch_log(tmp_path: Path) -> None:
+    path = tmp_path / "gaze.csv"
+    log = BatchLog(path, ["a", "b"])
+    log.extend([(1, 0.5), (2, None)])
+    assert log.flush(sync=True) == 2
+    with open(path, "a") as fh:
+        fh.write("3,0.")  # torn by a kill
+    BatchLog(path, ["a", "b"]).flush()
+    assert path.read_text() == "a,b\n1,0.5\n2,\n"

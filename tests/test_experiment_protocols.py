@@ -1,0 +1,160 @@
+"""Protocol validation (issue 3, item 1 and "Bad input"): the shipped protocols load, and bad
+ones fail with an error naming the file and the key, before any window opens."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import yaml
+from experiment_helpers import REPO, make_workspace, run_cli
+
+from fovexp.errors import FovexpError
+from fovexp.experiment.protocol import load_protocol
+from fovexp.experiment.validation import check_participant
+
+
+@pytest.fixture()
+def ws(tmp_path: Path) -> Path:
+    return make_workspace(tmp_path / "ws")
+
+
+def edit(ws: Path, name: str, **changes) -> Path:
+    path = ws / "protocols" / f"{name}.yaml"
+    data = yaml.safe_load(path.read_text())
+    for key, value in changes.items():
+        node = data
+        *parents, last = key.split(".")
+        for p in parents:
+            node = node[p]
+        if value is None:
+            node.pop(last)
+        else:
+            node[last] = value
+    out = ws / "protocols" / f"edited-{name}.yaml"
+    out.write_text(yaml.safe_dump(data))
+    return out
+
+
+def test_shipped_protocols_state_the_paper_design() -> None:
+    fe = load_protocol(REPO / "protocols" / "calibration-fe.yaml")
+    assert fe.spec.adjust.parameter == "f_e" and fe.spec.adjust.range == (0.0, 0.4)
+    assert fe.spec.methods == ["contrast"] and fe.spec.blur_rates == [0.11, 0.34, 0.57]
+    assert len(fe.spec.images) == 5
+    _, trials = fe.plan("P01", practice=0)
+    assert len(trials) == 15
+    val = load_protocol(REPO / "protocols" / "validation.yaml")
+    assert val.spec.adjust.parameter == "blur_rate" and val.spec.adjust.start == 0.0
+    assert sorted(val.spec.methods) == ["contrast", "ours"] and len(val.spec.images) == 10
+    _, trials = val.plan("P01", practice=0)
+    assert len(trials) == 20
+    t = next(t for t in trials if t.method == "ours")
+    # Table 2 interpolated by blur-rate: halfway between 0.11 and 0.34.
+    v = val.parameter_values(t, 0.225)
+    assert v["f_e"] == pytest.approx(0.19) and v["s_k"] == pytest.approx(21.71)
+    assert v["s_f"] == pytest.approx(2.83) and v["blur_rate"] == 0.225
+    for name in ("calibration-sk", "calibration-sf"):
+        spec = yaml.safe_load((REPO / "protocols" / f"{name}.yaml").read_text())
+        assert spec["parameters"]["f_e"] == {"fe_results": "../results/calibration-fe"}
+    sk = yaml.safe_load((REPO / "protocols" / "calibration-sk.yaml").read_text())
+    assert sk["s_f_values"] == [1.0, 1.9, 3.61, 6.81] and sk["adjust"]["range"] == [0.0, 45.0]
+
+
+def test_plan_is_seeded_per_participant_and_stable() -> None:
+    fe = load_protocol(REPO / "protocols" / "calibration-fe.yaml")
+    s1, a = fe.plan("P01")
+    s2, b = fe.plan("P01")
+    _, c = fe.plan("P02")
+    assert s1 == s2 and a == b
+    assert [(t.image, t.blur_rate) for t in a] != [(t.image, t.blur_rate) for t in c]
+    assert [t.practice for t in a] == [True, True] + [False] * 15
+    assert all(0.0 <= t.start_value <= 0.4 for t in a)
+    # A limit keeps a prefix of the same order (resume regenerates the same plan).
+    _, lim = fe.plan("P01", limit=4)
+    assert lim == a[:6]
+    main = [(t.image, t.blur_rate) for t in a if not t.practice]
+    assert len(set(main)) == 15
+
+
+@pytest.mark.parametrize(
+    ("change", "needle"),
+    [
+        ({"colour": "red"}, "unknown key 'colour'"),
+        ({"adjust.range": [0.0, 9.0]}, "adjust"),
+        ({"adjust.start": 0.9}, "start 0.9 is outside"),
+        ({"blur_rates": [0.11, 7.0]}, "blur_rates"),
+        ({"adjust.stride": 2}, "unknown key 'adjust.stride'"),
+        ({"images": ["scene-00", "no-such-image"]}, "images[1]: image 'no-such-image'"),
+        ({"repetitions": 0}, "repetitions"),
+        ({"display": "displays/none.yaml"}, "display"),
+    ],
+)
+def test_bad_protocol_names_file_and_key(ws: Path, change: dict, needle: str) -> None:
+    path = edit(ws, "calibration-fe", **change)
+    with pytest.raises(FovexpError) as err:
+        load_protocol(path)
+    msg = str(err.value)
+    assert str(path) in msg and needle in msg
+    assert "\n" not in msg
+
+
+def test_missing_dependency_folder(ws: Path) -> None:
+    with pytest.raises(FovexpError) as err:
+        load_protocol(ws / "protocols" / "calibration-sk.yaml")
+    msg = str(err.value)
+    assert "calibration-sk.yaml" in msg and "parameters.f_e.fe_results" in msg
+    assert "does not exist" in msg
+
+
+def test_method_needs_its_parameters(ws: Path) -> None:
+    path = edit(ws, "validation", **{"parameters.s_k": None})
+    with pytest.raises(FovexpError, match=r"parameters\.s_k: required"):
+        load_protocol(path)
+
+
+def test_changed_image_is_detected(ws: Path, tmp_path: Path) -> None:
+    # A private manifest copy whose image bytes differ from the recorded sha256.
+    stim = tmp_path / "stim"
+    stim.mkdir()
+    src = REPO / "stimuli" / "generated" / "scene-00.png"
+    (stim / "scene-00.png").write_bytes(src.read_bytes() + b"\0")
+    man = {"images": [{"id": "scene-00", "path": "scene-00.png", "source": "test",
+                       "licence": "CC0-1.0", "sha256": "0" * 64}]}
+    (stim / "manifest.yaml").write_text(yaml.safe_dump(man))
+    path = edit(ws, "calibration-fe", stimuli=str(stim / "manifest.yaml"), images=["scene-00"])
+    with pytest.raises(FovexpError, match="has sha256"):
+        load_protocol(path)
+
+
+def test_manifest_matches_files() -> None:
+    man = yaml.safe_load((REPO / "stimuli" / "manifest.yaml").read_text())
+    from fovexp.experiment.stimuli import StimulusSet
+
+    s = StimulusSet(REPO / "stimuli" / "manifest.yaml")
+    total = 0
+    for e in man["images"]:
+        total += s.check(e["id"], "test").stat().st_size
+    assert total < 1_000_000  # small enough to live in git
+
+
+@pytest.mark.parametrize("pid", ["P01", "a_b-3", "X" * 32])
+def test_participant_ok(pid: str) -> None:
+    assert check_participant(pid) == pid
+
+
+@pytest.mark.parametrize("pid", ["", "../x", "P 01", "P01/", "é", "X" * 33, "a.b"])
+def test_participant_rejected(pid: str) -> None:
+    with pytest.raises(FovexpError, match="participant ID"):
+        check_participant(pid)
+
+
+def test_cli_bad_input_one_line_exit_2(ws: Path) -> None:
+    path = edit(ws, "calibration-fe", colour="red")
+    r = run_cli(["run", str(path), "--participant", "P01", "--dry-run"], cwd=ws)
+    assert r.returncode == 2
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and "unknown key 'colour'" in lines[0] and str(path) in lines[0]
+    assert not any((ws / "results").iterdir())  # nothing written, no window
+    r = run_cli(["run", "protocols/calibration-fe.yaml", "--participant", "../evil",
+                 "--dry-run"], cwd=ws)
+    assert r.returncode == 2 and "participant ID" in r.stderr

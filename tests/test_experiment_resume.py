@@ -1,0 +1,87 @@
+"""SIGKILL mid-session, then ``--resume``: no completed trial lost, none repeated, and a row torn
+by the kill never makes a file unreadable (issue 3, item 7)."""
+
+from __future__ import annotations
+
+import json
+import signal
+import time
+import warnings
+from pathlib import Path
+
+import pytest
+from experiment_helpers import make_workspace, popen_cli, run_cli, xvfb_display  # noqa: F401
+
+from fovexp.experiment.logs import read_trials
+
+pytestmark = [pytest.mark.gui, pytest.mark.slow]
+
+
+def test_sigkill_then_resume(tmp_path: Path, xvfb_display) -> None:  # noqa: F811
+    ws = make_workspace(tmp_path / "ws")
+    args = ["run", "protocols/calibration-fe.yaml", "--participant", "K01", "--dry-run",
+            "--practice", "1", "--limit-trials", "8", "--sim-speed", "4"]
+    folder = ws / "results" / "calibration-fe" / "K01"
+    proc = popen_cli(args, ws)
+    try:
+        deadline = time.monotonic() + 180
+        n = 0
+        while time.monotonic() < deadline and proc.poll() is None:
+            if (folder / "trials.csv").exists():
+                n = len(read_trials(folder / "trials.csv")[0])
+                if n >= 3:
+                    break
+            time.sleep(0.05)
+        assert proc.poll() is None, proc.communicate()[1][-2000:]
+        assert n >= 3
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == -signal.SIGKILL
+    before = (folder / "trials.csv").read_bytes()
+    rows_before, _ = read_trials(folder / "trials.csv")
+    assert 3 <= len(rows_before) < 9
+    (session_file,) = folder.glob("session-*.json")
+    info = json.loads(session_file.read_text())
+    assert info["completed"] is False and info["state"] == "running"
+    # A write cut off mid-row, as a kill during the write would leave it.
+    torn = before.splitlines(keepends=True)[-1][:37]
+    with open(folder / "trials.csv", "ab") as fh:
+        fh.write(torn)
+    with open(next(folder.glob("gaze-*.csv")), "ab") as fh:
+        fh.write(b"5,12345,678")
+    with warnings.catch_warnings(record=True) as w:
+        warnings.simplefilter("always")
+        assert read_trials(folder / "trials.csv")[0] == rows_before
+        assert any("torn" in str(x.message) for x in w)
+
+    # Without --resume the runner refuses to start over silently.
+    r = run_cli(args, ws)
+    assert r.returncode == 2 and "--resume" in r.stderr
+
+    r = run_cli([*args, "--resume"], ws, timeout=300)
+    assert r.returncode == 0, r.stderr[-3000:]
+    after = (folder / "trials.csv").read_bytes()
+    assert after.startswith(before)  # nothing already logged was rewritten
+    rows, _ = read_trials(folder / "trials.csv")
+    idx = [r["trial_index"] for r in rows]
+    assert sorted(idx) == list(range(9)) and len(idx) == len(set(idx))
+    assert {r["session"] for r in rows} == {info["session"]}
+    # The resumed part continues the same seeded order and start values.
+    from fovexp.experiment.protocol import load_protocol
+
+    _, plan = load_protocol(ws / "protocols" / "calibration-fe.yaml").plan("K01", 8, 1)
+    for r in rows:
+        t = plan[r["trial_index"]]
+        assert (r["image"], r["blur_rate"], r["practice"]) == (t.image, t.blur_rate, t.practice)
+        assert r["start_value"] == pytest.approx(t.start_value)
+    info = json.loads(session_file.read_text())
+    assert info["completed"] is True and len(info["runs"]) == 2
+    assert info["runs"][1]["remaining_trials"] == 9 - len(rows_before)
+    gaze = next(folder.glob("gaze-*.csv")).read_text().splitlines()
+    assert all(len(line.split(",")) == 13 for line in gaze)
+    # Running again has nothing left to do.
+    r = run_cli([*args, "--resume"], ws)
+    assert r.returncode == 2 and "no incomplete session" in r.stderr

@@ -1,0 +1,157 @@
+"""The Tobii adapter against the real tobii-research package (issue 3, item 4).
+
+No tracker is attached in CI: the real SDK's search finds none, which must give a clear error.
+The stream handling is then exercised with a stand-in for the absent hardware only (an object
+with the ``tobii_research.EyeTracker`` methods the adapter calls), fed from a thread at 600 Hz.
+"""
+
+from __future__ import annotations
+
+import sys
+import threading
+import time
+
+import pytest
+
+if sys.version_info[:2] != (3, 10):
+    pytest.skip("tobii-research ships Linux wheels for Python 3.10 only", allow_module_level=True)
+tr = pytest.importorskip("tobii_research", reason="tobii-research is not installed")
+
+from experiment_helpers import REPO, run_cli  # noqa: E402
+
+from fovexp.errors import FovexpError  # noqa: E402
+from fovexp.experiment.tobii import TobiiGaze, sample_from_sdk  # noqa: E402
+
+
+class StandInTracker:
+    """Replaces only the hardware: the SDK's EyeTracker methods the adapter uses."""
+
+    model = "Tobii Pro Spectrum (stand-in)"
+    serial_number = "TEST-0001"
+    address = "tobii-prp://TEST-0001"
+    device_name = "stand-in"
+    firmware_version = "0"
+    runtime_version = "0"
+
+    def __init__(self, freqs=(60.0, 120.0, 300.0, 600.0)) -> None:
+        self.freqs = freqs
+        self.freq = 60.0
+        self.subs: dict[str, object] = {}
+        self.stop = threading.Event()
+
+    def get_all_gaze_output_frequencies(self):
+        return self.freqs
+
+    def set_gaze_output_frequency(self, f):
+        self.freq = f
+
+    def subscribe_to(self, kind, cb, as_dictionary=False):
+        assert as_dictionary
+        self.subs[kind] = cb
+
+    def unsubscribe_from(self, kind, cb=None):
+        self.subs.pop(kind, None)
+
+    def stream(self, n: int, rate: float, valid=lambda i: (True, True)) -> None:
+        cb = self.subs[tr.EYETRACKER_GAZE_DATA]
+        t0 = tr.get_system_time_stamp()
+        for i in range(n):
+            lv, rv = valid(i)
+            cb({
+                "device_time_stamp": 5_000_000 + int(i * 1e6 / rate),
+                "system_time_stamp": t0 + int(i * 1e6 / rate),
+                "left_gaze_point_on_display_area": (0.25, 0.75) if lv else (float("nan"),) * 2,
+                "left_gaze_point_validity": int(lv),
+                "right_gaze_point_on_display_area": (0.26, 0.74) if rv else (float("nan"),) * 2,
+                "right_gaze_point_validity": int(rv),
+                "left_pupil_diameter": 3.0, "right_pupil_diameter": 3.0,
+            })
+
+
+def test_real_sdk_is_importable() -> None:
+    assert callable(tr.find_all_eyetrackers)
+    assert isinstance(tr.get_system_time_stamp(), int)
+
+
+def test_no_tracker_gives_a_clear_error() -> None:
+    if tr.find_all_eyetrackers():
+        pytest.skip("a real Tobii tracker is connected")
+    with pytest.raises(FovexpError, match="no Tobii eye tracker found"):
+        TobiiGaze()
+
+
+def test_cli_tobii_without_tracker_stops_before_the_session(tmp_path) -> None:
+    if tr.find_all_eyetrackers():
+        pytest.skip("a real Tobii tracker is connected")
+    r = run_cli(["run", str(REPO / "protocols" / "calibration-fe.yaml"), "--participant", "P01",
+                 "--tracker", "tobii", "--results", str(tmp_path)], cwd=tmp_path)
+    assert r.returncode == 2, r.stderr
+    assert "no Tobii eye tracker found" in r.stderr
+    assert not list(tmp_path.rglob("session-*.json")) and not list(tmp_path.rglob("*.csv"))
+
+
+def test_sample_conversion_keeps_timestamps_and_validity() -> None:
+    s = sample_from_sdk({
+        "device_time_stamp": 123, "system_time_stamp": 456,
+        "left_gaze_point_on_display_area": (0.1, 0.2), "left_gaze_point_validity": 1,
+        "right_gaze_point_on_display_area": (float("nan"), float("nan")),
+        "right_gaze_point_validity": 0})
+    assert (s.device_time_us, s.system_time_us) == (123, 456)
+    assert s.left_valid and not s.right_valid and s.point == (0.1, 0.2)
+
+
+def test_stream_buffer_rate_and_notifications() -> None:
+    dev = StandInTracker()
+    g = TobiiGaze(frequency_hz=600, tracker=dev)
+    g.start()
+    assert dev.freq == 600 and tr.EYETRACKER_GAZE_DATA in dev.subs
+    # 1 s at 600 Hz delivered from another thread while the main thread drains.
+    th = threading.Thread(target=dev.stream, args=(600, 600.0, lambda i: (i % 50 != 0, True)))
+    th.start()
+    got = []
+    while th.is_alive():
+        got += g.poll()
+    th.join()
+    got += g.poll()
+    assert len(got) == 600
+    assert [s.device_time_us for s in got] == sorted(s.device_time_us for s in got)
+    assert got[1].device_time_us - got[0].device_time_us == pytest.approx(1e6 / 600, abs=1)
+    assert sum(not s.left_valid for s in got) == 12 and all(s.right_valid for s in got)
+    assert g.measured_rate_hz() == pytest.approx(600, rel=0.01)
+    assert not [e for e in g.poll_events() if e.kind == "rate_deviation"]
+    # The tracker drops to 300 Hz: noticed from the timestamps and from the notification.
+    dev.subs[tr.EYETRACKER_NOTIFICATION_GAZE_OUTPUT_FREQUENCY_CHANGED](
+        {"system_time_stamp": tr.get_system_time_stamp(), "gaze_output_frequency": 300.0})
+    dev.stream(600, 300.0)
+    g.poll()
+    kinds = [e.kind for e in g.poll_events()]
+    assert "frequency_changed" in kinds and "rate_deviation" in kinds
+    # Connection lost and restored.
+    dev.subs[tr.EYETRACKER_NOTIFICATION_CONNECTION_LOST]({"system_time_stamp": 1})
+    assert [e.kind for e in g.poll_events()][0] == "connection_lost" and not g.connected
+    dev.subs[tr.EYETRACKER_NOTIFICATION_CONNECTION_RESTORED]({"system_time_stamp": 2})
+    g.poll_events()
+    dev.stream(10, 600.0)
+    g.poll()
+    assert g.connected
+    g.stop()
+    assert not dev.subs
+
+
+def test_stalled_stream_counts_as_disconnected() -> None:
+    dev = StandInTracker()
+    g = TobiiGaze(frequency_hz=600, tracker=dev, stall_s=0.1)
+    g.start()
+    dev.stream(10, 600.0)
+    g.poll()
+    assert g.connected
+    time.sleep(0.2)
+    assert [e.kind for e in g.poll_events()] == ["stream_stalled"] and not g.connected
+    dev.stream(10, 600.0)
+    g.poll()
+    assert "stream_resumed" in [e.kind for e in g.poll_events()] and g.connected
+
+
+def test_unsupported_frequency_is_refused() -> None:
+    with pytest.raises(FovexpError, match="offers"):
+        TobiiGaze(frequency_hz=600, tracker=StandInTracker(freqs=(60.0, 120.0))).start()
