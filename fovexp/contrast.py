@@ -11,8 +11,9 @@ the foveation does. The gain ``f_e (1 + k)`` is below 1 for small ``k`` (with f_
 softens rather than sharpens up to k = 4): this is the release's formula, kept as such so that
 the calibrated f_e of Table 2 means the same thing. Where sigma = 0 the image is unchanged.
 
-The box means come from a summed-area table, so each pixel costs the same whatever its width,
-and only the two widths a pixel needs are evaluated (no stack of filtered images).
+The box means come from summed-area tables built tile by tile (each tile with the margin its
+widest box needs), so each pixel costs the same whatever its width, only the two widths a
+pixel needs are evaluated (no stack of filtered images), and fovea tiles are copied.
 Even widths follow MATLAB's anchoring: the window of width ``n`` covers
 ``[x - floor((n - 1) / 2), x + ceil((n - 1) / 2)]``.
 """
@@ -30,53 +31,84 @@ def box_width_px(level: int) -> int:
     return int(math.ceil(4 * level))
 
 
-@numba.njit(parallel=True, cache=True, fastmath=True)
-def _sat(padded):  # pragma: no cover - compiled
-    """Summed-area table (float64) with a leading zero row and column, per channel."""
-    h, w, c = padded.shape
-    s = np.zeros((h + 1, w + 1, c), dtype=np.float64)
-    for ch in numba.prange(c):
-        for y in range(h):
-            run = 0.0
-            for x in range(w):
-                run += padded[y, x, ch]
-                s[y + 1, x + 1, ch] = s[y, x + 1, ch] + run
-    return s
+@numba.njit(cache=True, inline="always")
+def _mirror(i, n):  # pragma: no cover - compiled
+    """Symmetric border (MATLAB 'symmetric'): -1 -> 0, -2 -> 1, n -> n - 1."""
+    if i < 0:
+        i = -i - 1
+    if i >= n:
+        i = 2 * n - i - 1
+    return min(max(i, 0), n - 1)
+
+
+#: Side of the tiles the enhancement is computed in; each tile builds its own summed-area
+#: table (small enough to stay in cache, and float64 sums stay small and exact).
+TILE_PX = 128
 
 
 @numba.njit(parallel=True, cache=True, fastmath=True)
-def _enhance(img, sigma, sat, pad, f_e):  # pragma: no cover - compiled
+def _enhance_tiles(img, sigma, f_e, tile):  # pragma: no cover - compiled
     h, w, c = img.shape
     out = np.empty_like(img)
-    for y in numba.prange(h):
-        for x in range(w):
-            s = sigma[y, x]
-            if s <= 0.0:
-                for ch in range(c):
-                    out[y, x, ch] = img[y, x, ch]
-                continue
-            k0 = int(math.floor(s))
-            t = s - k0
+    nty = (h + tile - 1) // tile
+    ntx = (w + tile - 1) // tile
+    for t in numba.prange(nty * ntx):
+        y0 = (t // ntx) * tile
+        x0 = (t % ntx) * tile
+        y1 = min(y0 + tile, h)
+        x1 = min(x0 + tile, w)
+        smax = 0.0
+        for y in range(y0, y1):
+            for x in range(x0, x1):
+                smax = max(smax, sigma[y, x])
+        if smax <= 0.0:  # the fovea: nothing to do
+            for y in range(y0, y1):
+                for x in range(x0, x1):
+                    for ch in range(c):
+                        out[y, x, ch] = img[y, x, ch]
+            continue
+        # widest box this tile needs: level floor(smax) + 1
+        m = int(math.ceil(4.0 * (int(math.floor(smax)) + 1))) // 2 + 1
+        th, tw = y1 - y0 + 2 * m, x1 - x0 + 2 * m
+        sat = np.zeros((c, th + 1, tw + 1), dtype=np.float64)
+        for yy in range(th):
+            sy = _mirror(y0 - m + yy, h)
             for ch in range(c):
-                v = img[y, x, ch]
-                acc = 0.0
+                run = 0.0
+                for xx in range(tw):
+                    run += img[sy, _mirror(x0 - m + xx, w), ch]
+                    sat[ch, yy + 1, xx + 1] = sat[ch, yy, xx + 1] + run
+        for y in range(y0, y1):
+            for x in range(x0, x1):
+                s = sigma[y, x]
+                if s <= 0.0:
+                    for ch in range(c):
+                        out[y, x, ch] = img[y, x, ch]
+                    continue
+                k0 = int(math.floor(s))
+                frac = s - k0
+                for ch in range(c):
+                    out[y, x, ch] = 0.0
                 for j in range(2):
                     k = k0 + j
-                    wgt = (1.0 - t) if j == 0 else t
+                    wgt = (1.0 - frac) if j == 0 else frac
                     if wgt == 0.0:
                         continue
-                    if k == 0:
-                        acc += wgt * v  # width 0: the pixel itself
+                    if k == 0:  # width 0: the pixel itself
+                        for ch in range(c):
+                            out[y, x, ch] += wgt * img[y, x, ch]
                         continue
                     n = int(math.ceil(4.0 * k))
                     lo = (n - 1) // 2
-                    hi = n - 1 - lo
-                    ya, yb = y + pad - lo, y + pad + hi + 1
-                    xa, xb = x + pad - lo, x + pad + hi + 1
-                    box = sat[yb, xb, ch] - sat[ya, xb, ch] - sat[yb, xa, ch] + sat[ya, xa, ch]
-                    avg = box / (n * n)
-                    acc += wgt * (avg + f_e * (1.0 + k) * (v - avg))
-                out[y, x, ch] = acc
+                    ya = y - y0 + m - lo
+                    xa = x - x0 + m - lo
+                    yb, xb = ya + n, xa + n
+                    gain = f_e * (1.0 + k)
+                    inv = 1.0 / (n * n)
+                    for ch in range(c):
+                        box = sat[ch, yb, xb] - sat[ch, ya, xb] - sat[ch, yb, xa] + sat[ch, ya, xa]
+                        avg = box * inv
+                        out[y, x, ch] += wgt * (avg + gain * (img[y, x, ch] - avg))
     return out
 
 
@@ -93,7 +125,5 @@ def contrast_enhance(linear: np.ndarray, sigma_map_px: np.ndarray, f_e: float) -
     max_sigma = float(sigma.max()) if sigma.size else 0.0
     if max_sigma <= 0.0:
         return linear.astype(np.float32, copy=True)
-    pad = box_width_px(int(math.floor(max_sigma)) + 1) // 2 + 1
-    sat = _sat(np.pad(img, ((pad, pad), (pad, pad), (0, 0)), mode="symmetric"))
-    out = _enhance(img, sigma, sat, pad, np.float32(f_e))
+    out = _enhance_tiles(img, sigma, np.float32(f_e), TILE_PX)
     return out[..., 0] if grey else out

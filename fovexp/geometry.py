@@ -29,6 +29,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
+import numba
 import numpy as np
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
@@ -121,6 +122,46 @@ def load_display(name_or_path: str | Path) -> Display:
         raise FovexpError(f"display profile {path}: field {field!r}: {err['msg']}") from None
 
 
+@numba.njit(cache=True, inline="always")
+def _angle_deg(ux, uy, vx, vy, d):  # pragma: no cover - compiled
+    """Angle (deg) between the rays from the eye to screen points u and v (cm from the
+    screen centre, eye at distance d on the normal): atan2(|u x v|, u . v)."""
+    dot = ux * vx + uy * vy + d * d
+    cx = uy * d - d * vy
+    cy = d * vx - ux * d
+    cz = ux * vy - uy * vx
+    return math.degrees(math.atan2(math.sqrt(cx * cx + cy * cy + cz * cz), dot))
+
+
+@numba.njit(cache=True, inline="always")
+def _ppd_at(ux, uy, d, pitch):  # pragma: no cover - compiled
+    """(pi / 180) L / pitch with L the eye-to-point distance (see ViewingGeometry.ppd)."""
+    return (math.pi / 180.0) * math.sqrt(ux * ux + uy * uy + d * d) / pitch
+
+
+@numba.vectorize(["float64(float64, float64, float64, float64, float64)"], cache=True)
+def _angle_ufunc(ux, uy, vx, vy, d):  # pragma: no cover - compiled
+    return _angle_deg(ux, uy, vx, vy, d)
+
+
+@numba.vectorize(["float64(float64, float64, float64, float64)"], cache=True)
+def _ppd_ufunc(ux, uy, d, pitch):  # pragma: no cover - compiled
+    return _ppd_at(ux, uy, d, pitch)
+
+
+@numba.njit(parallel=True, cache=True)
+def _exact_grids(ux, uy, vx, vy, d, pitch):  # pragma: no cover - compiled
+    """Eccentricity and ppd of every pixel (float32), rows in parallel."""
+    h, w = uy.shape[0], ux.shape[0]
+    ecc = np.empty((h, w), dtype=np.float32)
+    ppd = np.empty((h, w), dtype=np.float32)
+    for y in numba.prange(h):
+        for x in range(w):
+            ecc[y, x] = _angle_deg(ux[x], uy[y], vx, vy, d)
+            ppd[y, x] = _ppd_at(ux[x], uy[y], d, pitch)
+    return ecc, ppd
+
+
 @dataclass(frozen=True)
 class ViewingGeometry:
     """The geometry of one image shown full screen on a display.
@@ -196,12 +237,7 @@ class ViewingGeometry:
             return np.degrees(np.arctan(r_cm / self.distance_cm))
         ux, uy = self._screen_cm(x_px, y_px)
         vx, vy = self._screen_cm(np.float64(gx), np.float64(gy))
-        d = self.distance_cm
-        dot = ux * vx + uy * vy + d * d
-        cx = uy * d - d * vy
-        cy = d * vx - ux * d
-        cz = ux * vy - uy * vx
-        return np.degrees(np.arctan2(np.sqrt(cx * cx + cy * cy + cz * cz), dot))
+        return _angle_ufunc(ux, uy, vx, vy, self.distance_cm)
 
     def ppd(self, x_px: np.ndarray, y_px: np.ndarray) -> np.ndarray:
         """Local pixels per degree at pixels ``(x_px, y_px)``.
@@ -219,9 +255,22 @@ class ViewingGeometry:
         if self.model != "exact":
             return np.full(np.broadcast(x_px, y_px).shape, self.ppd_constant)
         ux, uy = self._screen_cm(x_px, y_px)
-        d = self.distance_cm
         pitch = math.sqrt(self.pitch_x_cm * self.pitch_y_cm)
-        return (math.pi / 180.0) * np.sqrt(ux * ux + uy * uy + d * d) / pitch
+        return _ppd_ufunc(ux, uy, self.distance_cm, pitch)
+
+    def eccentricity_and_ppd_maps(
+        self, gaze_px: tuple[float, float]
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Per-pixel eccentricity (deg) and pixels per degree, float32 (H, W): the same
+        formulas as :meth:`eccentricity_deg` and :meth:`ppd`, evaluated on the pixel grid."""
+        x, y = self.grid()
+        if self.model != "exact":
+            ecc = self.eccentricity_deg(x, y, gaze_px).astype(np.float32)
+            return ecc, np.full(ecc.shape, self.ppd_constant, dtype=np.float32)
+        ux, uy = self._screen_cm(x[0], y[:, 0])
+        vx, vy = self._screen_cm(np.float64(gaze_px[0]), np.float64(gaze_px[1]))
+        pitch = math.sqrt(self.pitch_x_cm * self.pitch_y_cm)
+        return _exact_grids(ux, uy, float(vx), float(vy), self.distance_cm, pitch)
 
     def grid(self) -> tuple[np.ndarray, np.ndarray]:
         """Broadcastable pixel-centre coordinates ``(x[None, :], y[:, None])``."""

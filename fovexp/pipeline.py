@@ -72,6 +72,7 @@ class _StageCache:
         self._inputs: dict[str, Any] = {}
         self._values: dict[str, Any] = {}
         self.timings_s: dict[str, float] = {}
+        self._nested_s = 0.0  # time spent in stages pulled by the stage being computed
 
     def stage(self, name: str, deps: tuple[str, ...], fn: Callable[..., Any]) -> None:
         self._fns[name] = (deps, fn)
@@ -97,9 +98,13 @@ class _StageCache:
             args = [
                 (lambda d=d[1:]: self.get(d)) if d.startswith("?") else self.get(d) for d in deps
             ]
+            outer, self._nested_s = self._nested_s, 0.0
             t0 = time.perf_counter()
             self._values[name] = fn(*args)
-            self.timings_s[name] = self.timings_s.get(name, 0.0) + time.perf_counter() - t0
+            elapsed = time.perf_counter() - t0
+            # a stage's own time excludes the stages it pulled lazily ("?name" dependencies)
+            self.timings_s[name] = self.timings_s.get(name, 0.0) + elapsed - self._nested_s
+            self._nested_s = outer + elapsed
         return self._values[name]
 
     def cached(self, name: str) -> bool:
@@ -180,9 +185,9 @@ class Enhancer:
         p = self.preset
         c.stage("geometry", ("shape",), self._geometry)
         c.stage("linear", ("image",), self._linear)
-        c.stage("grid_ecc", ("geometry", "gaze"), self._grid_ecc)
-        c.stage("grid_ppd", ("geometry",), self._grid_ppd)
-        c.stage("sigma", ("sigma_given", "grid_ecc", "grid_ppd", "blur_rate"), self._sigma)
+        c.stage("grids", ("geometry", "gaze"), lambda geom, gaze:
+                geom.eccentricity_and_ppd_maps(geom.gaze_px(gaze)))
+        c.stage("sigma", ("sigma_given", "grids", "blur_rate"), self._sigma)
         c.stage("foveated", ("linear", "sigma", "already_foveated"), self._foveated)
         c.stage("luma", ("foveated",), colour.luminance)
         c.stage("pyramid", ("luma",), lambda luma: pyramids.gaussian_pyramid(
@@ -270,18 +275,10 @@ class Enhancer:
     def _encode(self, linear: np.ndarray) -> np.ndarray:
         return colour.encode(linear, self._gamma(), self.preset.transfer)
 
-    def _grid_ecc(self, geom: ViewingGeometry, gaze: tuple[float, float]) -> np.ndarray:
-        x, y = geom.grid()
-        return geom.eccentricity_deg(x, y, geom.gaze_px(gaze)).astype(np.float32)
-
-    def _grid_ppd(self, geom: ViewingGeometry) -> np.ndarray:
-        x, y = geom.grid()
-        return np.broadcast_to(geom.ppd(x, y), geom.shape).astype(np.float32)
-
-    def _sigma(self, given, ecc, ppd, blur_rate) -> np.ndarray:
+    def _sigma(self, given, grids, blur_rate) -> np.ndarray:
         if given is not None:
             return given
-        return sigma_px(ecc, ppd, blur_rate, self.preset.fovea_deg)
+        return sigma_px(grids[0], grids[1], blur_rate, self.preset.fovea_deg)
 
     def _foveated(self, linear, sigma, already_foveated) -> np.ndarray:
         return linear if already_foveated else foveate(linear, sigma)
@@ -301,17 +298,16 @@ class Enhancer:
         reaches r = 20 px, past its own 8 x 8 block, so the level-3 min/max blocks are
         widened to every block the kernel can reach (the paper meant the neighbourhood to
         match the kernel's support). What is left is the noise's tail beyond 3 std."""
-        lo = contrast.min(axis=2) if contrast.ndim == 3 else contrast
-        hi = contrast.max(axis=2) if contrast.ndim == 3 else contrast
         p = self.preset
         if p.minmax == "pyramid":
             block = pyramids.level_scale(p.minmax_level)
             reach = 2 * int(np.ceil(gabor.kernel_radius_px(p.gabor_a_cpp) / block)) + 1
-            lo = ndimage.minimum_filter(
-                pyramids.block_extreme(lo, p.minmax_level, np.minimum), reach, mode="nearest")
-            hi = ndimage.maximum_filter(
-                pyramids.block_extreme(hi, p.minmax_level, np.maximum), reach, mode="nearest")
+            lo, hi = pyramids.block_extremes(contrast, p.minmax_level)
+            lo = ndimage.minimum_filter(lo, reach, mode="nearest")
+            hi = ndimage.maximum_filter(hi, reach, mode="nearest")
         else:
+            lo = contrast.min(axis=2) if contrast.ndim == 3 else contrast
+            hi = contrast.max(axis=2) if contrast.ndim == 3 else contrast
             lo = ndimage.minimum_filter(lo, p.minmax_box_px, mode="nearest")
             hi = ndimage.maximum_filter(hi, p.minmax_box_px, mode="nearest")
             block = 1
@@ -391,7 +387,7 @@ class Enhancer:
     def _map(self, name: str) -> np.ndarray:
         c = self._c
         if name == "eccentricity_deg":
-            return c.get("grid_ecc")
+            return c.get("grids")[0]
         if name == "sigma_px":
             return c.get("sigma")
         if name == "output":

@@ -158,18 +158,36 @@ def laplacian_levels(gaussian: list[np.ndarray], levels: int) -> dict[int, np.nd
     return out
 
 
-def block_extreme(image: np.ndarray, level: int, op: np.ufunc) -> np.ndarray:
-    """One level of a min (``op=np.minimum``) or max (``np.maximum``) pyramid: the extreme of
-    each ``2**level x 2**level`` block, built from 2 x 2 neighbourhoods level by level as the
-    paper describes (section 4.2); odd sizes replicate their last row or column."""
-    a = np.asarray(image)
-    for _ in range(level):
-        if a.shape[0] % 2:
-            a = np.concatenate([a, a[-1:]], axis=0)
-        if a.shape[1] % 2:
-            a = np.concatenate([a, a[:, -1:]], axis=1)
-        a = op(op(a[0::2, 0::2], a[1::2, 0::2]), op(a[0::2, 1::2], a[1::2, 1::2]))
-    return a
+@numba.njit(parallel=True, cache=True)
+def _block_extremes(img, block):  # pragma: no cover - compiled
+    h, w, c = img.shape
+    bh, bw = (h + block - 1) // block, (w + block - 1) // block
+    lo = np.empty((bh, bw), dtype=img.dtype)
+    hi = np.empty((bh, bw), dtype=img.dtype)
+    for by in numba.prange(bh):
+        for bx in range(bw):
+            mn = img[by * block, bx * block, 0]
+            mx = mn
+            for y in range(by * block, min(by * block + block, h)):
+                for x in range(bx * block, min(bx * block + block, w)):
+                    for ch in range(c):
+                        v = img[y, x, ch]
+                        mn = min(mn, v)
+                        mx = max(mx, v)
+            lo[by, bx] = mn
+            hi[by, bx] = mx
+    return lo, hi
+
+
+def block_extremes(image: np.ndarray, level: int) -> tuple[np.ndarray, np.ndarray]:
+    """Level ``level`` of the min and max pyramids (paper section 4.2): the minimum and maximum
+    of each ``2**level x 2**level`` block (over all channels of an (H, W, C) image).
+
+    The paper builds the level from 2 x 2 neighbourhoods level by level; the extreme of the
+    block is the same number, computed here in one pass (edge blocks are the partial ones).
+    """
+    img = np.ascontiguousarray(image if image.ndim == 3 else image[..., None])
+    return _block_extremes(img, level_scale(level))
 
 
 def sample_bilinear(grid: np.ndarray, x_px: np.ndarray, y_px: np.ndarray, level: int) -> np.ndarray:
