@@ -78,6 +78,5 @@ def mean_interframe_ssim(frames: list[np.ndarray]) -> float:
     if len(frames) < 2:
         return float("nan")
     grey = [f.mean(axis=2) if f.ndim == 3 else f for f in frames]
-    return float(np.mean([
-        structural_similarity(a, b, data_range=1.0) for a, b in zip(grey[:-1], grey[1:], strict=True)
-    ]))
+    pairs = zip(grey[:-1], grey[1:], strict=True)
+    return float(np.mean([structural_similarity(a, b, data_range=1.0) for a, b in pairs]))

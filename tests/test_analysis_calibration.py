@@ -14,13 +14,14 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from analysis_fixtures import BLUR_RATES, Truth, write_study
 
 from analysis.calibration import calibrate, fe_summary, table2_latex, table2_markdown
 from analysis.derive import fe_by_blur_rate, parameter_table, sk_line_by_blur_rate
 from analysis.loading import load_results
 from fovexp.errors import FovexpError
 from fovexp.params import ParameterTable
+
+from analysis_fixtures import BLUR_RATES, Truth, write_study
 
 CAL = ("calibration-fe", "calibration-sk", "calibration-sf")
 TOL = {"f_e": 0.02, "s_k": 1.2, "s_f": 0.2}

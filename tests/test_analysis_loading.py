@@ -8,10 +8,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from analysis_fixtures import SHA, Noise, Truth, session_id, simulate_rows, write_trials
 
 from analysis.loading import COLUMNS, load_results, read_trials_file
 from fovexp.errors import FovexpError
+
+from analysis_fixtures import SHA, Noise, Truth, session_id, simulate_rows, write_trials
 
 
 def rows(exp: str = "calibration-fe", pid: str = "P01", k: int = 0, seed: int = 0,

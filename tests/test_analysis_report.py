@@ -8,11 +8,12 @@ import shutil
 from pathlib import Path
 
 import pytest
-from analysis_fixtures import Truth, write_study
 
 from analysis.cli import add_analyze_parser, analyze_command, main
 from analysis.report import run_analysis
 from fovexp.params import ParameterTable
+
+from analysis_fixtures import Truth, write_study
 
 
 @pytest.fixture(scope="module")

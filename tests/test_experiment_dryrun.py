@@ -10,7 +10,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from experiment_helpers import make_workspace, run_cli, xvfb_display  # noqa: F401
 
 from fovexp import PAPER_TABLE2
 from fovexp.experiment.logs import (
@@ -21,6 +20,8 @@ from fovexp.experiment.logs import (
     read_trials,
 )
 from fovexp.experiment.protocol import load_protocol
+
+from experiment_helpers import make_workspace, run_cli, xvfb_display  # noqa: F401
 
 pytestmark = [pytest.mark.gui, pytest.mark.slow]
 

@@ -7,11 +7,12 @@ from pathlib import Path
 
 import pytest
 import yaml
-from experiment_helpers import REPO, make_workspace, run_cli
 
 from fovexp.errors import FovexpError
 from fovexp.experiment.protocol import load_protocol
 from fovexp.experiment.validation import check_participant
+
+from experiment_helpers import REPO, make_workspace, run_cli
 
 
 @pytest.fixture()

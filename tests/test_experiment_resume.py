@@ -10,9 +10,10 @@ import warnings
 from pathlib import Path
 
 import pytest
-from experiment_helpers import make_workspace, popen_cli, run_cli, xvfb_display  # noqa: F401
 
 from fovexp.experiment.logs import read_trials
+
+from experiment_helpers import make_workspace, popen_cli, run_cli, xvfb_display  # noqa: F401
 
 pytestmark = [pytest.mark.gui, pytest.mark.slow]
 

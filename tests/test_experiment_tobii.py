@@ -17,10 +17,10 @@ if sys.version_info[:2] != (3, 10):
     pytest.skip("tobii-research ships Linux wheels for Python 3.10 only", allow_module_level=True)
 tr = pytest.importorskip("tobii_research", reason="tobii-research is not installed")
 
-from experiment_helpers import REPO, run_cli  # noqa: E402
-
 from fovexp.errors import FovexpError  # noqa: E402
 from fovexp.experiment.tobii import TobiiGaze, sample_from_sdk  # noqa: E402
+
+from experiment_helpers import REPO, run_cli  # noqa: E402
 
 
 class StandInTracker:

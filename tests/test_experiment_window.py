@@ -12,7 +12,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from experiment_helpers import REPO, make_workspace, run_cli, xvfb_display  # noqa: F401
 
 from fovexp import load_display
 from fovexp.experiment.gaze import (
@@ -26,6 +25,8 @@ from fovexp.experiment.logs import read_trials
 from fovexp.experiment.protocol import load_protocol
 from fovexp.experiment.session import Session, SessionOptions
 from fovexp.experiment.trial import Key, Wheel
+
+from experiment_helpers import REPO, make_workspace, run_cli, xvfb_display  # noqa: F401
 
 pytestmark = [pytest.mark.gui]
 

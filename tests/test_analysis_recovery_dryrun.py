@@ -1,0 +1,208 @@
+"""Recovery through the real runner: dry-run sessions of simulated participants with a known
+ground truth, chained calibration-fe -> calibration-sk -> calibration-sf (paper section 6.2) and
+analysed with ``fovexp analyze``, give back that truth's Table 2 (section 6.3); a validation dry
+run with a known ours-vs-contrast difference gives the t-test of section 7.1.
+
+Unlike tests/test_analysis_calibration.py (trial logs written directly), every trial here is run
+by ``fovexp run --dry-run`` (PsychoPy window under Xvfb, simulated gaze, simulated participant
+turning the wheel towards ``--sim-truth``), so the chain between the protocols (f_e read from the
+calibration-fe results, s_k from the calibration-sk line), the logs and the analysis are tested
+together.
+
+Design (kept small for CI: about 2 minutes on 2 cores; copies of the protocols with fewer images,
+no practice, a 160x90 window, two sessions at a time): 6 participants; calibration-fe 2 images x
+3 blur-rates (6 trials each), calibration-sk 1 image x 3 blur-rates x the 4 s_f levels (12),
+calibration-sf 2 images x 3 blur-rates (6). Ground truth (:data:`TRUTH`): a Table 2 unlike the
+paper's (f_e 0.10/0.18/0.32, s_k 30/24/12, s_f 1.6/2.8/4.5 at blur-rates 0.11/0.34/0.57), s_k
+falling with s_f at slope -2 in calibration-sk, and the runner's default participant noise
+(per-trial sd 0.02 for f_e, 1.5 for s_k, 0.25 for s_f, plus the stop within half a fine step).
+
+Tolerance (docs/ANALYSIS.md, "Recovery through the runner"): every Table 2 entry within
+|f_e error| <= 0.02, |s_k error| <= 1.4, |s_f error| <= 0.25, and the s_k slopes within 0.5.
+For this design the expected (rms) errors per entry are 0.0057, 0.38 and 0.073 (slope 0.14); the
+tolerances are the 99.9 % quantiles of the largest of the three blur-rates' errors in a Monte
+Carlo of the same design (20000 studies), i.e. about 3.5 standard errors, so a correct chain
+fails on fewer than 1 in 1000 seeds. They are less than half the distance between this truth and
+the paper's Table 2 in at least one entry per parameter, so a runner that ignored ``--sim-truth``
+(its default truth is the paper's table) or a broken chain fails (checked in the test).
+Measured on the shipped seeds: see docs/ANALYSIS.md.
+"""
+
+from __future__ import annotations
+
+import csv
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import pytest
+import yaml
+from experiment_helpers import make_workspace, run_cli, xvfb_display  # noqa: F401
+
+from fovexp import PAPER_TABLE2, ParameterTable
+from fovexp.cli import main as fovexp_main
+from fovexp.experiment.logs import read_trials
+
+pytestmark = [pytest.mark.gui, pytest.mark.slow]
+
+TRUTH = ParameterTable(source="recovery test ground truth", rows=[
+    {"blur_rate": 0.11, "f_e": 0.10, "s_k": 30.0, "s_f": 1.6},
+    {"blur_rate": 0.34, "f_e": 0.18, "s_k": 24.0, "s_f": 2.8},
+    {"blur_rate": 0.57, "f_e": 0.32, "s_k": 12.0, "s_f": 4.5},
+])
+SK_SLOPE = -2.0
+#: The runner's default per-trial noise sd (SimTruth), written out so the test does not drift.
+NOISE = {"f_e": 0.02, "s_k": 1.5, "s_f": 0.25, "blur_rate": 0.04}
+TOLERANCE = {"f_e": 0.02, "s_k": 1.4, "s_f": 0.25}
+SLOPE_TOLERANCE = 0.5
+PARTICIPANTS = [f"R{i:02d}" for i in range(1, 7)]
+#: images per protocol copy (fewer than the shipped protocols, to keep the test short)
+IMAGES = {"calibration-fe": ["scene-00", "scene-01"], "calibration-sk": ["scene-02"],
+          "calibration-sf": ["scene-03", "scene-04"],
+          "validation": ["scene-00", "scene-03", "scene-06", "scene-09"]}
+TRIALS = {"calibration-fe": 6, "calibration-sk": 12, "calibration-sf": 6, "validation": 8}
+DRY = ["--dry-run", "--practice", "0", "--window", "160x90", "--sim-speed", "12"]
+
+#: validation truth: highest invisible blur-rate per method (ours 1.5 x contrast)
+VALIDATION_TRUTH = {"contrast": 0.30, "ours": 0.45}
+VALIDATION_PARTICIPANTS = ["V01", "V02", "V03"]
+
+
+def _shrink(ws: Path, experiment: str) -> None:
+    """Keep fewer images in the workspace's copy of a protocol (everything else as shipped)."""
+    path = ws / "protocols" / f"{experiment}.yaml"
+    spec = yaml.safe_load(path.read_text())
+    spec["images"] = IMAGES[experiment]
+    path.write_text(yaml.safe_dump(spec, sort_keys=False))
+
+
+def _run_all(ws: Path, experiment: str, pids: list[str], truth: Path) -> None:
+    """Dry-run one protocol for every participant, two sessions at a time."""
+    def one(pid: str):
+        return pid, run_cli(["run", f"protocols/{experiment}.yaml", "--participant", pid, *DRY,
+                             "--sim-truth", str(truth)], cwd=ws, timeout=300)
+
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        for pid, r in pool.map(one, pids):
+            assert r.returncode == 0, f"{experiment} {pid}:\n{r.stderr[-3000:]}"
+            rows, _ = read_trials(ws / "results" / experiment / pid / "trials.csv")
+            assert len(rows) == TRIALS[experiment] and not any(r["practice"] for r in rows)
+
+
+def _csv(path: Path) -> list[dict[str, str]]:
+    with open(path, newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def _analyze(ws: Path, out: Path) -> None:
+    code = fovexp_main(["analyze", str(ws / "results"), "--out", str(out), "--no-figures"])
+    assert code == 0
+    # Every dry-run trial reaches the statistics: complete sessions, no practice, one protocol.
+    assert _csv(out / "tables" / "exclusions.csv") == []
+
+
+@pytest.fixture(scope="module")
+def calibration(tmp_path_factory, xvfb_display) -> Path:  # noqa: F811
+    """The three calibration experiments dry-run in order, then ``fovexp analyze``."""
+    ws = make_workspace(tmp_path_factory.mktemp("recovery") / "project")
+    truth = ws / "truth.yaml"
+    truth.write_text(yaml.safe_dump({
+        "table": TRUTH.model_dump(), "sk_slope": SK_SLOPE, "noise_sd": NOISE}, sort_keys=False))
+    for exp in ("calibration-fe", "calibration-sk", "calibration-sf"):
+        _shrink(ws, exp)
+        _run_all(ws, exp, PARTICIPANTS, truth)
+    _analyze(ws, ws / "report")
+    return ws
+
+
+def test_truth_is_far_from_the_paper() -> None:
+    """Guard: recovering TRUTH within the tolerance is impossible from the paper's Table 2 (the
+    simulated participant's default truth), so the recovery test can fail."""
+    for k, key in enumerate(("f_e", "s_k", "s_f")):
+        gaps = [abs(TRUTH.at(br)[k] - PAPER_TABLE2.at(br)[k]) for br in (0.11, 0.34, 0.57)]
+        assert max(gaps) > 2 * TOLERANCE[key], key
+
+
+def test_recovered_table2(calibration: Path) -> None:
+    report = calibration / "report"
+    table = ParameterTable.load(report / "table2.yaml")
+    assert [r.blur_rate for r in table.rows] == [0.11, 0.34, 0.57]
+    sem = {float(r["blur_rate"]): r for r in _csv(report / "tables" / "table2.csv")}
+    errors: dict[str, float] = {}
+    for row in table.rows:
+        true = dict(zip(("f_e", "s_k", "s_f"), TRUTH.at(row.blur_rate), strict=True))
+        for key in ("f_e", "s_k", "s_f"):
+            got = getattr(row, key)
+            err = got - true[key]
+            errors[f"{key}@{row.blur_rate:g}"] = round(err, 4)
+            assert abs(err) <= TOLERANCE[key], (key, row.blur_rate, got, true[key])
+            # The CSV (full precision, with SEMs) agrees with the YAML the enhancer reads.
+            assert float(sem[row.blur_rate][key]) == pytest.approx(got, rel=1e-5)
+            assert float(sem[row.blur_rate][f"{key}_sem"]) > 0
+    print("recovery errors (recovered - truth):", errors)
+
+
+def test_recovered_sk_lines(calibration: Path) -> None:
+    """calibration-sk's lines: slope SK_SLOPE, through the truth's (s_f, s_k) per blur-rate."""
+    lines = _csv(calibration / "report" / "tables" / "calibration-sk-lines.csv")
+    assert len(lines) == 3
+    for ln in lines:
+        br = float(ln["blur_rate"])
+        _, s_k, s_f = TRUTH.at(br)
+        assert float(ln["n_levels"]) == 4
+        assert abs(float(ln["slope"]) - SK_SLOPE) <= SLOPE_TOLERANCE, ln
+        line_at = float(ln["slope"]) * s_f + float(ln["intercept"])
+        assert abs(line_at - s_k) <= TOLERANCE["s_k"], ln
+
+
+def test_chain_used_earlier_results(calibration: Path) -> None:
+    """The runner set calibration-sk's f_e and calibration-sf's s_k from the earlier dry runs'
+    results, with the same numbers the analysis reports (the contract of section 6.2)."""
+    report = calibration / "report" / "tables"
+    fe = {float(r["blur_rate"]): float(r["mean"]) for r in _csv(report / "calibration-fe.csv")}
+    lines = {float(r["blur_rate"]): (float(r["slope"]), float(r["intercept"]))
+             for r in _csv(report / "calibration-sk-lines.csv")}
+    for pid in PARTICIPANTS:
+        rows, _ = read_trials(calibration / "results" / "calibration-sk" / pid / "trials.csv")
+        for r in rows:
+            assert r["f_e"] == pytest.approx(fe[r["blur_rate"]], rel=1e-5)
+        rows, _ = read_trials(calibration / "results" / "calibration-sf" / pid / "trials.csv")
+        for r in rows:
+            slope, icpt = lines[r["blur_rate"]]
+            assert r["f_e"] == pytest.approx(fe[r["blur_rate"]], rel=1e-5)
+            assert r["s_k"] == pytest.approx(slope * r["s_f"] + icpt, rel=1e-5)
+
+
+def test_validation_ttest(tmp_path_factory, xvfb_display) -> None:  # noqa: F811
+    """Validation (section 7.1): simulated participants whose highest invisible blur-rate is 0.30
+    with contrast and 0.45 with ours (sd 0.04 per trial). 3 participants x 4 scenes = 12 pairs:
+    the expected SE of a method's mean is 0.012 and of the mean difference 0.016; tolerances 0.045
+    (means) and 0.06 (difference), about 3.7 SE. The paired t-test must find ours > contrast
+    (t about 9, p < 0.001); the sampling-rate reduction 1 - 0.30/0.45 = 33.3 % within 10
+    percentage points (SE about 3)."""
+    ws = make_workspace(tmp_path_factory.mktemp("recovery-val") / "project")
+    truth = ws / "truth.yaml"
+    truth.write_text(yaml.safe_dump({"validation_blur_rate": VALIDATION_TRUTH,
+                                     "noise_sd": NOISE}))
+    _shrink(ws, "validation")
+    _run_all(ws, "validation", VALIDATION_PARTICIPANTS, truth)
+    out = ws / "report"
+    _analyze(ws, out)
+    tables = out / "tables"
+    overall = {r["method"]: r for r in _csv(tables / "validation-overall.csv")}
+    for method, true in VALIDATION_TRUTH.items():
+        assert abs(float(overall[method]["mean"]) - true) <= 0.045, overall[method]
+        assert int(overall[method]["n"]) == len(VALIDATION_PARTICIPANTS)
+    tests = {r["scope"]: r for r in _csv(tables / "validation-tests.csv")}
+    main = tests["all scenes"]
+    assert int(main["n"]) == 12 and int(main["df"]) == 11
+    diff = VALIDATION_TRUTH["ours"] - VALIDATION_TRUTH["contrast"]
+    assert abs(float(main["mean_diff"]) - diff) <= 0.06, main
+    assert float(main["t"]) > 0 and float(main["p"]) < 1e-3, main
+    assert float(main["ci_low"]) > 0
+    assert int(tests["participant means"]["n"]) == len(VALIDATION_PARTICIPANTS)
+    assert {s for s in tests if s.startswith("scene-")} == set(IMAGES["validation"])
+    sampling = {r["scope"]: r for r in _csv(tables / "validation-sampling.csv")}
+    true_pct = 100 * (1 - VALIDATION_TRUTH["contrast"] / VALIDATION_TRUTH["ours"])
+    assert abs(float(sampling["all scenes"]["reduction_pct"]) - true_pct) <= 10.0
+    print("validation:", {k: round(float(main[k]), 4) for k in ("mean_diff", "t", "p")},
+          "reduction_pct", round(float(sampling["all scenes"]["reduction_pct"]), 2))
