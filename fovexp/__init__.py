@@ -3,16 +3,23 @@
 The public API (docs/API.md); the experiment runner and the analysis use only these names.
 """
 
-from .errors import FovexpError
+from .errors import FovexpError, validation_error
 from .geometry import Display, load_display
 from .io import read_image, write_image
-from .params import PAPER_TABLE2, EnhanceParams, ParameterTable, make_params
+from .params import (
+    METHODS,
+    PAPER_TABLE2,
+    PARAMETER_RANGES,
+    EnhanceParams,
+    ParameterTable,
+    make_params,
+)
 from .pipeline import MAP_NAMES, Enhancer, EnhanceResult, enhance
 
 __version__ = "0.1.0"
 
 __all__ = [
-    "MAP_NAMES", "PAPER_TABLE2", "Display", "EnhanceParams", "EnhanceResult", "Enhancer",
-    "FovexpError", "ParameterTable", "enhance", "load_display", "make_params", "read_image",
-    "write_image", "__version__",
+    "MAP_NAMES", "METHODS", "PAPER_TABLE2", "PARAMETER_RANGES", "Display", "EnhanceParams",
+    "EnhanceResult", "Enhancer", "FovexpError", "ParameterTable", "enhance", "load_display",
+    "make_params", "read_image", "validation_error", "write_image", "__version__",
 ]

@@ -123,25 +123,34 @@ def enhance_command(args: argparse.Namespace) -> int:
 def _enhance_sequence(enh: Enhancer, params, args: argparse.Namespace, sigma) -> int:
     from tqdm import tqdm
 
-    from .sequence import VIDEO_SUFFIXES, iter_frames, mean_interframe_ssim, write_video
+    from .sequence import VIDEO_SUFFIXES, InterframeSSIM, VideoWriter, iter_frames
 
     count, fps, frames = iter_frames(args.input)
-    to_video = args.output.suffix.lower() in VIDEO_SUFFIXES
-    if not to_video:
+    video = VideoWriter(args.output, fps) if args.output.suffix.lower() in VIDEO_SUFFIXES else None
+    if video is None:
         args.output.mkdir(parents=True, exist_ok=True)
-    inputs, outputs = [], []
-    for name, image in tqdm(frames, total=count, desc="enhance", unit="frame", file=sys.stderr):
-        _set(enh, image, args, sigma)
-        result = enh.enhance(args.gaze, params)
-        inputs.append(image)
-        outputs.append(result.output)
-        if not to_video:
-            write_image(args.output / f"{name}.png", result.output, args.bit_depth)
-    if to_video:
-        write_video(args.output, outputs, fps)
-    ssim_in, ssim_out = mean_interframe_ssim(inputs), mean_interframe_ssim(outputs)
-    print(f"wrote {count} frames to {args.output}; mean inter-frame SSIM: input {ssim_in:.4f}, "
-          f"output {ssim_out:.4f}")
+    ssim_in, ssim_out = InterframeSSIM(), InterframeSSIM()
+    n = 0
+    try:
+        for name, image in tqdm(frames, total=count, desc="enhance", unit="frame",
+                                file=sys.stderr):
+            _set(enh, image, args, sigma)  # the impulses stay: they depend on size and seed
+            result = enh.enhance(args.gaze, params)
+            ssim_in.add(image)
+            ssim_out.add(result.output)
+            if video is None:
+                write_image(args.output / f"{name}.png", result.output, args.bit_depth)
+            else:
+                video.append(result.output)
+            n += 1
+    except BaseException:
+        if video is not None:
+            video.abort()
+        raise
+    if video is not None:
+        video.close()
+    print(f"wrote {n} frames to {args.output}; mean inter-frame SSIM: input {ssim_in.mean:.4f}, "
+          f"output {ssim_out.mean:.4f}")
     return 0
 
 

@@ -14,7 +14,8 @@ the coarsest Gaussian-pyramid level that still resolves it (the residual blur th
 ~1.9 level pixels, so the pyramid's aliasing is filtered away) and only over the region whose
 sigmas need it; each pixel then interpolates linearly between the two stack levels that bracket
 its sigma, sampling them bilinearly. :func:`foveate_exact` is the exact per-pixel spatially
-varying convolution it is measured against (``benchmarks/foveation_error.py``, and the tests).
+varying convolution it is measured against (``benchmarks/run.py``; results in
+``benchmarks/RESULTS.md``; and the tests).
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ import math
 import numba
 import numpy as np
 
+from .geometry import arcmin_to_px
 from .pyramids import gaussian_pyramid, gaussian_sigma_px, level_scale
 
 #: Gaussians are truncated at 4 sigma, as scipy.ndimage.gaussian_filter does.
@@ -40,7 +42,7 @@ def sigma_px(
     "6 px at 30 deg".
     """
     arcmin = blur_rate * np.maximum(0.0, np.asarray(ecc_deg) - fovea_deg)
-    return (arcmin / 60.0 * ppd).astype(np.float32)
+    return arcmin_to_px(arcmin, ppd).astype(np.float32)
 
 
 def stack_sigmas_px(max_sigma_px: float) -> np.ndarray:
@@ -49,7 +51,7 @@ def stack_sigmas_px(max_sigma_px: float) -> np.ndarray:
     The linear interpolation between two Gaussians of std s1 < s2 differs from the Gaussian at
     s in between by about (s2 - s1)^2 / s^2 of the local contrast (second derivative in sigma);
     a constant ratio keeps that error the same at every scale. The spacing was chosen from the
-    measured error (benchmarks/foveation_error.md).
+    measured error (benchmarks/RESULTS.md).
     """
     levels = [0.0, 0.25, 0.5, 0.75, 1.0, 1.25, 1.5]
     while levels[-1] < max_sigma_px:
@@ -220,7 +222,7 @@ def foveate(linear: np.ndarray, sigma_map_px: np.ndarray) -> np.ndarray:
 
     Works on (H, W) or (H, W, C) float32 images; returns float32 of the same shape. Pixels
     with sigma 0 are returned unchanged (bit-exact). Error against :func:`foveate_exact`:
-    see ``benchmarks/foveation_error.md``.
+    see ``benchmarks/RESULTS.md``.
     """
     grey = linear.ndim == 2
     img = np.ascontiguousarray(linear[..., None] if grey else linear, dtype=np.float32)

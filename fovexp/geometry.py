@@ -34,7 +34,7 @@ import numpy as np
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from .errors import FovexpError
+from .errors import FovexpError, validation_error
 
 GeometryModel = Literal["exact", "linear", "release"]
 
@@ -117,9 +117,7 @@ def load_display(name_or_path: str | Path) -> Display:
     try:
         return Display(**data)
     except ValidationError as exc:
-        err = exc.errors()[0]
-        field = ".".join(str(p) for p in err["loc"]) or "?"
-        raise FovexpError(f"display profile {path}: field {field!r}: {err['msg']}") from None
+        raise validation_error(f"display profile {path}", exc) from None
 
 
 @numba.njit(cache=True, inline="always")
@@ -164,10 +162,12 @@ def _exact_grids(ux, uy, vx, vy, d, pitch):  # pragma: no cover - compiled
 
 @dataclass(frozen=True)
 class ViewingGeometry:
-    """The geometry of one image shown full screen on a display.
+    """The geometry of an image on a display.
 
-    Attributes are in the units their names say; ``pitch_*_cm`` is the size of one *image*
-    pixel on the screen.
+    The image covers pixels ``[x0, x0 + width) x [y0, y0 + height)`` of a full-screen frame of
+    ``screen_width x screen_height`` pixels (by default the image *is* the frame). Pixel
+    coordinates are the image's own; the pitch is the frame's. Attributes are in the units
+    their names say; ``pitch_*_cm`` is the size of one frame pixel on the screen.
     """
 
     width_px: int
@@ -178,25 +178,37 @@ class ViewingGeometry:
     model: GeometryModel = "exact"
     #: constant pixels per degree of the ``linear`` and ``release`` models
     ppd_constant: float = float("nan")
+    screen_width_px: int = 0
+    screen_height_px: int = 0
+    x0_px: int = 0
+    y0_px: int = 0
 
     @classmethod
     def for_image(
-        cls, display: Display, width_px: int, height_px: int, model: GeometryModel = "exact"
+        cls, display: Display, width_px: int, height_px: int, model: GeometryModel = "exact",
+        viewport: tuple[int, int, int, int] | None = None,
     ) -> ViewingGeometry:
-        """Geometry of a ``width_px x height_px`` image shown full screen on ``display``."""
+        """Geometry of a ``width_px x height_px`` image shown full screen on ``display``, or,
+        with ``viewport = (x0, y0, screen_width, screen_height)``, shown at ``(x0, y0)`` of a
+        full-screen frame of that size (e.g. the right half of a split-screen stimulus)."""
+        sw, sh, x0, y0 = width_px, height_px, 0, 0
+        if viewport is not None:
+            x0, y0, sw, sh = (int(v) for v in viewport)
+            if x0 < 0 or y0 < 0 or x0 + width_px > sw or y0 + height_px > sh:
+                raise FovexpError(
+                    f"viewport {viewport}: a {width_px}x{height_px} image does not fit at "
+                    f"({x0}, {y0}) of a {sw}x{sh} frame"
+                )
         if model == "release":
-            # The release's own screen and constant ppd, scaled to the image width.
+            # The release's own screen and constant ppd, scaled to the frame width.
             return cls(
-                width_px, height_px,
-                RELEASE_WIDTH_CM / width_px, RELEASE_HEIGHT_CM / height_px,
-                RELEASE_DISTANCE_CM, "release",
-                RELEASE_PPD_AT_3840 * width_px / RELEASE_WIDTH_PX,
+                width_px, height_px, RELEASE_WIDTH_CM / sw, RELEASE_HEIGHT_CM / sh,
+                RELEASE_DISTANCE_CM, "release", RELEASE_PPD_AT_3840 * sw / RELEASE_WIDTH_PX,
+                sw, sh, x0, y0,
             )
-        ppd_lin = width_px / display.horizontal_field_deg
         return cls(
-            width_px, height_px,
-            display.width_cm / width_px, display.height_cm / height_px,
-            display.distance_cm, model, ppd_lin,
+            width_px, height_px, display.width_cm / sw, display.height_cm / sh,
+            display.distance_cm, model, sw / display.horizontal_field_deg, sw, sh, x0, y0,
         )
 
     @property
@@ -210,12 +222,13 @@ class ViewingGeometry:
             raise FovexpError(
                 f"gaze ({gx}, {gy}) is outside the screen: normalised coordinates must be in [0, 1]"
             )
-        return gx * self.width_px - 0.5, gy * self.height_px - 0.5
+        return (gx * self.screen_width_px - 0.5 - self.x0_px,
+                gy * self.screen_height_px - 0.5 - self.y0_px)
 
     def _screen_cm(self, x_px: np.ndarray, y_px: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Pixel coordinates to cm from the screen centre."""
-        return ((x_px + 0.5) - 0.5 * self.width_px) * self.pitch_x_cm, (
-            (y_px + 0.5) - 0.5 * self.height_px
+        """Image pixel coordinates to cm from the screen centre."""
+        return ((x_px + self.x0_px + 0.5) - 0.5 * self.screen_width_px) * self.pitch_x_cm, (
+            (y_px + self.y0_px + 0.5) - 0.5 * self.screen_height_px
         ) * self.pitch_y_cm
 
     def eccentricity_deg(

@@ -21,7 +21,7 @@ import numpy as np
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from .errors import FovexpError
+from .errors import FovexpError, validation_error
 from .geometry import GeometryModel
 
 Method = Literal["foveated", "contrast", "ours"]
@@ -72,12 +72,40 @@ def get_preset(name: str) -> Preset:
         raise FovexpError(f"unknown preset {name!r} (choose from {', '.join(PRESETS)})") from None
 
 
+#: Accepted ranges, one definition for every place a parameter is read (CLI, tables, protocols):
+#: blur-rate in arcmin/deg, f_e, s_k, s_f unitless; wide enough for any calibration, narrow
+#: enough to catch a unit mistake.
+BLUR_RATE_RANGE = (0.0, 5.0)
+F_E_RANGE = (0.0, 2.0)
+S_K_RANGE = (0.0, 200.0)
+S_F_RANGE = (0.0, 50.0)  # open at 0: the log-normal needs a width
+PARAMETER_RANGES: dict[str, tuple[float, float]] = {
+    "blur_rate": BLUR_RATE_RANGE, "f_e": F_E_RANGE, "s_k": S_K_RANGE, "s_f": S_F_RANGE,
+}
+
+
+def _blur_rate(**kw: object) -> float:
+    return Field(ge=BLUR_RATE_RANGE[0], le=BLUR_RATE_RANGE[1], **kw)  # type: ignore[return-value]
+
+
+def _f_e(**kw: object) -> float:
+    return Field(ge=F_E_RANGE[0], le=F_E_RANGE[1], **kw)  # type: ignore[return-value]
+
+
+def _s_k(**kw: object) -> float:
+    return Field(ge=S_K_RANGE[0], le=S_K_RANGE[1], **kw)  # type: ignore[return-value]
+
+
+def _s_f(**kw: object) -> float:
+    return Field(gt=S_F_RANGE[0], le=S_F_RANGE[1], **kw)  # type: ignore[return-value]
+
+
 class TableRow(BaseModel):
     model_config = ConfigDict(extra="forbid")
-    blur_rate: float = Field(ge=0, le=10)
-    f_e: float = Field(ge=0, le=2)
-    s_k: float = Field(ge=0, le=200)
-    s_f: float = Field(gt=0, le=50)
+    blur_rate: float = _blur_rate()
+    f_e: float = _f_e()
+    s_k: float = _s_k()
+    s_f: float = _s_f()
 
 
 class ParameterTable(BaseModel):
@@ -114,9 +142,7 @@ class ParameterTable(BaseModel):
         except (yaml.YAMLError, TypeError) as exc:
             raise FovexpError(f"parameter table {path} is malformed: {exc}") from None
         except ValidationError as exc:
-            err = exc.errors()[0]
-            where = ".".join(str(p) for p in err["loc"]) or "?"
-            raise FovexpError(f"parameter table {path}: {where}: {err['msg']}") from None
+            raise validation_error(f"parameter table {path}", exc) from None
 
     def save(self, path: str | Path) -> None:
         rows = [r.model_dump() for r in self.rows]
@@ -151,10 +177,10 @@ class EnhanceParams(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
     method: Method = "ours"
-    blur_rate: float = Field(default=0.34, ge=0.0, le=5.0)  # arcmin per deg past the fovea
-    f_e: float | None = Field(default=None, ge=0.0, le=2.0)
-    s_k: float | None = Field(default=None, ge=0.0, le=200.0)
-    s_f: float | None = Field(default=None, gt=0.0, le=50.0)
+    blur_rate: float = _blur_rate(default=0.34)  # arcmin per deg past the fovea
+    f_e: float | None = _f_e(default=None)
+    s_k: float | None = _s_k(default=None)
+    s_f: float | None = _s_f(default=None)
     impulses: int = Field(default=64, ge=1, le=512)
     seed: int = Field(default=1, ge=0, le=2**31 - 1)
     preset: PresetName = "paper"
@@ -178,6 +204,4 @@ def make_params(**kwargs: object) -> EnhanceParams:
     try:
         return EnhanceParams(**kwargs)  # type: ignore[arg-type]
     except ValidationError as exc:
-        err = exc.errors()[0]
-        where = ".".join(str(p) for p in err["loc"]) or "?"
-        raise FovexpError(f"parameter {where}={err.get('input')!r}: {err['msg']}") from None
+        raise validation_error("parameter", exc) from None

@@ -183,7 +183,7 @@ class Enhancer:
         self._version = 0
         c = self._c = _StageCache()
         p = self.preset
-        c.stage("geometry", ("shape",), self._geometry)
+        c.stage("geometry", ("shape", "viewport"), self._geometry)
         c.stage("linear", ("image",), self._linear)
         c.stage("grids", ("geometry", "gaze"), lambda geom, gaze:
                 geom.eccentricity_and_ppd_maps(geom.gaze_px(gaze)))
@@ -215,12 +215,16 @@ class Enhancer:
 
     # ----------------------------------------------------------------------------- public API
     def set_image(
-        self, image: np.ndarray, foveated: bool = False, sigma_px: np.ndarray | None = None
+        self, image: np.ndarray, foveated: bool = False, sigma_px: np.ndarray | None = None,
+        viewport: tuple[int, int, int, int] | None = None,
     ) -> None:
         """Set the frame: a full-resolution reference to foveate (default), or an already
         foveated frame described by the blur-rate (``foveated=True``) or a sigma map in px.
 
-        ``image`` is display-encoded, float, in [0, 1], (H, W) or (H, W, 3).
+        ``image`` is display-encoded, float, in [0, 1], (H, W) or (H, W, 3). It fills the
+        screen, or, with ``viewport = (x0, y0, screen_width, screen_height)``, only that part
+        of a full-screen frame (the gaze stays in the frame's normalised coordinates): the
+        experiment runner enhances just the processed half of its split screen this way.
         """
         img = check_image(image)
         sigma_given = None
@@ -232,7 +236,11 @@ class Enhancer:
                 )
             if not np.isfinite(sigma_given).all() or float(sigma_given.min()) < 0:
                 raise FovexpError("sigma map must be finite and non-negative (px)")
-        self._c.set(image=img, shape=img.shape[:2], sigma_given=sigma_given,
+        if viewport is not None:
+            viewport = tuple(int(v) for v in viewport)
+            ViewingGeometry.for_image(self.display, img.shape[1], img.shape[0], "exact",
+                                      viewport)  # validates it
+        self._c.set(image=img, shape=img.shape[:2], sigma_given=sigma_given, viewport=viewport,
                     already_foveated=bool(foveated or sigma_px is not None))
         self._version += 1
 
@@ -250,9 +258,8 @@ class Enhancer:
             raise FovexpError(
                 f"params are for preset {params.preset!r}, this enhancer is {self.preset.name!r}"
             )
-        geom = ViewingGeometry.for_image(self.display, 1, 1, self.geometry_model)
         gaze_t = (float(gaze[0]), float(gaze[1]))
-        geom.gaze_px(gaze_t)  # validates the gaze
+        self._c.get("geometry").gaze_px(gaze_t)  # validates the gaze
         self._c.timings_s = {}
         self._c.set(
             gaze=gaze_t, blur_rate=params.blur_rate, f_e=params.f_e, s_k=params.s_k,
@@ -263,8 +270,9 @@ class Enhancer:
         return EnhanceResult(out, params, dict(self._c.timings_s), self, self._version)
 
     # ------------------------------------------------------------------------------- stages
-    def _geometry(self, shape: tuple[int, int]) -> ViewingGeometry:
-        return ViewingGeometry.for_image(self.display, shape[1], shape[0], self.geometry_model)
+    def _geometry(self, shape: tuple[int, int], viewport) -> ViewingGeometry:
+        return ViewingGeometry.for_image(self.display, shape[1], shape[0], self.geometry_model,
+                                         viewport)
 
     def _gamma(self) -> float:
         return 2.2 if self.preset.transfer == "release" else self.display.gamma
@@ -292,12 +300,13 @@ class Enhancer:
     def _headroom(self, contrast: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
         """Local minimum and maximum of the image the noise is added to (section 4.2).
 
-        Two departures from the release, both measured (benchmarks/clipping.md): the noise is
-        added to every colour channel, so the extremes are taken over the channels too (on
-        grey, saturated colours clip: 5 % of noisy pixels on Sponza); and an impulse's kernel
-        reaches r = 20 px, past its own 8 x 8 block, so the level-3 min/max blocks are
-        widened to every block the kernel can reach (the paper meant the neighbourhood to
-        match the kernel's support). What is left is the noise's tail beyond 3 std."""
+        Paper preset: two departures from the release, both measured (docs/STATUS.md). The
+        noise is added to every colour channel, so the extremes are taken over the channels
+        too (on grey, saturated colours clip: 5 % of the noisy pixels of Sponza). And an
+        impulse's kernel reaches r = 20 px, past its own 8 x 8 block, so the level-3 min/max
+        blocks are widened to every block the kernel can reach (the paper chose level 3 to
+        match the kernel's support). What is left is the noise's tail beyond 3 std.
+        Release preset: grey and a 25 x 25 box, as the release does (notes 3.8)."""
         p = self.preset
         if p.minmax == "pyramid":
             block = pyramids.level_scale(p.minmax_level)
@@ -305,11 +314,10 @@ class Enhancer:
             lo, hi = pyramids.block_extremes(contrast, p.minmax_level)
             lo = ndimage.minimum_filter(lo, reach, mode="nearest")
             hi = ndimage.maximum_filter(hi, reach, mode="nearest")
-        else:
-            lo = contrast.min(axis=2) if contrast.ndim == 3 else contrast
-            hi = contrast.max(axis=2) if contrast.ndim == 3 else contrast
-            lo = ndimage.minimum_filter(lo, p.minmax_box_px, mode="nearest")
-            hi = ndimage.maximum_filter(hi, p.minmax_box_px, mode="nearest")
+        else:  # the release: grey, a 25 x 25 box (notes 3.8), kept as it is for comparison
+            grey = colour.luminance(contrast)
+            lo = ndimage.minimum_filter(grey, p.minmax_box_px, mode="nearest")
+            hi = ndimage.maximum_filter(grey, p.minmax_box_px, mode="nearest")
             block = 1
         return lo, hi, block
 

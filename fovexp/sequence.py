@@ -1,7 +1,8 @@
 """Frame sequences: a folder of frames or a video, enhanced with the same impulses throughout.
 
 The paper keeps the impulse positions fixed over a sequence (section 4.4) and measures temporal
-coherence as the mean SSIM between consecutive frames (section 7.2); both are done here.
+coherence as the mean SSIM between consecutive frames (section 7.2); both are done here. Frames
+are streamed: one input and one output frame are held at a time, whatever the length.
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ import numpy as np
 from skimage.metrics import structural_similarity
 
 from .errors import FovexpError
-from .io import IMAGE_SUFFIXES, atomic_write_bytes, read_image
+from .io import IMAGE_SUFFIXES, read_image
 
 VIDEO_SUFFIXES = (".mp4", ".mov", ".avi", ".mkv", ".webm", ".gif")
 
@@ -30,8 +31,9 @@ def frame_paths(folder: Path) -> list[Path]:
     return frames
 
 
-def iter_frames(source: Path) -> tuple[int, float | None, Iterator[tuple[str, np.ndarray]]]:
-    """``(count, fps, frames)`` of a folder or a video; frames are (name, float image)."""
+def iter_frames(source: Path) -> tuple[int | None, float | None, Iterator[tuple[str, np.ndarray]]]:
+    """``(count or None, fps or None, frames)`` of a folder or a video; frames are
+    ``(name, float image in [0, 1])``."""
     if source.is_dir():
         paths = frame_paths(source)
         return len(paths), None, ((p.stem, read_image(p)) for p in paths)
@@ -40,43 +42,76 @@ def iter_frames(source: Path) -> tuple[int, float | None, Iterator[tuple[str, np
     import imageio.v3 as iio
 
     try:
-        meta = iio.immeta(source, plugin="pyav") if _has_pyav() else iio.immeta(source)
-        frames = iio.imread(source, index=None)
+        meta = iio.immeta(source)
     except Exception as exc:
         raise FovexpError(f"{source}: cannot be read as a video ({type(exc).__name__})") from None
     fps = meta.get("fps")
-    if frames.ndim == 3:  # a single grey frame or a grey sequence is ambiguous: take it as RGB-less
-        frames = frames[..., None].repeat(3, axis=-1) if frames.shape[-1] != 3 else frames[None]
-    scale = 255.0 if frames.dtype == np.uint8 else 65535.0
+    n = meta.get("nframes")
+    count = int(n) if isinstance(n, (int, float)) and np.isfinite(n) else None
 
     def gen() -> Iterator[tuple[str, np.ndarray]]:
-        for i, f in enumerate(frames):
-            yield f"frame{i:05d}", np.asarray(f[..., :3], dtype=np.float32) / scale
+        try:
+            for i, f in enumerate(iio.imiter(source)):
+                f = np.asarray(f)
+                scale = 255.0 if f.dtype == np.uint8 else 65535.0
+                rgb = f[..., :3] if f.ndim == 3 else np.repeat(f[..., None], 3, axis=2)
+                yield f"frame{i:05d}", rgb.astype(np.float32) / scale
+        except FovexpError:
+            raise
+        except Exception as exc:
+            raise FovexpError(f"{source}: video frame cannot be decoded ({exc})") from None
 
-    return int(frames.shape[0]), fps, gen()
-
-
-def _has_pyav() -> bool:
-    try:
-        import av  # noqa: F401
-    except ImportError:
-        return False
-    return True
-
-
-def write_video(path: Path, frames: list[np.ndarray], fps: float | None) -> None:
-    """Write 8-bit frames as a video, atomically."""
-    import imageio.v3 as iio
-
-    data = np.stack([np.round(np.clip(f, 0, 1) * 255).astype(np.uint8) for f in frames])
-    atomic_write_bytes(path, lambda tmp: iio.imwrite(tmp, data, extension=path.suffix,
-                                                     fps=fps or 30))
+    return count, fps, gen()
 
 
-def mean_interframe_ssim(frames: list[np.ndarray]) -> float:
-    """Mean SSIM between consecutive frames (paper section 7.2), on luma-like grey."""
-    if len(frames) < 2:
-        return float("nan")
-    grey = [f.mean(axis=2) if f.ndim == 3 else f for f in frames]
-    pairs = zip(grey[:-1], grey[1:], strict=True)
-    return float(np.mean([structural_similarity(a, b, data_range=1.0) for a, b in pairs]))
+class VideoWriter:
+    """Write 8-bit frames to a temporary file beside ``path``; :meth:`close` renames it into
+    place, :meth:`abort` removes it, so a failed run leaves no partial video."""
+
+    def __init__(self, path: Path, fps: float | None) -> None:
+        self.path = path
+        self.tmp = path.with_name(f".{path.stem}.partial{path.suffix}")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        kw = {"fps": fps or 30.0}
+        if path.suffix.lower() != ".gif":
+            kw["macro_block_size"] = 1  # keep the frame size exactly
+        self._writer = None
+        self._kw = kw
+
+    def append(self, frame: np.ndarray) -> None:
+        import imageio.v2 as iio2
+
+        data = np.round(np.clip(frame, 0, 1) * 255).astype(np.uint8)
+        if self._writer is None:
+            self._writer = iio2.get_writer(self.tmp, **self._kw)
+        self._writer.append_data(data)
+
+    def close(self) -> None:
+        if self._writer is not None:
+            self._writer.close()
+            self.tmp.replace(self.path)
+
+    def abort(self) -> None:
+        if self._writer is not None:
+            self._writer.close()
+        self.tmp.unlink(missing_ok=True)
+
+
+class InterframeSSIM:
+    """Running mean SSIM between consecutive frames (paper section 7.2), on grey."""
+
+    def __init__(self) -> None:
+        self._prev: np.ndarray | None = None
+        self._sum = 0.0
+        self._n = 0
+
+    def add(self, frame: np.ndarray) -> None:
+        grey = frame.mean(axis=2) if frame.ndim == 3 else frame
+        if self._prev is not None:
+            self._sum += structural_similarity(self._prev, grey, data_range=1.0)
+            self._n += 1
+        self._prev = grey
+
+    @property
+    def mean(self) -> float:
+        return self._sum / self._n if self._n else float("nan")

@@ -52,7 +52,7 @@ def _pushed_fraction(res):
 @pytest.mark.parametrize("blur_rate", [0.34, 0.57])
 def test_adding_noise_almost_never_leaves_the_range(frame, blur_rate):
     """Clipping control (section 4.2) bounds K / 2 = 3 noise std by the local headroom; what
-    is left is the noise's tail. Measured: < 0.02 % of noisy pixels (benchmarks/clipping.md)."""
+    is left is the noise's tail. Measured: < 0.02 % of noisy pixels (benchmarks/RESULTS.md)."""
     _, res = _run(frame, blur_rate=blur_rate, impulses=12)
     pushed, noisy = _pushed_fraction(res)
     assert noisy > 0.2  # there is noise to speak of
@@ -195,3 +195,23 @@ def test_bad_images_are_refused_with_a_clear_message(frame, bad, msg):
 def test_out_of_range_parameters_name_the_parameter(kw, field):
     with pytest.raises(FovexpError, match=field):
         make_params(**kw)
+
+
+def test_a_viewport_enhances_part_of_the_frame_as_the_whole_frame_would(frame):
+    """The runner's split screen: enhancing only the right half, placed at (W/2, 0) of the
+    frame, gives the right half of the whole frame's result (away from the seam, where the
+    half misses the impulses of the left half, and where there is no noise anyway)."""
+    h, w = frame.shape[:2]
+    p = EnhanceParams(blur_rate=0.57, impulses=12)
+    _, whole = _run(frame, blur_rate=0.57, impulses=12)
+    enh = Enhancer(LG)
+    enh.set_image(frame[:, w // 2 :], viewport=(w // 2, 0, w, h))
+    half = enh.enhance((0.5, 0.5), p)
+    assert np.allclose(half.map("eccentricity_deg"), whole.map("eccentricity_deg")[:, w // 2 :])
+    assert np.array_equal(half.map("sigma_px"), whole.map("sigma_px")[:, w // 2 :])
+    # past the blur's reach from the seam (the half's border is replicated, not the left half)
+    m = int(4 * whole.map("sigma_px").max()) + 2
+    assert np.abs(half.map("foveated")[:, m:] - whole.map("foveated")[:, w // 2 + m :]).max() < 1e-6
+    assert half.map("noise").std() > 0
+    with pytest.raises(FovexpError, match="does not fit"):
+        enh.set_image(frame, viewport=(10, 0, w, h))

@@ -32,7 +32,7 @@ def test_exact_reference_equals_gaussian_filter_for_constant_sigma():
 
 @pytest.mark.parametrize("max_sigma", [3.0, 12.0])
 def test_fast_foveation_error_against_exact_convolution(max_sigma):
-    """Stated bound (benchmarks/foveation_error.md): RMS < 0.002, max < 0.02 on [0, 1]."""
+    """Stated bound (benchmarks/RESULTS.md): RMS < 0.002, max < 0.02 on [0, 1]."""
     img = linearize(textured_image(270, 480), 2.2)
     sigma = _radial_sigma(270, 480, max_sigma)
     fast = foveate(img, sigma)
