@@ -10,6 +10,8 @@ and each pixel interpolates linearly between the two integer levels bracketing i
 the foveation does. The gain ``f_e (1 + k)`` is below 1 for small ``k`` (with f_e = 0.2 it
 softens rather than sharpens up to k = 4): this is the release's formula, kept as such so that
 the calibrated f_e of Table 2 means the same thing. Where sigma = 0 the image is unchanged.
+The pipeline applies it to luminance, since the method processes luminance only (paper
+section 4.5), and adds the change to every colour channel, as it does the noise.
 
 The box means come from summed-area tables built tile by tile (each tile with the margin its
 widest box needs), so each pixel costs the same whatever its width, only the two widths a

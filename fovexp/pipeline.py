@@ -195,8 +195,8 @@ class Enhancer:
         c.stage("abs_laplacian", ("pyramid",), self._abs_laplacian)
         c.stage("gradients", ("pyramid",), lambda pyr: orientation.sobel_gradients(
             pyr[orientation.ORIENTATION_LEVEL]))
-        c.stage("contrast", ("foveated", "sigma", "f_e"), self._contrast)
-        c.stage("headroom", ("contrast",), self._headroom)
+        c.stage("contrast", ("luma", "sigma", "f_e"), self._contrast)
+        c.stage("headroom", ("foveated", "luma", "contrast"), self._headroom)
         c.stage("impulses", ("shape", "n_impulses", "seed"), lambda shape, n, seed:
                 gabor.generate_impulses(shape[1], shape[0], n, p.gabor_a_cpp, seed))
         c.stage("imp_band", ("impulses", "geometry", "gaze", "sigma_given", "sigma",
@@ -211,7 +211,7 @@ class Enhancer:
                 orientation.orientation_at(g[0], g[1], b.x_px, b.y_px))
         c.stage("noise", ("shape", "impulses", "imp_band", "imp_amplitude", "imp_frequency",
                           "imp_orientation", "n_impulses"), self._noise)
-        c.stage("output", ("method", "?foveated", "?contrast", "?noise"), self._compose)
+        c.stage("output", ("method", "foveated", "?contrast", "?noise"), self._compose)
 
     # ----------------------------------------------------------------------------- public API
     def set_image(
@@ -294,10 +294,13 @@ class Enhancer:
     def _abs_laplacian(self, pyr: list[np.ndarray]) -> dict[int, np.ndarray]:
         return pyramids.smoothed_abs_laplacian(pyr, len(pyr) - 1)
 
-    def _contrast(self, foveated, sigma, f_e) -> np.ndarray:
-        return contrast_enhance(foveated, sigma, f_e)
+    def _contrast(self, luma, sigma, f_e) -> np.ndarray:
+        """The change of luminance the contrast enhancement makes (grey, linear). The method
+        processes luminance only (section 4.5): like the noise, this change is added to
+        every channel of the foveated image."""
+        return contrast_enhance(luma, sigma, f_e) - luma
 
-    def _headroom(self, contrast: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+    def _headroom(self, foveated, luma, delta) -> tuple[np.ndarray, np.ndarray, int]:
         """Local minimum and maximum of the image the noise is added to (section 4.2).
 
         Paper preset: two departures from the release, both measured (docs/STATUS.md). The
@@ -311,11 +314,11 @@ class Enhancer:
         if p.minmax == "pyramid":
             block = pyramids.level_scale(p.minmax_level)
             reach = 2 * int(np.ceil(gabor.kernel_radius_px(p.gabor_a_cpp) / block)) + 1
-            lo, hi = pyramids.block_extremes(contrast, p.minmax_level)
+            lo, hi = pyramids.block_extremes(foveated, p.minmax_level, add=delta)
             lo = ndimage.minimum_filter(lo, reach, mode="nearest")
             hi = ndimage.maximum_filter(hi, reach, mode="nearest")
         else:  # the release: grey, a 25 x 25 box (notes 3.8), kept as it is for comparison
-            grey = colour.luminance(contrast)
+            grey = luma + delta  # the luma weights sum to 1
             lo = ndimage.minimum_filter(grey, p.minmax_box_px, mode="nearest")
             hi = ndimage.maximum_filter(grey, p.minmax_box_px, mode="nearest")
             block = 1
@@ -376,13 +379,12 @@ class Enhancer:
         return gabor.synthesize(shape, imp, full, freq, carrier, n, self.preset.gabor_a_cpp)
 
     def _compose(self, method, foveated, contrast, noise) -> np.ndarray:
-        """The displayed frame: the noise (grey) is added to every channel of the linear
-        contrast-enhanced image, then encoded (section 4.5); values outside [0, 1] clip."""
+        """The displayed frame: the grey contrast change and noise are added to every channel
+        of the linear foveated image, then encoded (section 4.5); values outside [0, 1] clip."""
         if method == "foveated":
-            return self._encode(foveated())
-        if method == "contrast":
-            return self._encode(contrast())
-        return colour.encode(contrast(), self._gamma(), self.preset.transfer, add=noise())
+            return self._encode(foveated)
+        add = contrast() if method == "contrast" else contrast() + noise()
+        return colour.encode(foveated, self._gamma(), self.preset.transfer, add=add)
 
     # ------------------------------------------------------------------------------- maps
     def linear(self, name: str) -> np.ndarray:
@@ -390,7 +392,11 @@ class Enhancer:
         noise and before any clipping)."""
         if name not in ("foveated", "contrast"):
             raise FovexpError(f"no linear image {name!r} (choose foveated or contrast)")
-        return self._c.get(name)
+        foveated = self._c.get("foveated")
+        if name == "foveated":
+            return foveated
+        delta = self._c.get("contrast")
+        return foveated + (delta[..., None] if foveated.ndim == 3 else delta)
 
     def _map(self, name: str) -> np.ndarray:
         c = self._c

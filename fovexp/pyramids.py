@@ -159,19 +159,19 @@ def laplacian_levels(gaussian: list[np.ndarray], levels: int) -> dict[int, np.nd
 
 
 @numba.njit(parallel=True, cache=True)
-def _block_extremes(img, block):  # pragma: no cover - compiled
+def _block_extremes(img, add, block):  # pragma: no cover - compiled
     h, w, c = img.shape
     bh, bw = (h + block - 1) // block, (w + block - 1) // block
     lo = np.empty((bh, bw), dtype=img.dtype)
     hi = np.empty((bh, bw), dtype=img.dtype)
     for by in numba.prange(bh):
         for bx in range(bw):
-            mn = img[by * block, bx * block, 0]
+            mn = img[by * block, bx * block, 0] + add[by * block, bx * block]
             mx = mn
             for y in range(by * block, min(by * block + block, h)):
                 for x in range(bx * block, min(bx * block + block, w)):
                     for ch in range(c):
-                        v = img[y, x, ch]
+                        v = img[y, x, ch] + add[y, x]
                         mn = min(mn, v)
                         mx = max(mx, v)
             lo[by, bx] = mn
@@ -179,15 +179,20 @@ def _block_extremes(img, block):  # pragma: no cover - compiled
     return lo, hi
 
 
-def block_extremes(image: np.ndarray, level: int) -> tuple[np.ndarray, np.ndarray]:
+def block_extremes(
+    image: np.ndarray, level: int, add: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Level ``level`` of the min and max pyramids (paper section 4.2): the minimum and maximum
-    of each ``2**level x 2**level`` block (over all channels of an (H, W, C) image).
+    of each ``2**level x 2**level`` block (over all channels of an (H, W, C) image), of
+    ``image + add`` when a grey (H, W) ``add`` is given (added to every channel).
 
     The paper builds the level from 2 x 2 neighbourhoods level by level; the extreme of the
     block is the same number, computed here in one pass (edge blocks are the partial ones).
     """
     img = np.ascontiguousarray(image if image.ndim == 3 else image[..., None])
-    return _block_extremes(img, level_scale(level))
+    grey = np.zeros(img.shape[:2], img.dtype) if add is None else np.ascontiguousarray(
+        add, dtype=img.dtype)
+    return _block_extremes(img, grey, level_scale(level))
 
 
 def sample_bilinear(grid: np.ndarray, x_px: np.ndarray, y_px: np.ndarray, level: int) -> np.ndarray:

@@ -1,5 +1,8 @@
 """Trial, gaze, frame and session logs (format: docs/LOGS.md).
 
+The formats themselves (columns, types, the torn-row reader) are defined once in
+:mod:`fovexp.experiment.logformat`, which the analysis uses too.
+
 Crash safety (issue item 7): every trial row is written with one ``write`` call ending in a
 newline, then flushed and fsync'ed, so a SIGKILL leaves at most one torn last line. Readers
 (this module's :func:`read_trials` and the analysis) detect a torn last line by its missing
@@ -9,127 +12,40 @@ before a resumed session appends, so the fragment never merges with a new row.
 
 from __future__ import annotations
 
-import csv
-import io
 import json
-import math
 import os
 import threading
-import warnings
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
-from fovexp.errors import FovexpError
+from fovexp import FovexpError
 
-#: ``trials.csv`` columns, in the documented order (docs/LOGS.md).
-TRIAL_COLUMNS: tuple[str, ...] = (
-    "participant", "session", "experiment", "protocol_sha256", "trial_index", "practice",
-    "repetition", "image", "blur_rate", "method", "adjusted_parameter", "f_e", "s_k", "s_f",
-    "start_value", "final_value", "response_time_s", "wheel_events", "blanked_fraction",
-    "dropped_frames", "tracker", "seed", "software_version", "timestamp",
-)
-_INT = {"trial_index", "repetition", "wheel_events", "dropped_frames", "seed"}
-_FLOAT = {"blur_rate", "f_e", "s_k", "s_f", "start_value", "final_value", "response_time_s",
-          "blanked_fraction"}
-_BOOL = {"practice"}
-
-#: ``gaze-<session>.csv``: one row per tracker sample; times in microseconds.
-GAZE_COLUMNS: tuple[str, ...] = (
-    "trial_index", "device_time_us", "system_time_us", "left_x", "left_y", "left_valid",
-    "right_x", "right_y", "right_valid", "x", "y", "valid", "eccentricity_deg",
-)
-#: ``frames-<session>.csv``: one row per stimulus frame (issue item 6, frame intervals).
-FRAME_COLUMNS: tuple[str, ...] = (
-    "trial_index", "frame", "flip_time_s", "interval_s", "dropped", "blanked", "value",
-)
-#: ``blanking-<session>.csv``: one row per blanking episode (issue item 3).
-BLANKING_COLUMNS: tuple[str, ...] = (
-    "trial_index", "start_s", "end_s", "frames", "reason",
+from .logformat import (
+    BLANKING_COLUMNS,
+    FRAME_COLUMNS,
+    GAZE_COLUMNS,
+    TRIAL_COLUMNS,
+    format_line,
+    format_value,
+    read_trials_file,
 )
 
-
-def format_value(v: Any) -> str:
-    """CSV text of a value: empty for None/NaN, 0/1 for bools, round-trip floats."""
-    if v is None:
-        return ""
-    if isinstance(v, bool):
-        return "1" if v else "0"
-    if isinstance(v, float):
-        return "" if math.isnan(v) else repr(v)
-    return str(v)
-
-
-def format_line(values: Sequence[Any]) -> str:
-    buf = io.StringIO()
-    csv.writer(buf, lineterminator="\n").writerow([format_value(v) for v in values])
-    return buf.getvalue()
-
-
-def _parse_trial(fields: list[str]) -> dict[str, Any]:
-    """Typed trial row; raises ValueError for a wrong field count or an unparsable value."""
-    if len(fields) != len(TRIAL_COLUMNS):
-        raise ValueError(f"{len(fields)} fields, expected {len(TRIAL_COLUMNS)}")
-    row: dict[str, Any] = {}
-    for k, v in zip(TRIAL_COLUMNS, fields, strict=True):
-        if v == "":
-            row[k] = None
-        elif k in _INT:
-            row[k] = int(v)
-        elif k in _FLOAT:
-            row[k] = float(v)
-        elif k in _BOOL:
-            if v not in ("0", "1"):
-                raise ValueError(f"{k}={v!r} is not 0/1")
-            row[k] = v == "1"
-        else:
-            row[k] = v
-    for k in ("participant", "session", "trial_index", "timestamp"):
-        if row[k] is None:
-            raise ValueError(f"empty {k}")
-    return row
-
+__all__ = ["BLANKING_COLUMNS", "FRAME_COLUMNS", "GAZE_COLUMNS", "TRIAL_COLUMNS", "BatchLog",
+           "PeriodicFlusher", "TrialLog", "format_line", "format_value", "read_trials",
+           "repair_tail", "write_json_atomic"]
 
 def read_trials(path: Path) -> tuple[list[dict[str, Any]], int]:
-    """Rows of a ``trials.csv`` and the byte length of its valid part.
-
-    A torn last line is dropped with a warning naming the file; a bad row elsewhere is an error
-    (the file is damaged and nothing is guessed).
+    """Rows of a ``trials.csv`` and the byte length of its valid part
+    (:func:`fovexp.experiment.logformat.read_trials_file`: a torn last row is dropped with a
+    warning naming the file; a bad row elsewhere is an error). The header must be exactly the
+    documented one, since rows are appended in that order.
     """
-    path = Path(path)
-    if not path.exists():
-        return [], 0
-    data = path.read_bytes()
-    lines = data.split(b"\n")
-    # After a final newline split() leaves b"": that is a complete file.
-    tail_complete = lines[-1] == b""
-    lines = lines[:-1] if tail_complete else lines
-    if not lines:
-        return [], 0
-    header = lines[0].decode("utf-8", errors="replace").split(",")
-    if tuple(header) != TRIAL_COLUMNS:
-        if len(lines) == 1 and not tail_complete:
-            warnings.warn(f"{path}: torn header dropped", stacklevel=2)
-            return [], 0
-        raise FovexpError(f"{path}: header does not match docs/LOGS.md ({','.join(header)[:80]})")
-    rows: list[dict[str, Any]] = []
-    good_len = len(lines[0]) + 1
-    for i, raw in enumerate(lines[1:], start=2):
-        last = i == len(lines)
-        try:
-            text = raw.decode("utf-8")
-            fields = next(csv.reader([text]))
-            row = _parse_trial(fields)
-            if last and not tail_complete:
-                raise ValueError("no final newline")
-        except (ValueError, UnicodeDecodeError, StopIteration) as exc:
-            if last:
-                warnings.warn(f"{path}: torn last row (line {i}) dropped: {exc}", stacklevel=2)
-                break
-            raise FovexpError(f"{path}: line {i} is corrupt: {exc}") from None
-        rows.append(row)
-        good_len += len(raw) + 1
-    return rows, good_len
+    tf = read_trials_file(path)
+    if tf.header and tuple(tf.header) != TRIAL_COLUMNS and tf.torn != "torn header":
+        raise FovexpError(f"{path}: header does not match docs/LOGS.md "
+                          f"({','.join(tf.header)[:80]})")
+    return tf.rows, tf.good_len
 
 
 def repair_tail(path: Path, good_len: int) -> bytes:
