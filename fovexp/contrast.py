@@ -27,6 +27,8 @@ import math
 import numba
 import numpy as np
 
+from .foveation import per_pixel_sigma
+
 
 def box_width_px(level: int) -> int:
     """Box-filter width of integer blur level ``level`` (notes section 3.3): ceil(4 level)."""
@@ -121,11 +123,7 @@ def contrast_enhance(linear: np.ndarray, sigma_map_px: np.ndarray, f_e: float) -
     (Table 2: 0.15 .. 0.28). The result may leave [0, 1]; the noise's clipping control
     accounts for that.
     """
-    grey = linear.ndim == 2
-    img = np.ascontiguousarray(linear[..., None] if grey else linear, dtype=np.float32)
-    sigma = np.ascontiguousarray(sigma_map_px, dtype=np.float32)
-    max_sigma = float(sigma.max()) if sigma.size else 0.0
-    if max_sigma <= 0.0:
-        return linear.astype(np.float32, copy=True)
-    out = _enhance_tiles(img, sigma, np.float32(f_e), TILE_PX)
-    return out[..., 0] if grey else out
+    return per_pixel_sigma(
+        linear, sigma_map_px,
+        lambda img, sigma, _max, fe: _enhance_tiles(img, sigma, fe, TILE_PX), np.float32(f_e),
+    )

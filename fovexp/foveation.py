@@ -21,6 +21,7 @@ varying convolution it is measured against (``benchmarks/run.py``; results in
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numba
 import numpy as np
@@ -72,6 +73,22 @@ def _pyramid_level_for(sigma: float) -> int:
     ):
         m += 1
     return m
+
+
+def per_pixel_sigma(
+    linear: np.ndarray, sigma_map_px: np.ndarray, run: Callable[..., np.ndarray], *args: object
+) -> np.ndarray:
+    """Shared shell of the sigma-driven filters (foveation, contrast): run
+    ``run(image (H, W, C) float32, sigma (H, W) float32, max_sigma, *args)`` and give back the
+    input's shape; an image with no sigma above 0 is returned as a copy, untouched."""
+    grey = linear.ndim == 2
+    img = np.ascontiguousarray(linear[..., None] if grey else linear, dtype=np.float32)
+    sigma = np.ascontiguousarray(sigma_map_px, dtype=np.float32)
+    max_sigma = float(sigma.max()) if sigma.size else 0.0
+    if max_sigma <= 0.0:
+        return linear.astype(np.float32, copy=True)
+    out = run(img, sigma, max_sigma, *args)
+    return out[..., 0] if grey else out
 
 
 def gaussian_kernel(sigma: float) -> np.ndarray:
@@ -224,12 +241,10 @@ def foveate(linear: np.ndarray, sigma_map_px: np.ndarray) -> np.ndarray:
     with sigma 0 are returned unchanged (bit-exact). Error against :func:`foveate_exact`:
     see ``benchmarks/RESULTS.md``.
     """
-    grey = linear.ndim == 2
-    img = np.ascontiguousarray(linear[..., None] if grey else linear, dtype=np.float32)
-    sigma = np.ascontiguousarray(sigma_map_px, dtype=np.float32)
-    max_sigma = float(sigma.max()) if sigma.size else 0.0
-    if max_sigma <= 0.0:
-        return linear.astype(np.float32, copy=True)
+    return per_pixel_sigma(linear, sigma_map_px, _foveate)
+
+
+def _foveate(img: np.ndarray, sigma: np.ndarray, max_sigma: float) -> np.ndarray:
     levels = stack_sigmas_px(max_sigma)
     lvl_m = np.array([_pyramid_level_for(float(s)) for s in levels], dtype=np.int64)
     top = int(lvl_m.max())
@@ -257,10 +272,9 @@ def foveate(linear: np.ndarray, sigma_map_px: np.ndarray) -> np.ndarray:
         kmeta[k] = (start, g.size // 2)
         start += g.size
     kbuf = np.concatenate(kernels)
-    out = _foveate_bands(
+    return _foveate_bands(
         img, sigma, levels.astype(np.float32), lvl_m, kbuf, kmeta, pbuf, pmeta, pad, BAND_ROWS
     )
-    return out[..., 0] if grey else out
 
 
 @numba.njit(parallel=True, cache=True)
