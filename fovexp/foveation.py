@@ -106,28 +106,29 @@ def _blur_patch(src, ly0, ly1, lx0, lx1, g):  # pragma: no cover - compiled
     h, w, c = src.shape
     r = g.shape[0] // 2
     ph, pw = ly1 - ly0, lx1 - lx0
-    cx0 = lx0 - r
-    tw = pw + 2 * r
-    # vertical pass over the widened column range, columns clamped to the image
-    tmp = np.zeros((ph, tw * c), dtype=np.float32)
+    th, tw = ph + 2 * r, pw + 2 * r
+    n = tw * c
+    # the source block with its border replicated, contiguous, so both passes vectorise
+    blk = np.empty((th, n), dtype=np.float32)
+    for yy in range(th):
+        sy = min(max(ly0 - r + yy, 0), h - 1)
+        for xx in range(tw):
+            sx = min(max(lx0 - r + xx, 0), w - 1)
+            for ch in range(c):
+                blk[yy, xx * c + ch] = src[sy, sx, ch]
+    tmp = np.zeros((ph, n), dtype=np.float32)
     for yy in range(ph):
         for k in range(2 * r + 1):
-            sy = min(max(ly0 + yy + k - r, 0), h - 1)
             gk = g[k]
-            row = tmp[yy]
-            for xx in range(tw):
-                sx = min(max(cx0 + xx, 0), w - 1)
-                for ch in range(c):
-                    row[xx * c + ch] += gk * src[sy, sx, ch]
+            for j in range(n):
+                tmp[yy, j] += gk * blk[yy + k, j]
     out = np.zeros((ph, pw * c), dtype=np.float32)
     for yy in range(ph):
-        row = tmp[yy]
-        orow = out[yy]
         for k in range(2 * r + 1):
             gk = g[k]
             base = k * c
             for j in range(pw * c):
-                orow[j] += gk * row[base + j]
+                out[yy, j] += gk * tmp[yy, base + j]
     return out
 
 

@@ -176,6 +176,10 @@ class Enhancer:
     ) -> None:
         self.display = display
         self.preset: Preset = get_preset(preset)
+        if self.preset.name == "release" and geometry not in (None, "release"):
+            raise FovexpError(
+                f"the release preset has its own geometry; geometry {geometry!r} is for the paper"
+            )
         self.geometry_model: GeometryModel = (
             "release" if self.preset.name == "release" else (geometry or self.preset.geometry)
         )

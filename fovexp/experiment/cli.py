@@ -12,7 +12,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from fovexp.errors import FovexpError
+from fovexp import FovexpError
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -97,8 +97,11 @@ def run_command(args: argparse.Namespace) -> int:
             sim_seed=args.sim_seed,
         )
         session = Session(protocol, opts)
-        if not session.remaining and session.info.get("completed"):
-            print(f"session {session.session_id}: nothing left to run", file=sys.stderr)
+        if not session.remaining:
+            # Every trial was logged before the last run ended: no window, no tracker.
+            session.finish_without_trials()
+            print(f"fovexp run: session {session.session_id}: no trials left to run; marked "
+                  "complete", file=sys.stderr)
             return 0
         # A tracker that is absent fails here, before any window opens.
         gaze = session.make_gaze()
@@ -108,6 +111,9 @@ def run_command(args: argparse.Namespace) -> int:
         code = session.run(gaze=gaze)
     except FovexpError as exc:
         print(f"fovexp run: error: {exc}", file=sys.stderr)
+        return EXIT_ERROR
+    except Exception as exc:  # never a traceback for the operator (Session.run logs it)
+        print(f"fovexp run: error: {type(exc).__name__}: {exc}", file=sys.stderr)
         return EXIT_ERROR
     messages = {0: "finished", 3: "aborted by the operator; continue with --resume",
                 130: "interrupted; continue with --resume"}

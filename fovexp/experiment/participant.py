@@ -20,10 +20,9 @@ import numpy as np
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from fovexp import PAPER_TABLE2, FovexpError, ParameterTable
+from fovexp import PAPER_TABLE2, FovexpError, ParameterTable, validation_error
 
 from .trial import InputEvent, Key, Wheel
-from .validation import first_error
 
 
 class SimTruth(BaseModel):
@@ -67,7 +66,7 @@ class SimTruth(BaseModel):
         except yaml.YAMLError as exc:
             raise FovexpError(f"{path} is not valid YAML: {exc}") from None
         except ValidationError as exc:
-            raise FovexpError(f"simulated-participant truth {path}: {first_error(exc)}") from None
+            raise validation_error(f"simulated-participant truth {path}", exc) from None
 
 
 class SimulatedParticipant:

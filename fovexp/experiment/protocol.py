@@ -18,27 +18,34 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from fovexp.errors import FovexpError
+from fovexp import PARAMETER_RANGES, FovexpError, make_params, validation_error
 
 from .stimuli import StimulusSet
-from .validation import first_error
 
 Parameter = Literal["f_e", "s_k", "s_f", "blur_rate"]
 MethodName = Literal["foveated", "contrast", "ours"]
 
-#: Bounds every value must respect (those of :class:`fovexp.EnhanceParams`).
-PARAM_BOUNDS: dict[str, tuple[float, float]] = {
-    "f_e": (0.0, 2.0),
-    "s_k": (0.0, 200.0),
-    "s_f": (0.0, 50.0),
-    "blur_rate": (0.0, 5.0),
-}
+#: Parameters whose accepted range (:data:`fovexp.PARAMETER_RANGES`) is open at its low end.
+OPEN_AT_LOW: frozenset[str] = frozenset({"s_f"})
+
+
+def check_in_range(name: str, value: float) -> str | None:
+    """Why ``value`` is outside what the enhancer accepts for ``name`` (None: it is inside)."""
+    lo, hi = PARAMETER_RANGES[name]
+    if name in OPEN_AT_LOW:
+        if not lo < value <= hi:
+            return f"{value} is outside what {name} allows ({lo}, {hi}]"
+    elif not lo <= value <= hi:
+        return f"{value} is outside what {name} allows [{lo}, {hi}]"
+    return None
+
+
 #: Parameters each method uses besides the blur-rate (paper sections 5, 6.2).
 METHOD_NEEDS: dict[str, tuple[str, ...]] = {
     "foveated": (),
@@ -65,13 +72,12 @@ class AdjustSpec(_Strict):
     @model_validator(mode="after")
     def _check(self) -> AdjustSpec:
         lo, hi = self.range
-        blo, bhi = PARAM_BOUNDS[self.parameter]
         if not lo < hi:
             raise ValueError(f"range [{lo}, {hi}] must have low < high")
-        if lo < blo or hi > bhi:
-            raise ValueError(
-                f"range [{lo}, {hi}] is outside what {self.parameter} allows [{blo}, {bhi}]"
-            )
+        for end in (lo, hi):
+            why = check_in_range(self.parameter, end)
+            if why is not None:
+                raise ValueError(f"range [{lo}, {hi}]: {why}")
         if self.fine_step > self.step:
             raise ValueError("fine_step must not exceed step")
         if self.step > hi - lo:
@@ -133,7 +139,8 @@ class Protocol(_Strict):
     title: str = ""
     paper_section: str = ""
     display: str
-    geometry: Literal["exact", "linear", "release"] = "exact"
+    #: default: the preset's (exact for paper, release for release)
+    geometry: Literal["exact", "linear", "release"] | None = None
     preset: Literal["paper", "release"] = "paper"
     stimuli: str = "../stimuli/manifest.yaml"
     images: list[str] = Field(min_length=1)
@@ -151,9 +158,20 @@ class Protocol(_Strict):
     tracker: TrackerSpec = TrackerSpec()
     instructions: str = ""
 
+    @property
+    def geometry_model(self) -> str:
+        """The geometry the enhancer and the gaze check use."""
+        if self.geometry is not None:
+            return self.geometry
+        return "release" if self.preset == "release" else "exact"
+
     @model_validator(mode="after")
     def _consistent(self) -> Protocol:
         p = self.adjust.parameter
+        if self.preset == "release" and self.geometry not in (None, "release"):
+            # The enhancer's release preset always uses the release's own geometry.
+            raise ValueError(f"geometry: {self.geometry!r} contradicts preset 'release' (which "
+                             "uses the release geometry): leave geometry out or set 'release'")
         if len(set(self.images)) != len(self.images):
             raise ValueError("images: duplicate ids")
         if p == "blur_rate":
@@ -162,12 +180,11 @@ class Protocol(_Strict):
         elif not self.blur_rates:
             raise ValueError("blur_rates: required (one or more) unless adjust.parameter is "
                              "blur_rate")
-        for br in self.blur_rates or []:
-            if not 0.0 <= br <= PARAM_BOUNDS["blur_rate"][1]:
-                raise ValueError(f"blur_rates: {br} is outside [0, 5] arcmin/deg")
-        for sf in self.s_f_values or []:
-            if not 0.0 < sf <= PARAM_BOUNDS["s_f"][1]:
-                raise ValueError(f"s_f_values: {sf} is outside (0, 50]")
+        for key, name in (("blur_rates", "blur_rate"), ("s_f_values", "s_f")):
+            for v in getattr(self, key) or []:
+                why = check_in_range(name, v)
+                if why is not None:
+                    raise ValueError(f"{key}: {why}")
         if p in self.parameters:
             raise ValueError(f"parameters.{p}: {p} is the adjusted parameter")
         needed = {n for m in self.methods for n in METHOD_NEEDS[m]} - {p}
@@ -181,9 +198,9 @@ class Protocol(_Strict):
                 raise ValueError(f"parameters.{n}.condition: only s_f can come from the "
                                  "conditions, and then s_f_values must be given")
             if src.value is not None:
-                lo, hi = PARAM_BOUNDS[n]
-                if not lo <= src.value <= hi:
-                    raise ValueError(f"parameters.{n}.value: {src.value} outside [{lo}, {hi}]")
+                why = check_in_range(n, src.value)
+                if why is not None:
+                    raise ValueError(f"parameters.{n}.value: {why}")
             if src.fe_results is not None and n != "f_e":
                 raise ValueError(f"parameters.{n}.fe_results: only for f_e")
             if src.sk_line_results is not None and n != "s_k":
@@ -223,6 +240,41 @@ class LoadedProtocol:
     #: functions (blur_rate, s_f or None) -> value, for the parameters that are not adjusted
     sources: dict[str, Callable[[float, float | None], float]] = field(default_factory=dict)
     dependency_folders: dict[str, str] = field(default_factory=dict)
+    #: what the sources derive from files (tables, earlier results): JSON data per parameter,
+    #: stored in the session file and reused by ``--resume``
+    derived: dict[str, dict[str, Any]] = field(default_factory=dict)
+
+    def use_derived(self, derived: dict[str, dict[str, Any]]) -> None:
+        """(Re)build the parameter sources from ``derived`` (this protocol's own, or those a
+        session stored at its first start), then check that every trial of the plan gives the
+        enhancer parameters it accepts at both ends of the adjusted range."""
+        where = f"protocol {self.path}"
+        for name, src in self.spec.parameters.items():
+            self.sources[name] = _make_source(f"{where}: parameters.{name}", name, src,
+                                              derived.get(name), self.spec)
+        self.derived = dict(derived)
+        s = self.spec
+        lo, hi = s.adjust.range
+        for method, br, sf in itertools.product(s.methods, s.blur_rates or [None],
+                                                s.s_f_values or [None]):
+            trial = Trial(-1, False, 0, s.images[0], method, br, sf, lo)
+            for value in (lo, hi):
+                try:
+                    self.make_params(trial, value, seed=0)
+                except FovexpError as exc:
+                    cond = ", ".join(f"{k}={v}" for k, v in (("method", method),
+                                     ("blur_rate", br), ("s_f", sf)) if v is not None)
+                    raise FovexpError(f"{where}: {s.adjust.parameter}={value} ({cond}): "
+                                      f"{exc}") from None
+
+    def make_params(self, trial: Trial, value: float, seed: int) -> Any:
+        """The enhancer's parameters (``fovexp.make_params``) when the adjusted parameter is
+        ``value``; raises FovexpError."""
+        vals = self.parameter_values(trial, value)
+        s = self.spec
+        return make_params(method=trial.method, blur_rate=vals["blur_rate"], f_e=vals["f_e"],
+                           s_k=vals["s_k"], s_f=vals["s_f"], impulses=s.impulses, seed=seed,
+                           preset=s.preset)
 
     @property
     def experiment(self) -> str:
@@ -312,7 +364,7 @@ def load_protocol(path: str | Path, check_dependencies: bool = True) -> LoadedPr
     try:
         spec = Protocol.model_validate(data)
     except ValidationError as exc:
-        raise FovexpError(f"protocol {path}: {first_error(exc)}") from None
+        raise validation_error(f"protocol {path}", exc) from None
     base = path.resolve().parent
 
     from fovexp import load_display
@@ -332,13 +384,16 @@ def load_protocol(path: str | Path, check_dependencies: bool = True) -> LoadedPr
     lp = LoadedProtocol(path=path, sha256=hashlib.sha256(raw).hexdigest(), text=text, spec=spec,
                         stimuli=stim, image_paths=image_paths, display_name=disp)
     for name, src in spec.parameters.items():
-        lp.sources[name] = _make_source(path, base, name, src, spec, lp, check_dependencies)
+        snap = _snapshot(path, base, name, src, lp, check_dependencies)
+        if snap is not None:
+            lp.derived[name] = snap
+    lp.use_derived(lp.derived)
     return lp
 
 
-def _interp(where: str, table: dict[float, float], needed: list[float]) -> Callable[[float], float]:
-    xs = sorted(table)
-    ys = [table[x] for x in xs]
+def _interp(where: str, pairs: list[list[float]], needed: list[float]) -> Callable[[float], float]:
+    xs = [float(x) for x, _ in sorted(pairs)]
+    ys = [float(y) for _, y in sorted(pairs)]
     for br in needed:
         # Calibration dependencies must cover the blur-rates asked for; no extrapolation.
         if br < xs[0] - 1e-9 or br > xs[-1] + 1e-9:
@@ -346,18 +401,12 @@ def _interp(where: str, table: dict[float, float], needed: list[float]) -> Calla
     return lambda br: float(np.interp(br, xs, ys))
 
 
-def _make_source(path: Path, base: Path, name: str, src: ParamSource, spec: Protocol,
-                 lp: LoadedProtocol, check: bool) -> Callable[[float, float | None], float]:
+def _snapshot(path: Path, base: Path, name: str, src: ParamSource, lp: LoadedProtocol,
+              check: bool) -> dict[str, Any] | None:
+    """The values a parameter source derives from files (a table, earlier results), as JSON
+    data; None for a constant or a condition. Stored in the session file at the first start so
+    that ``--resume`` uses the same values even when the results folders changed since."""
     where = f"protocol {path}: parameters.{name}"
-    if src.value is not None:
-        v = float(src.value)
-        return lambda br, sf: v
-    if src.condition:
-        def from_condition(br: float, sf: float | None) -> float:
-            assert sf is not None
-            return float(sf)
-        return from_condition
-    needed = list(spec.blur_rates or [])
     if src.table is not None:
         if src.table in PAPER_TABLE_NAMES:
             from fovexp import PAPER_TABLE2
@@ -375,27 +424,56 @@ def _make_source(path: Path, base: Path, name: str, src: ParamSource, spec: Prot
             else:
                 raise FovexpError(f"{where}.table: {tpath} does not exist (a parameter table "
                                   "YAML or a calibration results folder)")
-        k = ("f_e", "s_k", "s_f").index(name)
-        return lambda br, sf: table.at(br)[k]
+        return {"kind": "table", "from": src.table, "table": table.model_dump()}
     if src.fe_results is not None:
         folder = _resolve_path(base, src.fe_results)
         lp.dependency_folders[name] = str(folder)
         _require_results(where + ".fe_results", folder, check)
         from analysis.derive import fe_by_blur_rate
         fe = _call(where + ".fe_results", fe_by_blur_rate, folder)
-        f = _interp(where + ".fe_results", fe, needed)
+        return {"kind": "fe_results", "from": str(folder),
+                "f_e": [[float(b), float(v)] for b, v in sorted(fe.items())]}
+    if src.sk_line_results is not None:
+        folder = _resolve_path(base, src.sk_line_results)
+        lp.dependency_folders[name] = str(folder)
+        _require_results(where + ".sk_line_results", folder, check)
+        from analysis.derive import sk_line_by_blur_rate
+        lines = _call(where + ".sk_line_results", sk_line_by_blur_rate, folder)
+        return {"kind": "sk_line_results", "from": str(folder),
+                "slope_intercept": [[float(b), float(v[0]), float(v[1])]
+                                    for b, v in sorted(lines.items())]}
+    return None
+
+
+def _make_source(where: str, name: str, src: ParamSource, snap: dict[str, Any] | None,
+                 spec: Protocol) -> Callable[[float, float | None], float]:
+    """The function (blur_rate, s_f) -> value of a parameter that is not adjusted."""
+    if src.value is not None:
+        v = float(src.value)
+        return lambda br, sf: v
+    if src.condition:
+        def from_condition(br: float, sf: float | None) -> float:
+            assert sf is not None
+            return float(sf)
+        return from_condition
+    assert snap is not None
+    needed = list(spec.blur_rates or [])
+    if snap["kind"] == "table":
+        from fovexp import ParameterTable
+
+        table = ParameterTable.model_validate(snap["table"])
+        k = ("f_e", "s_k", "s_f").index(name)
+        return lambda br, sf: table.at(br)[k]
+    if snap["kind"] == "fe_results":
+        f = _interp(where + ".fe_results", snap["f_e"], needed)
         return lambda br, sf: f(br)
-    folder = _resolve_path(base, src.sk_line_results)  # type: ignore[arg-type]
-    lp.dependency_folders[name] = str(folder)
-    _require_results(where + ".sk_line_results", folder, check)
-    from analysis.derive import sk_line_by_blur_rate
-    lines = _call(where + ".sk_line_results", sk_line_by_blur_rate, folder)
-    slope = _interp(where + ".sk_line_results", {b: v[0] for b, v in lines.items()}, needed)
-    icpt = _interp(where + ".sk_line_results", {b: v[1] for b, v in lines.items()}, needed)
+    rows = snap["slope_intercept"]
+    slope = _interp(where + ".sk_line_results", [[b, m] for b, m, _ in rows], needed)
+    icpt = _interp(where + ".sk_line_results", [[b, c] for b, _, c in rows], needed)
 
     def sk_line(br: float, sf: float | None) -> float:
         assert sf is not None
-        lo, hi = PARAM_BOUNDS["s_k"]
+        lo, hi = PARAMETER_RANGES["s_k"]
         return float(min(max(slope(br) * sf + icpt(br), lo), hi))
 
     return sk_line

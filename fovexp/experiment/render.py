@@ -1,46 +1,56 @@
 """The test half of the screen, rendered by the enhancer on a worker thread.
 
-Per trial the split-screen frame (reference left half and its mirror, paper section 6.1) is given
-to :meth:`fovexp.Enhancer.set_image` once; each wheel step then calls ``enhance`` with the new
+Per trial the processed half of the split screen (the reference's mirrored left half, paper
+section 6.1) is given to :meth:`fovexp.Enhancer.set_image` once, as the right half of the
+full-screen frame (``viewport``), so the enhancer computes only that half while eccentricity is
+still measured from the screen centre; each wheel step then calls ``enhance`` with the new
 parameters, and the enhancer's stage cache redoes only what the changed parameter affects. The
 worker keeps only the latest request, so a fast wheel never queues stale frames, and the frame
-loop keeps flipping (and blanking) at the display rate while a frame is computed.
+loop keeps flipping (and blanking) at the display rate while a frame is computed; every result
+carries the parameters it was computed with, so the frame loop knows what is on screen.
+Errors on the worker reach the frame loop as one-line :class:`fovexp.FovexpError`.
 """
 
 from __future__ import annotations
 
 import threading
 import time
-import traceback
 from typing import Any
 
 import numpy as np
+
+from fovexp import FovexpError
+
+#: The gaze point of the enhancer: the fixation cross at the screen centre (normalised).
+SCREEN_CENTRE = (0.5, 0.5)
 
 
 class TestRenderer:
     """Renders the right (test) half for the latest requested parameters."""
 
-    def __init__(self, display: Any, preset: str = "paper") -> None:
+    def __init__(self, display: Any, preset: str = "paper", geometry: str | None = None) -> None:
         from fovexp import Enhancer  # public API (docs/API.md)
 
-        self.enhancer = Enhancer(display)
+        self.enhancer = Enhancer(display, preset=preset, geometry=geometry)  # type: ignore[arg-type]
         self.preset = preset
         self._cv = threading.Condition()
-        self._image: np.ndarray | None = None
+        self._image: tuple[np.ndarray, tuple[int, int, int, int]] | None = None
         self._image_new = False
         self._request: tuple[int, Any] | None = None
         self._result: tuple[int, Any, np.ndarray, float] | None = None
-        self._error: str | None = None
+        self._error: Exception | None = None
         self._serial = 0
         self._stop = False
         self._busy = False
         self._thread = threading.Thread(target=self._run, name="fovexp-render", daemon=True)
         self._thread.start()
 
-    def set_image(self, frame: np.ndarray) -> None:
-        """The split-screen frame of the next trial (applied before the next render)."""
+    def set_image(self, right: np.ndarray, screen_size: tuple[int, int]) -> None:
+        """The processed (right) half of the next trial's split screen, whose full frame is
+        ``screen_size = (width, height)`` px (applied before the next render)."""
+        w, h = screen_size
         with self._cv:
-            self._image = frame
+            self._image = (right, (w - right.shape[1], 0, w, h))
             self._image_new = True
             self._request = None
             self._result = None
@@ -56,20 +66,23 @@ class TestRenderer:
     def poll(self) -> tuple[int, Any, np.ndarray, float] | None:
         """The newest finished render ``(serial, params, right_half, seconds)``, once."""
         with self._cv:
-            if self._error is not None:
-                err, self._error = self._error, None
-                raise RuntimeError(f"rendering failed:\n{err}")
+            self._raise_error()
             out, self._result = self._result, None
             return out
+
+    def _raise_error(self) -> None:
+        if self._error is not None:
+            err, self._error = self._error, None
+            if isinstance(err, FovexpError):
+                raise FovexpError(f"rendering failed: {err}")
+            raise err  # a bug: the session records its traceback and reports one line
 
     def wait(self, serial: int, timeout: float = 120.0) -> tuple[int, Any, np.ndarray, float]:
         """Block until the render ``serial`` (or a newer one) is done."""
         deadline = time.monotonic() + timeout
         with self._cv:
             while True:
-                if self._error is not None:
-                    err, self._error = self._error, None
-                    raise RuntimeError(f"rendering failed:\n{err}")
+                self._raise_error()
                 if self._result is not None and self._result[0] >= serial:
                     out, self._result = self._result, None
                     return out
@@ -98,16 +111,14 @@ class TestRenderer:
             try:
                 t0 = time.perf_counter()
                 if image is not None:
-                    self.enhancer.set_image(image)
-                res = self.enhancer.enhance(gaze=(0.5, 0.5), params=params)
-                out = np.asarray(res.output, dtype=np.float32)
-                w = out.shape[1]
-                right = np.ascontiguousarray(out[:, w // 2:])
+                    self.enhancer.set_image(image[0], viewport=image[1])
+                res = self.enhancer.enhance(gaze=SCREEN_CENTRE, params=params)
+                right = np.ascontiguousarray(res.output, dtype=np.float32)
                 dt = time.perf_counter() - t0
                 with self._cv:
                     self._result = (serial, params, right, dt)
                     self._cv.notify_all()
-            except Exception:
+            except Exception as exc:  # handed to the frame loop, which stops the session
                 with self._cv:
-                    self._error = traceback.format_exc()
+                    self._error = exc
                     self._cv.notify_all()

@@ -23,7 +23,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from fovexp.errors import FovexpError
+from fovexp import FovexpError
 
 from .gaze import (
     BlankingMonitor,
@@ -62,7 +62,9 @@ class Screen(Protocol):
 
     size: tuple[int, int]
 
-    def check_display(self, display: Any) -> dict[str, Any]: ...
+    refresh_hz: float
+
+    def measure_display(self) -> tuple[float | None, tuple[int, int], tuple[int, int]]: ...
     def message(self, text: str, keys: list[str] | None, timeout_s: float | None) -> str | None: ...
     def show_point(self, x: float, y: float) -> None: ...
     def set_reference(self, left: np.ndarray) -> None: ...
@@ -171,19 +173,23 @@ class Session:
         self.display = load_display(protocol.display_name)
         self.folder = Path(opts.results_root) / protocol.experiment / self.participant
         self.folder.mkdir(parents=True, exist_ok=True)
-        self.fixation = FixationGeometry(self.display, protocol.spec.geometry)
+        self.fixation = FixationGeometry(self.display, protocol.spec.geometry_model)
         self._prepare_session()
         self.gaze: Any = None
         self.screen: Any = None
         self.renderer: Any = None
         self.sim: SimulatedParticipant | None = None
         self.events: list[dict[str, Any]] = []
+        self.refresh_hz: float = float(self.display.refresh_hz)
 
     # -- plan and resume (no window) -----------------------------------------------------------
     def _prepare_session(self) -> None:
         opts, proto = self.opts, self.protocol
         sessions = find_sessions(self.folder)
-        incomplete = [s for s in sessions if not s.get("completed")]
+        # A session that failed before its first trial (tracker calibration or validation,
+        # a bad stimulus) has nothing to continue: it blocks nothing.
+        incomplete = [s for s in sessions if not s.get("completed")
+                      and not (s.get("state") == "failed" and not s.get("n_completed"))]
         self.info: dict[str, Any]
         if opts.resume:
             if not incomplete:
@@ -199,6 +205,7 @@ class Session:
                     f"{str(info.get('protocol_sha256'))[:12]}...); resuming would mix protocol "
                     "versions")
             self.session_id = str(info["session"])
+            self._reuse_derived(info)
             plan = info.get("plan", {})
             self.limit = plan.get("limit_trials")
             self.practice = plan.get("practice_trials")
@@ -217,6 +224,34 @@ class Session:
         rows, _ = read_trials(self.folder / "trials.csv")
         self.done = {int(r["trial_index"]) for r in rows if r["session"] == self.session_id}
         self.remaining = [t for t in self.trials if t.index not in self.done]
+
+    def _reuse_derived(self, info: dict[str, Any]) -> None:
+        """Resume with the dependency values (f_e per blur-rate, s_k lines, tables) the session
+        started with, even when the results they came from changed since (more participants):
+        one session never mixes two sets."""
+        proto = self.protocol
+        stored = info.get("derived")
+        if stored is None:
+            if proto.derived:
+                raise FovexpError(
+                    f"--resume: session {info['session']} did not record the values it derived "
+                    f"from {', '.join(sorted(proto.dependency_folders.values()))}; resuming "
+                    "could mix two sets of them: start a --new-session")
+            return
+        if stored != proto.derived:
+            changed = sorted(k for k in set(stored) | set(proto.derived)
+                             if stored.get(k) != proto.derived.get(k))
+            info.setdefault("events", []).append({
+                "time": now_iso(), "event": "derived_values_reused", "parameters": changed,
+                "note": "the dependency results changed since the session started; the "
+                        "session's own values are used"})
+            proto.use_derived(stored)
+
+    def finish_without_trials(self) -> None:
+        """Nothing left to run (all trials logged before the last run ended): mark the session
+        complete, without opening a window or a tracker."""
+        self._write_info(state="completed", completed=True, ended=now_iso(),
+                         n_completed=len(self.done))
 
     def _session_path(self) -> Path:
         return self.folder / f"session-{self.session_id}.json"
@@ -238,6 +273,7 @@ class Session:
                 "protocol_sha256": proto.sha256,
                 "protocol": proto.text,
                 "dependencies": proto.dependency_folders,
+                "derived": proto.derived,
                 "display": self.display.model_dump(),
                 "seed": self.seed,
                 "plan": {"limit_trials": self.limit, "practice_trials": self.practice,
@@ -285,7 +321,9 @@ class Session:
     def run(self, screen_factory: Any = None, gaze: Any = None) -> int:
         """Run the remaining trials; returns an exit status (0 done, 3 aborted, 130 killed)."""
         proto = self.protocol
-        if not self.remaining and self.info.get("completed"):
+        if not self.remaining:
+            if not self.info.get("completed"):
+                self.finish_without_trials()
             return EXIT_OK
         self.gaze = gaze if gaze is not None else self.make_gaze()
         if screen_factory is None:
@@ -298,11 +336,7 @@ class Session:
             size=size, fullscreen=self.opts.fullscreen and not self.opts.dry_run,
             cross_px=self._cross_px(size), dry_run=self.opts.dry_run,
             refresh_hz=self.display.refresh_hz)
-        if not (self.opts.dry_run or self.opts.skip_display_check):
-            check = self.screen.check_display(self.display)  # closes the window on failure
-        else:
-            check = {"skipped": True,
-                     "reason": "dry run" if self.opts.dry_run else "--skip-display-check"}
+        check = self._check_display()
         if isinstance(self.gaze, MouseGaze):
             self.gaze.position = self.screen.mouse_position
         self._start_info()
@@ -316,10 +350,12 @@ class Session:
         old_handlers = self._install_signals()
         state = "interrupted"
         code = EXIT_INTERRUPTED
+        failure: str | None = None
         try:
             from .render import TestRenderer
 
-            self.renderer = TestRenderer(self.display, proto.spec.preset)
+            self.renderer = TestRenderer(self.display, proto.spec.preset,
+                                         proto.spec.geometry_model)
             self.gaze.start()
             self._write_info(tracker=self.gaze.info())
             if self.opts.dry_run:
@@ -334,6 +370,16 @@ class Session:
             state, code = "aborted", EXIT_ABORTED
         except Interrupted:
             state, code = "interrupted", EXIT_INTERRUPTED
+        except FovexpError as exc:
+            state, failure = "failed", str(exc)
+            raise
+        except Exception as exc:  # a bug: recorded with its traceback, reported in one line
+            import traceback
+
+            state, failure = "failed", f"{type(exc).__name__}: {exc}"
+            self.info["failure_traceback"] = traceback.format_exc()
+            raise FovexpError(f"internal error: {failure} (traceback in "
+                              f"{self._session_path()})") from None
         finally:
             self._restore_signals(old_handlers)
             flusher.stop()
@@ -347,10 +393,33 @@ class Session:
             done = {int(r["trial_index"]) for r in self.trial_log.rows
                     if r["session"] == self.session_id} if hasattr(self, "trial_log") else set()
             complete = state == "completed" and len(done) == len(self.trials)
+            extra = {"failure": failure} if failure is not None else {}
             self._write_info(state=state if not (state == "completed" and not complete)
                              else "incomplete", completed=complete, ended=now_iso(),
-                             n_completed=len(done), events=self.info.get("events", []))
+                             n_completed=len(done), events=self.info.get("events", []), **extra)
         return code
+
+    def _check_display(self) -> dict[str, Any]:
+        """Measured refresh rate and window size against the profile (closes the window and
+        raises on a mismatch unless ``--skip-display-check``); sets :attr:`refresh_hz`, the rate
+        dropped frames are counted against: the measured one where there is one."""
+        from .window import check_display
+
+        self.refresh_hz = float(getattr(self.screen, "refresh_hz", self.display.refresh_hz))
+        if self.opts.dry_run:
+            return {"skipped": True, "reason": "dry run", "refresh_hz": self.refresh_hz}
+        measured, size, fb = self.screen.measure_display()
+        if measured is not None:
+            self.refresh_hz = measured
+        if self.opts.skip_display_check:
+            return {"skipped": True, "reason": "--skip-display-check", "measured_refresh_hz":
+                    measured, "window_size": size, "framebuffer_size": fb,
+                    "refresh_hz": self.refresh_hz}
+        try:
+            return check_display(measured, size, fb, self.display)
+        except FovexpError:
+            self.screen.close()
+            raise
 
     def _cross_px(self, size: tuple[int, int]) -> float:
         """Cross size in window pixels from the protocol's degrees at the screen centre."""
@@ -490,6 +559,9 @@ class Session:
         text = ("The eye tracker connection was lost. The trial will start again when it is "
                 "back.\n\nQ: quit (progress is saved; continue later with --resume)")
         while not self.gaze.connected:
+            # The stream is drained here too: a stalled tracker counts as back only when its
+            # samples arrive again (and they belong in the gaze log, between trials).
+            self.gaze_log.extend(self._gaze_rows(None, self.gaze.poll()))
             for ev in self.gaze.poll_events():
                 self._event(ev.kind, **ev.detail)
             key = self.screen.message(text, ["q"], 0.1)
@@ -499,13 +571,7 @@ class Session:
         self._event("tracker_reconnected", trial_index=trial.index)
 
     def _params(self, trial: Trial, value: float) -> Any:
-        from fovexp import EnhanceParams
-
-        vals = self.protocol.parameter_values(trial, value)
-        spec = self.protocol.spec
-        return EnhanceParams(method=trial.method, blur_rate=vals["blur_rate"], f_e=vals["f_e"],
-                             s_k=vals["s_k"], s_f=vals["s_f"], impulses=spec.impulses,
-                             seed=self.seed, preset=spec.preset)
+        return self.protocol.make_params(trial, value, self.seed)
 
     def _load_frame(self, trial: Trial) -> np.ndarray:
         size = self.screen.size
@@ -513,7 +579,12 @@ class Session:
         return split_screen(img)
 
     def _run_trial(self, trial: Trial) -> str:
-        """One trial; returns ``done``, ``pause`` or ``disconnected``."""
+        """One trial; returns ``done``, ``pause`` or ``disconnected``.
+
+        What is logged is what was on screen: each frame's value is that of the render shown
+        in it, and Enter pressed while a newer render is pending is accepted on the first frame
+        that shows it (``final_value`` is the value the participant saw when confirming).
+        """
         spec = self.protocol.spec
         adj = spec.adjust
         frame = self._load_frame(trial)
@@ -521,19 +592,19 @@ class Session:
         self.screen.set_reference(frame[:, : w // 2])
         adjuster = ValueAdjuster(adj.range[0], adj.range[1], adj.step, adj.fine_step,
                                  trial.start_value)
-        refresh = self.display.refresh_hz if not self.opts.dry_run else self.screen.refresh_hz
-        st = TrialState(adjuster, refresh)
-        self.renderer.set_image(frame)
-        first = self.renderer.request(self._params(trial, adjuster.value))
+        st = TrialState(adjuster, self.refresh_hz)
+        self.renderer.set_image(frame[:, w // 2:], (w, frame.shape[0]))
+        latest = self.renderer.request(self._params(trial, adjuster.value))
         # The cross alone while the first frame of the trial is computed.
         while True:
             try:
-                _, _, right, _ = self.renderer.wait(first, timeout=0.05)
+                shown_serial, shown_params, right, _ = self.renderer.wait(latest, timeout=0.05)
                 break
             except TimeoutError:
                 self.screen.draw(blank=True)
                 self.gaze_log.extend(self._gaze_rows(None, self.gaze.poll()))
         self.screen.set_test(right)
+        st.show(float(getattr(shown_params, adj.parameter)))
         monitor = BlankingMonitor(self.fixation, spec.fixation.radius_deg,
                                   spec.fixation.gaze_timeout_s)
         if self.sim is not None:
@@ -546,6 +617,8 @@ class Session:
         self.gaze_log.extend(self._gaze_rows(None, early))
         decision = None
         frame_rows = []
+        confirmed = False  # Enter pressed; waiting for the pending render to be shown
+        drawn_serial = -1  # the render in the last frame drawn
         while True:
             for ev in self.gaze.poll_events():
                 self._event(ev.kind, trial_index=trial.index, **ev.detail)
@@ -557,7 +630,10 @@ class Session:
             decision = monitor.update(samples, self.gaze.now_us())
             self.gaze_log.extend(self._gaze_rows(trial.index, samples))
             events = self.screen.poll_input()
-            if self.sim is not None and st.t_start is not None:
+            if confirmed:
+                # After Enter only a pause counts; the wheel no longer changes the value.
+                events = [e for e in events if isinstance(e, Key) and e.name == "escape"]
+            elif self.sim is not None and st.t_start is not None:
                 t_trial = time.monotonic() - st.t_start
                 events = events + self.sim.poll(t_trial, st.value, not decision.blank)
             outcome = st.handle(events)
@@ -565,17 +641,23 @@ class Session:
                 self._flush_frames(frame_rows)
                 return "pause"
             if outcome == "confirm":
-                break
+                confirmed = True
+                st.confirm(time.monotonic())
             if outcome == "changed":
-                self.renderer.request(self._params(trial, st.value))
+                latest = self.renderer.request(self._params(trial, st.value))
             got = self.renderer.poll()
             if got is not None:
-                self.screen.set_test(got[2])
+                shown_serial, shown_params, right, _ = got
+                self.screen.set_test(right)
+                st.show(float(getattr(shown_params, adj.parameter)))
+            if confirmed and drawn_serial >= latest:
+                break  # the last frame drawn showed the confirmed value
             t = self.screen.draw(blank=decision.blank)
+            drawn_serial = shown_serial
             dt, dropped = st.flip(t, decision.blank, decision.reason)
             frame_rows.append((trial.index, st.n_frames - 1, round(t, 6),
                                None if dt is None else round(dt, 6), dropped, decision.blank,
-                               st.value))
+                               st.shown_value))
         st.finish(time.monotonic())
         self._flush_frames(frame_rows)
         self.blank_log.extend(
@@ -597,7 +679,7 @@ class Session:
 
     def _row(self, trial: Trial, st: TrialState) -> dict[str, Any]:
         spec = self.protocol.spec
-        vals = self.protocol.parameter_values(trial, st.value)
+        vals = self.protocol.parameter_values(trial, st.shown_value)
         return {
             "participant": self.participant,
             "session": self.session_id,
@@ -614,7 +696,7 @@ class Session:
             "s_k": vals["s_k"],
             "s_f": vals["s_f"],
             "start_value": st.start_value,
-            "final_value": st.value,
+            "final_value": st.shown_value,
             "response_time_s": round(st.response_time_s, 4),
             "wheel_events": st.adjuster.notches,
             "blanked_fraction": round(st.blanking.fraction, 5),

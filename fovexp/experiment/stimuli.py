@@ -14,9 +14,7 @@ import numpy as np
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from fovexp.errors import FovexpError
-
-from .validation import first_error
+from fovexp import FovexpError, validation_error
 
 
 class StimulusEntry(BaseModel):
@@ -59,7 +57,7 @@ class StimulusSet:
         try:
             self.manifest = Manifest.model_validate(data)
         except ValidationError as exc:
-            raise FovexpError(f"stimulus manifest {self.path}: {first_error(exc)}") from None
+            raise validation_error(f"stimulus manifest {self.path}", exc) from None
         self.entries: dict[str, StimulusEntry] = {}
         for e in self.manifest.images:
             if e.id in self.entries:

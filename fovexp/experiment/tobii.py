@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from fovexp.errors import FovexpError
+from fovexp import FovexpError
 
 from .gaze import GazeSample, SampleBuffer, SourceEvent, monotonic_us
 

@@ -56,12 +56,16 @@ class ValueAdjuster:
         return changed
 
 
+#: a frame whose interval exceeds this many refresh periods counts as dropped
+DROPPED_FRAME_PERIODS = 1.5
+
+
 class FrameTimer:
     """Frame intervals of a trial; a frame whose interval exceeds 1.5 refresh periods counts as
     dropped (docs/LOGS.md, ``dropped_frames``)."""
 
     def __init__(self, refresh_hz: float) -> None:
-        self.period = 1.0 / refresh_hz
+        self.period_s = 1.0 / refresh_hz
         self.last: float | None = None
         self.intervals: list[float] = []
         self.dropped = 0
@@ -73,7 +77,7 @@ class FrameTimer:
         dt = t - self.last
         self.last = t
         self.intervals.append(dt)
-        dropped = dt > 1.5 * self.period
+        dropped = dt > DROPPED_FRAME_PERIODS * self.period_s
         self.dropped += int(dropped)
         return dt, dropped
 
@@ -119,7 +123,9 @@ class TrialState:
     """The state of one trial between its first frame and Enter.
 
     ``handle`` consumes input events and returns ``"changed"``, ``"confirm"``, ``"pause"`` or
-    None; ``flip`` records a shown frame (its time, whether it was black and why).
+    None; ``flip`` records a shown frame (its time, whether it was black and why). ``value`` is
+    the requested value (the wheel's), ``shown_value`` that of the render on screen, which lags
+    while a render is computed; what is logged is ``shown_value``.
     """
 
     def __init__(self, adjuster: ValueAdjuster, refresh_hz: float) -> None:
@@ -129,7 +135,9 @@ class TrialState:
         self.blanking = BlankingLog()
         self.t_start: float | None = None
         self.t_end: float | None = None
+        self.t_confirm: float | None = None
         self.n_frames = 0
+        self.shown_value: float = adjuster.value
 
     @property
     def value(self) -> float:
@@ -157,6 +165,15 @@ class TrialState:
         self.blanking.frame(t - self.t_start, blank, reason)
         return self.timer.flip(t)
 
+    def show(self, value: float) -> None:
+        """A render computed for ``value`` is now the test half of the next frames."""
+        self.shown_value = float(value)
+
+    def confirm(self, t: float) -> None:
+        """Enter pressed at ``t`` (the response time ends here)."""
+        if self.t_confirm is None:
+            self.t_confirm = t
+
     def finish(self, t: float) -> None:
         self.t_end = t
         if self.t_start is not None:
@@ -164,6 +181,7 @@ class TrialState:
 
     @property
     def response_time_s(self) -> float:
-        if self.t_start is None or self.t_end is None:
+        end = self.t_confirm if self.t_confirm is not None else self.t_end
+        if self.t_start is None or end is None:
             return math.nan
-        return self.t_end - self.t_start
+        return end - self.t_start

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from fovexp.errors import FovexpError
+from fovexp import FovexpError
 
 from .trial import InputEvent, Key, Wheel
 
@@ -22,6 +22,39 @@ KEYS = ["return", "num_enter", "escape", "space", "q", "r"]
 #: measured refresh may differ from the profile by this fraction (a 120 Hz screen run at 60 Hz
 #: is off by 50 %, far outside it)
 REFRESH_TOLERANCE = 0.05
+#: a dry run paces its flips to this rate (Xvfb has no vsync)
+DRY_RUN_REFRESH_HZ = 60.0
+
+
+def check_display(measured_hz: float | None, window_size: tuple[int, int],
+                  framebuffer_size: tuple[int, int], profile: Any) -> dict[str, Any]:
+    """The display check of a session's start (docs/EXPERIMENT.md): the measured refresh rate
+    within :data:`REFRESH_TOLERANCE` of the profile's (a 120 Hz screen run at 60 Hz fails), and
+    window and framebuffer exactly the profile's pixel size (desktop scaling fails).
+
+    Returns what was measured and expected; raises FovexpError naming every mismatch.
+    """
+    size = (int(window_size[0]), int(window_size[1]))
+    fb = (int(framebuffer_size[0]), int(framebuffer_size[1]))
+    expected = (int(profile.width_px), int(profile.height_px))
+    info = {"measured_refresh_hz": measured_hz, "window_size": size, "framebuffer_size": fb,
+            "profile": profile.name, "profile_refresh_hz": profile.refresh_hz,
+            "profile_size": expected}
+    problems = []
+    if measured_hz is None:
+        problems.append("the refresh rate could not be measured (frame times unstable)")
+    elif abs(measured_hz - profile.refresh_hz) > REFRESH_TOLERANCE * profile.refresh_hz:
+        problems.append(f"measured refresh {measured_hz:.1f} Hz, profile {profile.name!r} says "
+                        f"{profile.refresh_hz:g} Hz (set the display mode, or check that "
+                        "vsync is on)")
+    if size != expected or fb != expected:
+        problems.append(f"window is {size[0]}x{size[1]} px (framebuffer {fb[0]}x{fb[1]}), "
+                        f"profile {profile.name!r} says {expected[0]}x{expected[1]} "
+                        "(desktop scaling or a different display mode?)")
+    if problems:
+        raise FovexpError("display check failed: " + "; ".join(problems)
+                          + " -- fix the display, or rerun with --skip-display-check")
+    return info
 
 
 class PsychoScreen:
@@ -38,8 +71,8 @@ class PsychoScreen:
         self._event = event
         self.size = (int(size[0]), int(size[1]))
         self.dry_run = dry_run
-        # In a dry run flips are paced to 60 Hz (Xvfb has no vsync).
-        self.refresh_hz = 60.0 if dry_run else float(refresh_hz)
+        # In a dry run flips are paced (Xvfb has no vsync).
+        self.refresh_hz = DRY_RUN_REFRESH_HZ if dry_run else float(refresh_hz)
         w, h = self.size
         try:
             self.win = visual.Window(
@@ -83,36 +116,14 @@ class PsychoScreen:
         self.last_frame: np.ndarray | None = None
 
     # -- checks --------------------------------------------------------------------------------
-    def check_display(self, display: Any) -> dict[str, Any]:
-        """Measured refresh rate and window pixel size against the profile (issue item 2).
-
-        Raises FovexpError with what was measured and expected; ``--skip-display-check``
-        overrides.
-        """
+    def measure_display(self) -> tuple[float | None, tuple[int, int], tuple[int, int]]:
+        """Measured refresh rate (Hz; None when frame times are unstable), window size and
+        framebuffer size (px), for :func:`check_display`."""
         measured = self.win.getActualFrameRate(nIdentical=20, nMaxFrames=240,
                                                nWarmUpFrames=20, threshold=1)
-        size = tuple(int(v) for v in self.win.size)
+        size = (int(self.win.size[0]), int(self.win.size[1]))
         fb = tuple(int(v) for v in getattr(self.win, "frameBufferSize", size))
-        info = {"measured_refresh_hz": measured, "window_size": size, "framebuffer_size": fb,
-                "profile": display.name, "profile_refresh_hz": display.refresh_hz,
-                "profile_size": (display.width_px, display.height_px)}
-        problems = []
-        if measured is None:
-            problems.append("the refresh rate could not be measured (frame times unstable)")
-        elif abs(measured - display.refresh_hz) > REFRESH_TOLERANCE * display.refresh_hz:
-            problems.append(f"measured refresh {measured:.1f} Hz, profile {display.name!r} says "
-                            f"{display.refresh_hz:g} Hz (set the display mode, or check that "
-                            "vsync is on)")
-        expected = (display.width_px, display.height_px)
-        if size != expected or fb != expected:
-            problems.append(f"window is {size[0]}x{size[1]} px (framebuffer {fb[0]}x{fb[1]}), "
-                            f"profile {display.name!r} says {expected[0]}x{expected[1]} "
-                            "(desktop scaling or a different display mode?)")
-        if problems:
-            self.close()
-            raise FovexpError("display check failed: " + "; ".join(problems)
-                              + " -- fix the display, or rerun with --skip-display-check")
-        return info
+        return (None if measured is None else float(measured)), size, (fb[0], fb[1])
 
     # -- drawing -------------------------------------------------------------------------------
     @staticmethod
