@@ -150,6 +150,43 @@ def case_foveation_error(samples: int = 20000) -> dict:
             "rows": rows}
 
 
+def case_foveation_tradeoff(samples: int = 20000) -> dict:
+    """Run time against error of the blur stack's two knobs, at blur-rate 0.34."""
+    from fovexp import EnhanceParams, Enhancer, load_display
+    from fovexp.colour import linearize
+    from fovexp.foveation import foveate, foveate_exact
+
+    image, source = _frame()
+    display = load_display("lg-oled55cx")
+    lin = linearize(image, display.gamma)
+    enh = Enhancer(display)
+    enh.set_image(image)
+    sigma = enh.enhance((0.5, 0.5), EnhanceParams(blur_rate=0.34, method="foveated")).map(
+        "sigma_px")
+    del enh
+    rng = np.random.default_rng(0)
+    blurred = np.flatnonzero(sigma.ravel() > 0)
+    pick = rng.choice(blurred, size=min(samples, blurred.size), replace=False)
+    ys, xs = np.unravel_index(pick, sigma.shape)
+    exact = foveate_exact(lin, sigma, ys, xs)
+    rows = []
+    for ratio_exp in (0.125, 0.25, 0.5):
+        for min_res in (0.75, 1.25, 2.0):
+            kw = {"ratio": 2.0**ratio_exp, "min_residual_px": min_res}
+            foveate(lin, sigma, **kw)
+            times = []
+            for _ in range(3):
+                t0 = time.perf_counter()
+                fast = foveate(lin, sigma, **kw)
+                times.append(time.perf_counter() - t0)
+            err = np.abs(fast[ys, xs] - exact).max(axis=1)
+            rows.append({"ratio": f"2^{ratio_exp}", "min_residual_px": min_res,
+                         "time_s": float(np.median(times)),
+                         "rms": float(np.sqrt(np.mean(err**2))),
+                         "p99_9": float(np.quantile(err, 0.999)), "max": float(err.max())})
+    return {"case": "foveation trade-off", "source": source, "rows": rows}
+
+
 def case_clipping() -> dict:
     """Fraction of noise-carrying pixels that adding the noise pushes out of [0, 1]."""
     from fovexp import EnhanceParams, Enhancer, load_display
@@ -175,7 +212,7 @@ def case_clipping() -> dict:
 
 CASES = {
     "timing": case_timing, "noise": case_noise_alone, "foveation": case_foveation_error,
-    "clipping": case_clipping,
+    "tradeoff": case_foveation_tradeoff, "clipping": case_clipping,
 }
 
 
@@ -223,6 +260,7 @@ def main() -> None:
                                          repeats=args.repeats))
         results["cases"].append(_sub("noise", impulses=n, repeats=args.repeats))
     results["cases"].append(_sub("foveation"))
+    results["cases"].append(_sub("tradeoff"))
     results["cases"].append(_sub("clipping"))
     (HERE / "results.json").write_text(json.dumps(results, indent=1))
     (HERE / "RESULTS.md").write_text(report(results))
@@ -270,6 +308,15 @@ def report(r: dict) -> str:
         lines.append(f"| {row['blur_rate']} | {row['max_sigma_px']:.1f} | {row['time_s']:.2f} | "
                      f"{row['rms']:.5f} | {row['p99_9']:.4f} | {row['max']:.4f} | "
                      f"{row['pixels_checked']} |")
+    trade = next(c for c in r["cases"] if c["case"].startswith("foveation trade-off"))
+    lines += ["", "Run time against error (blur-rate 0.34): stack ratio past 1.5 px, and the least "
+              "residual blur (level px) before a level moves to a coarser pyramid level. The "
+              "default is 2^0.25 and 1.25.", "",
+              "| ratio | min residual px | time s | RMS | 99.9th pct | max |",
+              "|---|---|---|---|---|---|"]
+    for row in trade["rows"]:
+        lines.append(f"| {row['ratio']} | {row['min_residual_px']} | {row['time_s']:.2f} | "
+                     f"{row['rms']:.5f} | {row['p99_9']:.4f} | {row['max']:.4f} |")
     clip = next(c for c in r["cases"] if c["case"].startswith("clipping"))
     lines += ["", "## Clipping control", "",
               "Pixels the noise pushes out of [0, 1] (linear, before display clipping), as a "

@@ -46,8 +46,13 @@ def sigma_px(
     return arcmin_to_px(arcmin, ppd).astype(np.float32)
 
 
-def stack_sigmas_px(max_sigma_px: float) -> np.ndarray:
-    """The blur-stack sigmas: 0.25 px apart up to 1.5 px, then a ratio of 2**0.25.
+#: Ratio of consecutive blur-stack sigmas past 1.5 px (the speed / error trade-off:
+#: benchmarks/RESULTS.md measures 2**0.25 against 2**0.5 and 2**0.125).
+STACK_RATIO = 2.0**0.25
+
+
+def stack_sigmas_px(max_sigma_px: float, ratio: float = STACK_RATIO) -> np.ndarray:
+    """The blur-stack sigmas: 0.25 px apart up to 1.5 px, then a constant ``ratio``.
 
     The linear interpolation between two Gaussians of std s1 < s2 differs from the Gaussian at
     s in between by about (s2 - s1)^2 / s^2 of the local contrast (second derivative in sigma);
@@ -56,7 +61,7 @@ def stack_sigmas_px(max_sigma_px: float) -> np.ndarray:
     """
     levels = [0.0, 0.25, 0.5, 0.75, 1.0, 1.25, 1.5]
     while levels[-1] < max_sigma_px:
-        levels.append(levels[-1] * 2.0**0.25)
+        levels.append(levels[-1] * ratio)
     return np.array(levels, dtype=np.float64)
 
 
@@ -64,12 +69,12 @@ def stack_sigmas_px(max_sigma_px: float) -> np.ndarray:
 MIN_RESIDUAL_LEVEL_PX = 1.25
 
 
-def _pyramid_level_for(sigma: float) -> int:
+def _pyramid_level_for(sigma: float, min_residual_px: float = MIN_RESIDUAL_LEVEL_PX) -> int:
     """Coarsest Gaussian level on which a blur of ``sigma`` (full-res px) is still well sampled:
-    the blur left to do there is at least :data:`MIN_RESIDUAL_LEVEL_PX` level pixels."""
+    the blur left to do there is at least ``min_residual_px`` level pixels."""
     m = 0
     while math.sqrt(max(sigma**2 - gaussian_sigma_px(m + 1) ** 2, 0.0)) / level_scale(m + 1) >= (
-        MIN_RESIDUAL_LEVEL_PX
+        min_residual_px
     ):
         m += 1
     return m
@@ -235,19 +240,25 @@ def _foveate_bands(
 BAND_ROWS = 32
 
 
-def foveate(linear: np.ndarray, sigma_map_px: np.ndarray) -> np.ndarray:
+def foveate(
+    linear: np.ndarray, sigma_map_px: np.ndarray, ratio: float = STACK_RATIO,
+    min_residual_px: float = MIN_RESIDUAL_LEVEL_PX,
+) -> np.ndarray:
     """Spatially varying Gaussian blur of a linear image, ``sigma_map_px`` per pixel (fast).
 
     Works on (H, W) or (H, W, C) float32 images; returns float32 of the same shape. Pixels
-    with sigma 0 are returned unchanged (bit-exact). Error against :func:`foveate_exact`:
-    see ``benchmarks/RESULTS.md``.
+    with sigma 0 are returned unchanged (bit-exact). ``ratio`` and ``min_residual_px`` trade
+    speed for accuracy; error against :func:`foveate_exact`: ``benchmarks/RESULTS.md``.
     """
-    return per_pixel_sigma(linear, sigma_map_px, _foveate)
+    return per_pixel_sigma(linear, sigma_map_px, _foveate, ratio, min_residual_px)
 
 
-def _foveate(img: np.ndarray, sigma: np.ndarray, max_sigma: float) -> np.ndarray:
-    levels = stack_sigmas_px(max_sigma)
-    lvl_m = np.array([_pyramid_level_for(float(s)) for s in levels], dtype=np.int64)
+def _foveate(
+    img: np.ndarray, sigma: np.ndarray, max_sigma: float, ratio: float, min_residual_px: float
+) -> np.ndarray:
+    levels = stack_sigmas_px(max_sigma, ratio)
+    lvl_m = np.array([_pyramid_level_for(float(s), min_residual_px) for s in levels],
+                     dtype=np.int64)
     top = int(lvl_m.max())
     # Replicate borders at full resolution (as the exact convolution does) by padding before
     # the pyramid; a multiple of 2**top keeps the level grids aligned with the image's.
