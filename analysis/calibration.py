@@ -22,8 +22,7 @@ import numpy as np
 import pandas as pd
 from pydantic import ValidationError
 
-from fovexp.errors import FovexpError
-from fovexp.params import ParameterTable
+from fovexp import FovexpError, ParameterTable, validation_error
 
 from .stats import Line, linear_fit, mean_sem
 
@@ -145,16 +144,14 @@ class Calibration:
     table: pd.DataFrame  # blur_rate, f_e, f_e_sem, s_k, s_k_sem, s_f, s_f_sem
 
     def parameter_table(self, source: str = "fovexp analyze: lab calibration") -> ParameterTable:
-        """Table 2 in the format the enhancer reads (:class:`fovexp.params.ParameterTable`)."""
+        """Table 2 in the format the enhancer reads (:class:`fovexp.ParameterTable`)."""
         rows = [{k: float(r[k]) for k in ("blur_rate", "f_e", "s_k", "s_f")}
                 for _, r in self.table.iterrows()]
         try:
             return ParameterTable(source=source, rows=rows)
         except ValidationError as exc:
-            err = exc.errors()[0]
-            where = ".".join(str(p) for p in err["loc"])
-            raise FovexpError(f"calibrated Table 2 is outside the enhancer's ranges: {where}: "
-                              f"{err['msg']} (input {err.get('input')!r})") from None
+            raise validation_error("calibrated Table 2 is outside the enhancer's ranges",
+                                   exc) from None
 
 
 def calibrate(fe_trials: pd.DataFrame, sk_trials: pd.DataFrame,
@@ -215,10 +212,13 @@ def table2_latex(table: pd.DataFrame, digits: int = 2) -> str:
     return "\n".join(out) + "\n"
 
 
-def write_table2(calib: Calibration, out_dir: Path, source: str) -> dict[str, Path]:
-    """Write Table 2 as CSV, Markdown, LaTeX and ParameterTable YAML into ``out_dir``."""
+def write_table2(calib: Calibration, out_dir: Path, source: str,
+                 yaml_path: Path | None = None) -> dict[str, Path]:
+    """Write Table 2 as CSV, Markdown and LaTeX into ``out_dir``, and once as ParameterTable YAML
+    (``yaml_path``, default ``out_dir/table2.yaml``)."""
     out_dir.mkdir(parents=True, exist_ok=True)
-    paths = {k: out_dir / f"table2.{k}" for k in ("csv", "md", "tex", "yaml")}
+    paths = {k: out_dir / f"table2.{k}" for k in ("csv", "md", "tex")}
+    paths["yaml"] = Path(yaml_path) if yaml_path is not None else out_dir / "table2.yaml"
     calib.table.to_csv(paths["csv"], index=False, float_format="%.6g")
     paths["md"].write_text(table2_markdown(calib.table))
     paths["tex"].write_text(table2_latex(calib.table))

@@ -1,14 +1,15 @@
-"""``fovexp analyze results/ --out report/`` (paper sections 6.3, 7.1). The lead wires
-:func:`add_analyze_parser` into ``fovexp.cli:main``; ``python -m analysis`` works meanwhile."""
+"""``fovexp analyze results/ --out report/`` (paper sections 6.3, 7.1): ``fovexp.cli`` registers
+:func:`add_analyze_parser`; ``python -m analysis`` does the same."""
 
 from __future__ import annotations
 
 import argparse
+import shutil
 import sys
 import warnings
 from pathlib import Path
 
-from fovexp.errors import FovexpError
+from fovexp import FovexpError
 
 
 def _configure(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
@@ -60,8 +61,8 @@ def analyze_command(args: argparse.Namespace) -> int:
             if ana.calibration is None:
                 raise FovexpError("--table-out: no Table 2 (calibration-fe, -sk and -sf are all "
                                   "needed)")
-            ana.calibration.parameter_table(
-                f"fovexp analyze {args.results}").save(args.table_out)
+            # The same file as the report's table2.yaml (one table, one source string).
+            shutil.copyfile(ana.out / "table2.yaml", args.table_out)
     except FovexpError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

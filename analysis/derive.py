@@ -3,7 +3,7 @@ the previous step's result).
 
 The runner imports these three functions to set up the next calibration experiment and to write
 a lab's Table 2. Each loads a results folder with the analysis' exclusion rules
-(:func:`analysis.loading.load_results`) and raises :class:`~fovexp.errors.FovexpError` on
+(:func:`analysis.loading.load_results`) and raises :class:`~fovexp.FovexpError` on
 missing or malformed data.
 """
 
@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from fovexp.params import ParameterTable
+from fovexp import ParameterTable
 
 from .calibration import calibrate, fe_summary, sk_lines, sk_summary
 from .loading import load_results

@@ -1,7 +1,7 @@
 """Load and validate the runner's trial logs (docs/LOGS.md) for paper sections 6.3 and 7.1.
 
 Every row that does not reach the statistics is accounted for: it is either an error
-(:class:`~fovexp.errors.FovexpError` naming the file, line and problem) or an :class:`Exclusion`
+(:class:`~fovexp.FovexpError` naming the file, line and problem) or an :class:`Exclusion`
 with the rule that removed it. The rules, applied in this order (docs/ANALYSIS.md):
 
 R1 torn last row
@@ -32,43 +32,20 @@ R8 incomplete sessions
 
 from __future__ import annotations
 
-import csv
 import json
-import math
-import re
-import warnings
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import pandas as pd
 
-from fovexp.errors import FovexpError
+from fovexp import FovexpError
+from fovexp.experiment.logformat import FLOAT_COLUMNS, INT_COLUMNS, TRIAL_COLUMNS
+from fovexp.experiment.logformat import read_trials_file as _read_file
 
-#: ``trials.csv`` columns in their documented order (docs/LOGS.md).
-COLUMNS: tuple[str, ...] = (
-    "participant", "session", "experiment", "protocol_sha256", "trial_index", "practice",
-    "repetition", "image", "blur_rate", "method", "adjusted_parameter", "f_e", "s_k", "s_f",
-    "start_value", "final_value", "response_time_s", "wheel_events", "blanked_fraction",
-    "dropped_frames", "tracker", "seed", "software_version", "timestamp",
-)
-STR_COLUMNS = frozenset({
-    "participant", "session", "experiment", "protocol_sha256", "image", "method",
-    "adjusted_parameter", "tracker", "software_version", "timestamp",
-})
-INT_COLUMNS = frozenset({"trial_index", "repetition", "wheel_events", "dropped_frames", "seed"})
-BOOL_COLUMNS = frozenset({"practice"})
-FLOAT_COLUMNS = frozenset({
-    "blur_rate", "f_e", "s_k", "s_f", "start_value", "final_value", "response_time_s",
-    "blanked_fraction",
-})
-#: Columns the analysis cannot do without; an empty value there is a corrupt row.
-REQUIRED_VALUES: tuple[str, ...] = (
-    "participant", "session", "experiment", "protocol_sha256", "trial_index", "practice",
-    "image", "blur_rate", "method", "adjusted_parameter", "final_value",
-)
-METHODS = frozenset({"foveated", "contrast", "ours"})
-ADJUSTED = frozenset({"f_e", "s_k", "s_f", "blur_rate"})
+#: ``trials.csv`` columns in their documented order (docs/LOGS.md); the format is defined once,
+#: in the runner's window-free :mod:`fovexp.experiment.logformat`.
+COLUMNS: tuple[str, ...] = TRIAL_COLUMNS
 #: The parameter each of the paper's experiments adjusts (sections 6.2, 7.1).
 EXPERIMENT_PARAMETER: dict[str, str] = {
     "calibration-fe": "f_e",
@@ -76,10 +53,6 @@ EXPERIMENT_PARAMETER: dict[str, str] = {
     "calibration-sf": "s_f",
     "validation": "blur_rate",
 }
-_PARTICIPANT_RE = re.compile(r"^[A-Za-z0-9_-]{1,32}$")
-_ISO_RE = re.compile(
-    r"^\d{4}-\d{2}-\d{2}[T ]\d{2}:\d{2}(:\d{2}(\.\d+)?)?(Z|[+-]\d{2}(:?\d{2})?)?$"
-)
 _COMPLETE_WORDS = frozenset({"complete", "completed", "finished", "done"})
 _INCOMPLETE_WORDS = frozenset({
     "incomplete", "aborted", "interrupted", "running", "in_progress", "in-progress", "started",
@@ -140,105 +113,32 @@ class Dataset:
         return sorted(self.trials["experiment"].unique())
 
 
-def _parse_value(column: str, text: str) -> object:
-    """One field, typed; raises ValueError with a short reason."""
-    text = text.strip()
-    if text == "":
-        if column in REQUIRED_VALUES:
-            raise ValueError("is empty but required")
-        return None if column in STR_COLUMNS else math.nan
-    if column in FLOAT_COLUMNS:
-        try:
-            value = float(text)
-        except ValueError:
-            raise ValueError("is not a number") from None
-        if not math.isfinite(value):
-            raise ValueError("is not a finite number")
-        return value
-    if column in INT_COLUMNS:
-        try:
-            return int(text)
-        except ValueError:
-            raise ValueError("is not an integer") from None
-    if column in BOOL_COLUMNS:
-        low = text.lower()
-        if low in ("1", "true"):
-            return True
-        if low in ("0", "false"):
-            return False
-        raise ValueError("is not 0 or 1")
-    if column == "participant" and not _PARTICIPANT_RE.match(text):
-        raise ValueError("is not a valid participant ID ([A-Za-z0-9_-]{1,32})")
-    if column == "method" and text not in METHODS:
-        raise ValueError(f"is not a method ({', '.join(sorted(METHODS))})")
-    if column == "adjusted_parameter" and text not in ADJUSTED:
-        raise ValueError(f"is not an adjustable parameter ({', '.join(sorted(ADJUSTED))})")
-    if column == "timestamp" and not _ISO_RE.match(text):
-        raise ValueError("is not an ISO 8601 time")
-    return text
-
-
 def read_trials_file(path: Path) -> tuple[pd.DataFrame, list[Exclusion]]:
     """Read one ``trials.csv``: rules R1 (torn last row), R2 (corrupt row), R3 (missing columns).
 
     Returns the parsed rows (all of them, practice included) and the exclusions/warnings.
     Raises :class:`FovexpError` on a corrupt row other than the last one.
     """
-    try:
-        raw = path.read_bytes()
-    except OSError as exc:
-        raise FovexpError(f"{path}: cannot read: {exc.strerror}") from None
-    try:
-        text = raw.decode("utf-8-sig")
-    except UnicodeDecodeError as exc:
-        raise FovexpError(f"{path}: not UTF-8 text (byte {exc.start})") from None
+    path = Path(path)
+    tf = _read_file(path)
     empty = pd.DataFrame(columns=[*COLUMNS, "file", "line"])
-    if not text.strip():
+    if not tf.header:
         return empty, [Exclusion("R3 missing columns", str(path), "empty file (no header)")]
-    rows = list(csv.reader(text.splitlines()))
-    header = [h.strip() for h in rows[0]]
-    missing = [c for c in COLUMNS if c not in header]
-    if missing:
+    if tf.missing:
+        n_rows = sum(1 for ln in path.read_bytes().splitlines()[1:] if ln.strip())
         return empty, [Exclusion(
-            "R3 missing columns", str(path), f"header lacks {', '.join(missing)}",
-            n_trials=max(0, len(rows) - 1),
+            "R3 missing columns", str(path), f"header lacks {', '.join(tf.missing)}",
+            n_trials=n_rows,
         )]
     exclusions: list[Exclusion] = []
-    extra = [h for h in header if h not in COLUMNS]
-    if extra:
+    if tf.extra:
         exclusions.append(
-            Exclusion("note", str(path), f"extra columns ignored: {', '.join(extra)}")
+            Exclusion("note", str(path), f"extra columns ignored: {', '.join(tf.extra)}")
         )
-    index = {c: header.index(c) for c in COLUMNS}
-    # Blank lines are not rows (csv writers never emit them); line numbers stay the file's.
-    data = [(i + 1, r) for i, r in enumerate(rows) if i > 0 and any(f.strip() for f in r)]
-    parsed: list[dict[str, object]] = []
-    for k, (line, fields) in enumerate(data):
-        last = k == len(data) - 1
-        problem = None
-        record: dict[str, object] = {}
-        if last and line == len(rows) and not text.endswith(("\n", "\r")):
-            problem = "no final newline"
-        elif len(fields) != len(header):
-            problem = f"{len(fields)} fields, expected {len(header)}"
-        else:
-            for col in COLUMNS:
-                value = fields[index[col]]
-                try:
-                    record[col] = _parse_value(col, value)
-                except ValueError as exc:
-                    problem = f"column {col}: {value.strip()!r} {exc}"
-                    break
-        if problem is not None:
-            if last:
-                msg = f"line {line}: torn last row dropped ({problem})"
-                warnings.warn(f"{path}: {msg}", stacklevel=2)
-                exclusions.append(Exclusion("R1 torn last row", str(path), msg, n_trials=1))
-                continue
-            raise FovexpError(f"{path}: line {line}: {problem}")
-        record["file"] = str(path)
-        record["line"] = line
-        parsed.append(record)
+    if tf.torn is not None:
+        msg = f"line {tf.torn_line}: torn last row dropped ({tf.torn})"
+        exclusions.append(Exclusion("R1 torn last row", str(path), msg, n_trials=1))
+    parsed = [dict(r, file=str(path), line=ln) for r, ln in zip(tf.rows, tf.lines, strict=True)]
     frame = pd.DataFrame(parsed, columns=[*COLUMNS, "file", "line"]) if parsed else empty
     if not parsed:
         exclusions.append(Exclusion("note", str(path), "no trials"))

@@ -5,7 +5,7 @@ Output folder layout::
 
     report.md                      everything below, gathered, with the exclusions
     table2.yaml                    the lab's Table 2 as a ParameterTable (the enhancer reads it)
-    tables/table2.{csv,md,tex,yaml}
+    tables/table2.{csv,md,tex}
     tables/calibration-fe.csv, calibration-sk.csv, calibration-sk-lines.csv, calibration-sf.csv
     tables/<experiment>-summary.csv, -overall.csv, -tests.csv, -sampling.csv
     tables/exclusions.csv
@@ -22,8 +22,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from fovexp.errors import FovexpError
-from fovexp.params import PAPER_TABLE2
+from fovexp import PAPER_TABLE2, FovexpError
 
 from . import figures as figs
 from .calibration import (
@@ -105,9 +104,8 @@ def run_analysis(
         calib = calibrate(*(data.experiment(e) for e in CALIBRATION_EXPERIMENTS))
         ana.calibration = calib
         source = table_source or f"fovexp analyze {results} ({datetime.now(timezone.utc):%Y-%m-%d})"
-        paths = write_table2(calib, tables, source)
-        calib.parameter_table(source).save(out / "table2.yaml")
-        ana.files += [*paths.values(), out / "table2.yaml"]
+        paths = write_table2(calib, tables, source, yaml_path=out / "table2.yaml")
+        ana.files += list(paths.values())
         for name, frame in (("calibration-fe", calib.fe), ("calibration-sk", calib.sk),
                             ("calibration-sf", calib.sf), ("calibration-sk-lines",
                                                            _lines_frame(calib))):

@@ -13,7 +13,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from scipy import stats
 
-from fovexp.errors import FovexpError
+from fovexp import FovexpError
 
 
 def mean_sem(values: Sequence[float] | np.ndarray) -> tuple[float, float, int]:

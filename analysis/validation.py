@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 
 import pandas as pd
 
-from fovexp.errors import FovexpError
+from fovexp import FovexpError
 
 from .calibration import summarize
 from .stats import paired_ttest, sampling_rate_ratio

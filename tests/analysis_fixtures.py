@@ -15,7 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from analysis.loading import COLUMNS
+from analysis.loading import COLUMNS, EXPERIMENT_PARAMETER
+from fovexp.experiment.logformat import format_value
 
 BLUR_RATES = (0.11, 0.34, 0.57)
 SK_SF_LEVELS = (1.0, 1.9, 3.61, 6.81)  # paper section 6.2
@@ -56,8 +57,6 @@ class Noise:
 
 
 RANGES = {"f_e": (0.0, 0.4), "s_k": (0.0, 45.0), "s_f": (0.5, 10.0), "blur_rate": (0.0, 2.0)}
-EXPERIMENT_PARAMETER = {"calibration-fe": "f_e", "calibration-sk": "s_k",
-                        "calibration-sf": "s_f", "validation": "blur_rate"}
 
 
 def session_id(k: int) -> str:
@@ -138,14 +137,6 @@ def simulate_rows(experiment: str, participant: str, session: str, rng: np.rando
     return rows
 
 
-def _fmt(v: object) -> str:
-    if v is None:
-        return ""
-    if isinstance(v, float):
-        return repr(v)
-    return str(v)
-
-
 def write_trials(folder: Path, rows: list[dict], *, completed: bool | None = True,
                  append: bool = False, columns: tuple[str, ...] = COLUMNS) -> Path:
     """Append ``rows`` to ``folder/trials.csv`` (header first if new) and write the session JSON
@@ -158,7 +149,7 @@ def write_trials(folder: Path, rows: list[dict], *, completed: bool | None = Tru
         if new:
             w.writerow(columns)
         for r in rows:
-            w.writerow([_fmt(r.get(c)) for c in columns])
+            w.writerow([format_value(r.get(c)) for c in columns])
     if completed is not None and rows:
         sess = rows[0]["session"]
         (folder / f"session-{sess}.json").write_text(json.dumps(

@@ -3,14 +3,18 @@ running ``python -m fovexp.experiment`` in a subprocess."""
 
 from __future__ import annotations
 
+import math
 import os
 import shutil
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
+
+from fovexp.experiment.gaze import ClockedGaze, GazeSample, monotonic_us
 
 REPO = Path(__file__).resolve().parent.parent
 PYTHON = sys.executable
@@ -83,3 +87,83 @@ def popen_cli(args: list[str], cwd: Path) -> subprocess.Popen:
     env["PYTHONPATH"] = os.pathsep.join([str(REPO), env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
     return subprocess.Popen([PYTHON, "-m", "fovexp.experiment", *args], cwd=cwd, env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+class ScriptedGaze(ClockedGaze):
+    """Gaze that follows ``path(t_s) -> (x, y) | None`` (None: invalid), sampled at ``rate_hz``
+    from :meth:`start`: crosses the blanking radius at a known time. Not validated at the start
+    of a session (the script does not look at calibration targets)."""
+
+    name = "scripted"
+    validated = False
+
+    def __init__(self, path: Callable[[float], tuple[float, float] | None],
+                 rate_hz: float = 600.0, clock_us: Callable[[], int] = monotonic_us) -> None:
+        super().__init__(rate_hz, clock_us)
+        self.path = path
+
+    def _sample(self, i: int) -> GazeSample:
+        t = self._time_us(i)
+        pt = self.path(t / 1e6)
+        ok = pt is not None
+        x, y = pt if pt is not None else (math.nan, math.nan)
+        assert self._t0 is not None
+        return GazeSample(t, self._t0 + t, x, y, ok, x, y, ok)
+
+
+class StubScreen:
+    """A window-free :class:`fovexp.experiment.session.Screen` for session tests: it draws
+    nothing, records what each frame would show, gives scripted input per frame-loop poll
+    (``inputs``: poll number from 1 -> events) and answers messages with
+    ``answer(text, keys, timeout_s)`` (default: the first key; Q on the failed-validation
+    screen; None on the tracker-lost screen, whose loop polls)."""
+
+    def __init__(self, size, fullscreen=False, cross_px=10.0, dry_run=True, refresh_hz=60.0,
+                 inputs=None, answer=None) -> None:
+        self.size = tuple(size)
+        self.refresh_hz = 60.0 if dry_run else float(refresh_hz)
+        self.inputs = dict(inputs or {})
+        self.answer = answer
+        self.polls = 0
+        self.test = None
+        self.frames: list[tuple[bool, object]] = []  # (blank, test half shown)
+        self.messages: list[str] = []
+        self.closed = False
+
+    def measure_display(self):
+        return self.refresh_hz, self.size, self.size
+
+    def message(self, text, keys, timeout_s):
+        self.messages.append(text)
+        if self.answer is not None:
+            return self.answer(text, keys, timeout_s)
+        if keys == ["q"]:
+            time.sleep(timeout_s or 0.0)
+            return None
+        if keys and "r" in keys:
+            return "q"  # the tracker failed validation: stop, do not recalibrate forever
+        return keys[0] if keys else None
+
+    def show_point(self, x, y) -> None:
+        time.sleep(0.001)
+
+    def set_reference(self, left) -> None:
+        pass
+
+    def set_test(self, right) -> None:
+        self.test = right
+
+    def draw(self, blank: bool) -> float:
+        time.sleep(1 / 240)
+        self.frames.append((blank, self.test))
+        return time.monotonic()
+
+    def poll_input(self):
+        self.polls += 1
+        return list(self.inputs.get(self.polls, []))
+
+    def mouse_position(self):
+        return None
+
+    def close(self) -> None:
+        self.closed = True

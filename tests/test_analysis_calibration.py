@@ -18,8 +18,7 @@ import pytest
 from analysis.calibration import calibrate, fe_summary, table2_latex, table2_markdown
 from analysis.derive import fe_by_blur_rate, parameter_table, sk_line_by_blur_rate
 from analysis.loading import load_results
-from fovexp.errors import FovexpError
-from fovexp.params import ParameterTable
+from fovexp import FovexpError, ParameterTable
 
 from analysis_fixtures import BLUR_RATES, Truth, write_study
 

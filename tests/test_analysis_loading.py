@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from analysis.loading import COLUMNS, load_results, read_trials_file
-from fovexp.errors import FovexpError
+from fovexp import FovexpError
 
 from analysis_fixtures import SHA, Noise, Truth, session_id, simulate_rows, write_trials
 

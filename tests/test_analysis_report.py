@@ -11,7 +11,7 @@ import pytest
 
 from analysis.cli import add_analyze_parser, analyze_command, main
 from analysis.report import run_analysis
-from fovexp.params import ParameterTable
+from fovexp import ParameterTable
 
 from analysis_fixtures import Truth, write_study
 
@@ -35,6 +35,10 @@ def test_cli_writes_the_report(results: Path, tmp_path: Path,
                  "figures/validation-sampling.png"):
         assert (out / name).is_file(), name
         assert (out / name).stat().st_size > 0, name
+    # Table 2 in the enhancer's format exists once (one source string).
+    assert not (out / "tables" / "table2.yaml").exists()
+    assert len(list(out.rglob("table2.yaml"))) == 1
+    assert (tmp_path / "t.yaml").read_bytes() == (out / "table2.yaml").read_bytes()
     assert (out / "figures/calibration.png").read_bytes()[:4] == b"\x89PNG"
     assert (out / "figures/validation.pdf").read_bytes()[:4] == b"%PDF"
     report = (out / "report.md").read_text()

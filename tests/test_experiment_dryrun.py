@@ -86,7 +86,9 @@ def check_common(folder: Path, n_trials: int, n_practice: int) -> list[dict]:
         frac = np.mean([f["blanked"] == "1" for f in fr])
         assert r["blanked_fraction"] == pytest.approx(frac, abs=1e-4)
         assert r["dropped_frames"] == sum(f["dropped"] == "1" for f in fr)
-        # The last frame shows the confirmed value.
+        # Frame values are those of the render on screen: the first frame shows the start
+        # value, the last one the confirmed value (Enter waits for a pending render).
+        assert float(fr[0]["value"]) == pytest.approx(r["start_value"])
         assert float(fr[-1]["value"]) == pytest.approx(r["final_value"])
     return rows
 

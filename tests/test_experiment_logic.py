@@ -12,8 +12,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fovexp import load_display
-from fovexp.errors import FovexpError
+from fovexp import FovexpError, load_display
 from fovexp.experiment.gaze import (
     BlankingMonitor,
     FixationGeometry,
@@ -215,7 +214,7 @@ def test_sim_truth_yaml(tmp_path: Path) -> None:
     assert t.value("s_k", "ours", 0.3, 3.5) == pytest.approx(15 - 2 * (3.5 - 2.5))
     assert t.value("blur_rate", "ours", None, None) == 0.7
     f.write_text("sk_slop: 1\n")
-    with pytest.raises(FovexpError, match="unknown key 'sk_slop'"):
+    with pytest.raises(FovexpError, match=r"sk_slop=1: Extra inputs are not permitted"):
         SimTruth.load(f)
 
 
@@ -301,8 +300,28 @@ def test_corrupt_middle_row_is_an_error(tmp_path: Path) -> None:
     lines = path.read_text().splitlines(keepends=True)
     lines[2] = lines[2].replace(",contrast,", ",contrast,extra,")
     path.write_text("".join(lines))
-    with pytest.raises(FovexpError, match="line 3 is corrupt"):
+    with pytest.raises(FovexpError, match="line 3: 25 fields, expected 24"):
         read_trials(path)
+
+
+def test_one_trials_format_for_runner_and_analysis(tmp_path: Path) -> None:
+    """The runner and the analysis read trials.csv with the same definition (logformat)."""
+    from analysis.loading import COLUMNS, read_trials_file
+    from fovexp.experiment import logformat
+
+    assert COLUMNS is logformat.TRIAL_COLUMNS is TRIAL_COLUMNS
+    path = tmp_path / "P01" / "trials.csv"
+    log = TrialLog(path)
+    for i in range(3):
+        log.append(row(i))
+    with open(path, "ab") as fh:
+        fh.write(b"P01,20260101-000000,calibration-fe,ab")  # torn by a kill
+    with pytest.warns(UserWarning, match="line 5: torn last row"):
+        runner_rows, _ = read_trials(path)
+    with pytest.warns(UserWarning, match="line 5: torn last row"):
+        frame, excl = read_trials_file(path)
+    assert [r["trial_index"] for r in runner_rows] == list(frame["trial_index"]) == [0, 1, 2]
+    assert [e.rule for e in excl] == ["R1 torn last row"]
 
 
 def test_batch_log(tmp_path: Path) -> None:
@@ -314,3 +333,35 @@ def test_batch_log(tmp_path: Path) -> None:
         fh.write("3,0.")  # torn by a kill
     BatchLog(path, ["a", "b"]).flush()
     assert path.read_text() == "a,b\n1,0.5\n2,\n"
+
+
+# -- display check ---------------------------------------------------------------------------
+
+def test_display_check_refresh_rate() -> None:
+    from fovexp.experiment.window import check_display
+
+    size = (DISPLAY.width_px, DISPLAY.height_px)
+    info = check_display(119.2, size, size, DISPLAY)
+    assert info["measured_refresh_hz"] == 119.2 and info["profile_refresh_hz"] == 120
+    # The 120 Hz screen running at 60 Hz stops the session.
+    with pytest.raises(FovexpError, match=r"measured refresh 60\.0 Hz.*says 120 Hz"):
+        check_display(60.0, size, size, DISPLAY)
+    with pytest.raises(FovexpError, match="could not be measured"):
+        check_display(None, size, size, DISPLAY)
+
+
+def test_display_check_scaling() -> None:
+    from fovexp.experiment.window import check_display
+
+    size = (DISPLAY.width_px, DISPLAY.height_px)
+    # 150 % desktop scaling: the window reports fewer pixels than the framebuffer has.
+    with pytest.raises(FovexpError) as err:
+        check_display(120.0, (2560, 1440), size, DISPLAY)
+    msg = str(err.value)
+    assert "window is 2560x1440 px (framebuffer 3840x2160)" in msg and "3840x2160" in msg
+    assert "--skip-display-check" in msg and "\n" not in msg
+    with pytest.raises(FovexpError, match="framebuffer 1920x1080"):
+        check_display(120.0, size, (1920, 1080), DISPLAY)
+    # Both problems at once are both named.
+    with pytest.raises(FovexpError, match=r"60\.0 Hz.*; window is"):
+        check_display(60.0, (2560, 1440), (2560, 1440), DISPLAY)

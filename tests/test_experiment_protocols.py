@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from fovexp.errors import FovexpError
+from fovexp import FovexpError
 from fovexp.experiment.protocol import load_protocol
 from fovexp.experiment.validation import check_participant
 
@@ -80,11 +80,11 @@ def test_plan_is_seeded_per_participant_and_stable() -> None:
 @pytest.mark.parametrize(
     ("change", "needle"),
     [
-        ({"colour": "red"}, "unknown key 'colour'"),
+        ({"colour": "red"}, "colour='red': Extra inputs"),
         ({"adjust.range": [0.0, 9.0]}, "adjust"),
         ({"adjust.start": 0.9}, "start 0.9 is outside"),
         ({"blur_rates": [0.11, 7.0]}, "blur_rates"),
-        ({"adjust.stride": 2}, "unknown key 'adjust.stride'"),
+        ({"adjust.stride": 2}, "adjust.stride=2: Extra inputs"),
         ({"images": ["scene-00", "no-such-image"]}, "images[1]: image 'no-such-image'"),
         ({"repetitions": 0}, "repetitions"),
         ({"display": "displays/none.yaml"}, "display"),
@@ -154,8 +154,32 @@ def test_cli_bad_input_one_line_exit_2(ws: Path) -> None:
     r = run_cli(["run", str(path), "--participant", "P01", "--dry-run"], cwd=ws)
     assert r.returncode == 2
     lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
-    assert len(lines) == 1 and "unknown key 'colour'" in lines[0] and str(path) in lines[0]
+    assert len(lines) == 1 and "colour='red': Extra inputs" in lines[0] and str(path) in lines[0]
     assert not any((ws / "results").iterdir())  # nothing written, no window
     r = run_cli(["run", "protocols/calibration-fe.yaml", "--participant", "../evil",
                  "--dry-run"], cwd=ws)
     assert r.returncode == 2 and "participant ID" in r.stderr
+
+
+def test_ranges_come_from_the_enhancer(ws: Path) -> None:
+    """Protocol bounds are the enhancer's PARAMETER_RANGES (s_f open at 0): a protocol that
+    validates gives parameters the enhancer accepts."""
+    from fovexp import PARAMETER_RANGES
+
+    hi = PARAMETER_RANGES["f_e"][1]
+    load_protocol(edit(ws, "calibration-fe", **{"adjust.range": [0.0, hi]}))
+    with pytest.raises(FovexpError, match=rf"adjust.*outside what f_e allows \[0.0, {hi}\]"):
+        load_protocol(edit(ws, "calibration-fe", **{"adjust.range": [0.0, hi + 0.1]}))
+    with pytest.raises(FovexpError, match=r"parameters\.s_f\.value: 0\.0 is outside .*\(0\.0"):
+        load_protocol(edit(ws, "validation", **{"parameters.s_f": {"value": 0.0}}))
+    lp = load_protocol(edit(ws, "validation", **{"parameters.s_f": {"value": 1e-3}}))
+    assert lp.spec.parameters["s_f"].value == 1e-3
+
+
+def test_preset_and_geometry_must_agree(ws: Path) -> None:
+    with pytest.raises(FovexpError, match="geometry: 'exact' contradicts preset 'release'"):
+        load_protocol(edit(ws, "calibration-fe", preset="release", geometry="exact"))
+    lp = load_protocol(edit(ws, "calibration-fe", preset="release", geometry=None))
+    assert lp.spec.geometry_model == "release"
+    lp = load_protocol(edit(ws, "calibration-fe", geometry="linear"))
+    assert (lp.spec.preset, lp.spec.geometry_model) == ("paper", "linear")

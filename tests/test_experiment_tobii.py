@@ -17,7 +17,7 @@ if sys.version_info[:2] != (3, 10):
     pytest.skip("tobii-research ships Linux wheels for Python 3.10 only", allow_module_level=True)
 tr = pytest.importorskip("tobii_research", reason="tobii-research is not installed")
 
-from fovexp.errors import FovexpError  # noqa: E402
+from fovexp import FovexpError  # noqa: E402
 from fovexp.experiment.tobii import TobiiGaze, sample_from_sdk  # noqa: E402
 
 from experiment_helpers import REPO, run_cli  # noqa: E402
@@ -155,3 +155,56 @@ def test_stalled_stream_counts_as_disconnected() -> None:
 def test_unsupported_frequency_is_refused() -> None:
     with pytest.raises(FovexpError, match="offers"):
         TobiiGaze(frequency_hz=600, tracker=StandInTracker(freqs=(60.0, 120.0))).start()
+
+
+def test_session_recovers_from_a_stall_longer_than_the_stall_time(tmp_path) -> None:
+    """The tracker stops sending for longer than the stall time, then comes back: the session's
+    wait-for-reconnect loop drains the stream, so the real adapter notices the samples again
+    and the trial restarts (the samples of the wait go to the gaze log)."""
+    from fovexp.experiment.logs import GAZE_COLUMNS, BatchLog
+    from fovexp.experiment.protocol import load_protocol
+    from fovexp.experiment.session import Session, SessionOptions
+
+    from experiment_helpers import StubScreen
+
+    lp = load_protocol(REPO / "protocols" / "calibration-fe.yaml")
+    s = Session(lp, SessionOptions(participant="T01", results_root=tmp_path, tracker="tobii",
+                                   limit_trials=1, practice_trials=0))
+    dev = StandInTracker()
+    g = TobiiGaze(frequency_hz=600, tracker=dev, stall_s=0.1)
+    g.start()
+    t0 = time.monotonic()
+
+    def answer(text, keys, timeout_s):  # the operator would quit after 5 s
+        time.sleep(timeout_s or 0)
+        return "q" if time.monotonic() - t0 > 5 else None
+
+    s.gaze, s.screen = g, StubScreen((480, 270), answer=answer)
+    s.gaze_log = BatchLog(tmp_path / "gaze.csv", GAZE_COLUMNS)
+    dev.stream(60, 600.0)
+    g.poll()
+    time.sleep(0.4)  # the stream stalls for 4x the stall time
+    assert [e.kind for e in g.poll_events()] == ["stream_stalled"] and not g.connected
+    stop = threading.Event()
+
+    def feed() -> None:  # the tracker is back after 0.3 s, at 600 Hz
+        time.sleep(0.3)
+        while not stop.is_set():
+            dev.stream(6, 600.0)
+            time.sleep(0.01)
+
+    th = threading.Thread(target=feed)
+    th.start()
+    try:
+        s._wait_reconnect(s.trials[0])  # raises Aborted if the stream is never noticed
+    finally:
+        stop.set()
+        th.join()
+    assert time.monotonic() - t0 < 3 and g.connected
+    kinds = [e["event"] for e in s.info["events"]]
+    assert kinds[0] == "tracker_disconnected" and kinds[-1] == "tracker_reconnected"
+    assert "stream_resumed" in kinds
+    s.gaze_log.flush(sync=True)
+    rows = (tmp_path / "gaze.csv").read_text().splitlines()[1:]
+    assert rows and all(r.startswith(",") for r in rows)  # samples between trials
+    g.stop()

@@ -7,8 +7,9 @@ coordinates (origin top-left, x right, y down, as Tobii's ``gaze_point_on_displa
 degrees from the cross come from :meth:`fovexp.geometry.ViewingGeometry.eccentricity_deg`.
 
 Sources: :class:`SimulatedGaze` (fixation with jitter, drift, microsaccades, saccades, blinks and
-dropouts from a seed), :class:`MouseGaze` (pilot sessions), :class:`ScriptedGaze` (tests), and
-``fovexp.experiment.tobii.TobiiGaze`` (Tobii Pro through tobii-research).
+dropouts from a seed), :class:`MouseGaze` (pilot sessions), and
+``fovexp.experiment.tobii.TobiiGaze`` (Tobii Pro through tobii-research). :class:`ClockedGaze` is
+the shared base of sources sampled on a fixed-rate grid (the tests script gaze paths with it).
 """
 
 from __future__ import annotations
@@ -23,6 +24,15 @@ from typing import Any, NamedTuple, Protocol
 import numpy as np
 
 from fovexp.geometry import ViewingGeometry
+
+#: Paper section 6.1: gaze farther than this from the cross blanks the next frame (deg).
+BLANKING_RADIUS_DEG = 1.25
+#: No sample newer than this: gaze "lost", the next frame is black (s).
+GAZE_TIMEOUT_S = 0.05
+#: Tobii Pro Spectrum's rate in the paper (section 6.1), and the simulated sources' (Hz).
+TRACKER_RATE_HZ = 600.0
+#: Seconds of samples a tracker's buffer holds before the oldest are dropped.
+GAZE_BUFFER_S = 120.0
 
 
 class GazeSample(NamedTuple):
@@ -114,12 +124,14 @@ class FixationGeometry:
         bx, by = self.to_px(*b)
         return float(self.geometry.eccentricity_deg(np.array(ax), np.array(ay), (bx, by)))
 
-    def offset_to_norm(self, dx_deg: float, dy_deg: float) -> tuple[float, float]:
-        """A point ``(dx, dy)`` degrees from the cross, via the pixels per degree at the cross
-        (simulation only; the blanking decision measures the angle exactly)."""
+    def offset_to_norm(self, dx_deg: float, dy_deg: float,
+                       origin: tuple[float, float] = (0.5, 0.5)) -> tuple[float, float]:
+        """A point ``(dx, dy)`` degrees from ``origin`` (normalised; default the cross), via the
+        pixels per degree at the cross (simulation only; the blanking decision measures the
+        angle exactly)."""
         g = self.geometry
-        return (0.5 + dx_deg * self.ppd_centre / g.width_px,
-                0.5 + dy_deg * self.ppd_centre / g.height_px)
+        return (origin[0] + dx_deg * self.ppd_centre / g.width_px,
+                origin[1] + dy_deg * self.ppd_centre / g.height_px)
 
 
 @dataclass
@@ -136,8 +148,8 @@ class BlankingMonitor:
     valid), or none newer than ``timeout_s`` (lost) -> black; otherwise the stimulus is shown.
     """
 
-    def __init__(self, fixation: FixationGeometry, radius_deg: float = 1.25,
-                 timeout_s: float = 0.05) -> None:
+    def __init__(self, fixation: FixationGeometry, radius_deg: float = BLANKING_RADIUS_DEG,
+                 timeout_s: float = GAZE_TIMEOUT_S) -> None:
         self.fixation = fixation
         self.radius_deg = radius_deg
         self.timeout_us = int(timeout_s * 1e6)
@@ -163,7 +175,7 @@ class SampleBuffer:
     ``deque.append`` and ``popleft`` are atomic in CPython, so the producer never takes a lock.
     """
 
-    def __init__(self, maxlen: int = 600 * 60) -> None:
+    def __init__(self, maxlen: int = int(TRACKER_RATE_HZ * GAZE_BUFFER_S)) -> None:
         self._q: deque[Any] = deque(maxlen=maxlen)
 
     def append(self, item: Any) -> None:
@@ -183,7 +195,7 @@ class SampleBuffer:
 class SimGazeParams:
     """Behaviour of :class:`SimulatedGaze` (degrees, seconds, events per second)."""
 
-    rate_hz: float = 600.0
+    rate_hz: float = TRACKER_RATE_HZ
     jitter_deg: float = 0.03
     drift_sd_deg: float = 0.25  # stationary sd of the slow drift (Ornstein-Uhlenbeck)
     drift_tau_s: float = 2.0
@@ -198,28 +210,22 @@ class SimGazeParams:
     eye_offset_deg: float = 0.05
 
 
-class SimulatedGaze:
-    """Fixation on the cross with jitter, drift, microsaccades, saccades away, blinks and dropouts.
+class ClockedGaze:
+    """The lifecycle shared by sources whose samples lie on a fixed ``rate_hz`` grid from
+    :meth:`start` (their values depend only on the sample index, not on when the frame loop
+    polls), with a connection that can be cut (:meth:`set_connected`): samples due while
+    disconnected are lost, as with a tracker. Subclasses give :meth:`_sample`."""
 
-    Samples lie on a fixed ``rate_hz`` grid from :meth:`start`; their values depend only on the
-    seed and the sample index, not on when the frame loop polls.
-    """
+    name = "clocked"
+    #: calibrated and validated at the session's start (the mouse and scripted paths are not)
+    validated = True
 
-    name = "simulated"
-
-    def __init__(self, fixation: FixationGeometry, seed: int = 0,
-                 params: SimGazeParams | None = None,
+    def __init__(self, rate_hz: float = TRACKER_RATE_HZ,
                  clock_us: Callable[[], int] = monotonic_us) -> None:
-        self.fixation = fixation
-        self.p = params or SimGazeParams()
-        self.rng = np.random.default_rng(seed)
-        self.seed = seed
+        self.rate_hz = float(rate_hz)
         self._clock = clock_us
         self._t0: int | None = None
         self._n = 0
-        self._drift = np.zeros(2)
-        self._away: tuple[np.ndarray, int] | None = None  # (offset, samples left)
-        self._blink_left = 0
         self._connected = True
 
     def start(self) -> None:
@@ -242,6 +248,50 @@ class SimulatedGaze:
 
     def poll_events(self) -> list[SourceEvent]:
         return []
+
+    def info(self) -> dict[str, Any]:
+        return {"name": self.name, "rate_hz": self.rate_hz}
+
+    def _sample(self, i: int) -> GazeSample:
+        raise NotImplementedError
+
+    def _time_us(self, i: int) -> int:
+        """Device time of sample ``i`` (us from :meth:`start`)."""
+        return int(i * 1e6 / self.rate_hz)
+
+    def poll(self) -> list[GazeSample]:
+        if self._t0 is None:
+            self.start()
+        assert self._t0 is not None
+        upto = int((self._clock() - self._t0) * self.rate_hz / 1e6)
+        if not self._connected:
+            self._n = upto + 1
+            return []
+        out = [self._sample(i) for i in range(self._n, upto + 1)]
+        self._n = max(self._n, upto + 1)
+        return out
+
+
+class SimulatedGaze(ClockedGaze):
+    """Fixation on the cross with jitter, drift, microsaccades, saccades away, blinks and dropouts.
+
+    Samples lie on a fixed ``rate_hz`` grid from :meth:`start`; their values depend only on the
+    seed and the sample index, not on when the frame loop polls.
+    """
+
+    name = "simulated"
+
+    def __init__(self, fixation: FixationGeometry, seed: int = 0,
+                 params: SimGazeParams | None = None,
+                 clock_us: Callable[[], int] = monotonic_us) -> None:
+        self.p = params or SimGazeParams()
+        super().__init__(self.p.rate_hz, clock_us)
+        self.fixation = fixation
+        self.rng = np.random.default_rng(seed)
+        self.seed = seed
+        self._drift = np.zeros(2)
+        self._away: tuple[np.ndarray, int] | None = None  # (offset, samples left)
+        self._blink_left = 0
 
     def info(self) -> dict[str, Any]:
         return {"name": "simulated", "seed": self.seed, "rate_hz": self.p.rate_hz}
@@ -275,22 +325,9 @@ class SimulatedGaze:
             x, y = self.fixation.offset_to_norm(float(d[0]), float(d[1]))
             ok = not blink and rng.uniform() >= p.dropout_prob and 0 <= x <= 1 and 0 <= y <= 1
             eyes.append((x if ok else math.nan, y if ok else math.nan, ok))
-        t = int(i * 1e6 / p.rate_hz)
+        t = self._time_us(i)
         assert self._t0 is not None
         return GazeSample(t, self._t0 + t, *eyes[0], *eyes[1])
-
-    def poll(self) -> list[GazeSample]:
-        if self._t0 is None:
-            self.start()
-        assert self._t0 is not None
-        if not self._connected:
-            # Samples that would have arrived while disconnected are lost, as with a tracker.
-            self._n = int((self._clock() - self._t0) * self.p.rate_hz / 1e6) + 1
-            return []
-        upto = int((self._clock() - self._t0) * self.p.rate_hz / 1e6)
-        out = [self._sample(i) for i in range(self._n, upto + 1)]
-        self._n = max(self._n, upto + 1)
-        return out
 
     def fixate(self, target: tuple[float, float], n: int) -> list[GazeSample]:
         """``n`` samples fixating ``target`` (normalised) with jitter: the simulated participant
@@ -302,58 +339,10 @@ class SimulatedGaze:
             for _ in range(2):
                 dx, dy = self.p.jitter_deg * 3 * self.rng.standard_normal(2)
                 ok = self.rng.uniform() >= 0.01
-                x = target[0] + dx * self.fixation.ppd_centre / self.fixation.geometry.width_px
-                y = target[1] + dy * self.fixation.ppd_centre / self.fixation.geometry.height_px
+                x, y = self.fixation.offset_to_norm(float(dx), float(dy), origin=target)
                 eyes.append((x if ok else math.nan, y if ok else math.nan, ok))
-            t = int(i * 1e6 / self.p.rate_hz)
+            t = self._time_us(i)
             out.append(GazeSample(t, t0 + t, *eyes[0], *eyes[1]))
-        return out
-
-
-class ScriptedGaze:
-    """Gaze that follows ``path(t_s) -> (x, y) | None`` (None: invalid), sampled at ``rate_hz``
-    from :meth:`start`. Used by tests to cross the blanking radius at a known time."""
-
-    name = "scripted"
-
-    def __init__(self, path: Callable[[float], tuple[float, float] | None],
-                 rate_hz: float = 600.0, clock_us: Callable[[], int] = monotonic_us) -> None:
-        self.path = path
-        self.rate_hz = rate_hz
-        self._clock = clock_us
-        self._t0: int | None = None
-        self._n = 0
-        self.connected = True
-
-    def start(self) -> None:
-        self._t0 = self._clock()
-        self._n = 0
-
-    def stop(self) -> None:
-        pass
-
-    def now_us(self) -> int:
-        return self._clock()
-
-    def poll_events(self) -> list[SourceEvent]:
-        return []
-
-    def info(self) -> dict[str, Any]:
-        return {"name": "scripted", "rate_hz": self.rate_hz}
-
-    def poll(self) -> list[GazeSample]:
-        if self._t0 is None:
-            self.start()
-        assert self._t0 is not None
-        upto = int((self._clock() - self._t0) * self.rate_hz / 1e6)
-        out = []
-        for i in range(self._n, upto + 1):
-            t = int(i * 1e6 / self.rate_hz)
-            pt = self.path(t / 1e6)
-            ok = pt is not None
-            x, y = pt if pt is not None else (math.nan, math.nan)
-            out.append(GazeSample(t, self._t0 + t, x, y, ok, x, y, ok))
-        self._n = max(self._n, upto + 1)
         return out
 
 
@@ -365,6 +354,7 @@ class MouseGaze:
     """
 
     name = "mouse"
+    validated = False
 
     def __init__(self, position: Callable[[], tuple[float, float] | None] | None = None) -> None:
         self.position = position

@@ -26,6 +26,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 
 from fovexp import PARAMETER_RANGES, FovexpError, make_params, validation_error
 
+from .gaze import BLANKING_RADIUS_DEG, GAZE_TIMEOUT_S, TRACKER_RATE_HZ
 from .stimuli import StimulusSet
 
 Parameter = Literal["f_e", "s_k", "s_f", "blur_rate"]
@@ -118,14 +119,14 @@ class ParamSource(_Strict):
 
 class FixationSpec(_Strict):
     #: gaze farther than this from the cross blanks the next frame (paper section 6.1: 1.25 deg)
-    radius_deg: float = Field(default=1.25, gt=0, le=20)
+    radius_deg: float = Field(default=BLANKING_RADIUS_DEG, gt=0, le=20)
     cross_size_deg: float = Field(default=0.6, gt=0, le=10)
     #: gaze older than this counts as lost (s)
-    gaze_timeout_s: float = Field(default=0.05, gt=0, le=2)
+    gaze_timeout_s: float = Field(default=GAZE_TIMEOUT_S, gt=0, le=2)
 
 
 class TrackerSpec(_Strict):
-    sampling_hz: float = Field(default=600, gt=0, le=2000)
+    sampling_hz: float = Field(default=TRACKER_RATE_HZ, gt=0, le=2000)
     #: refuse to start when a validation's accuracy (median error, worse eye) exceeds this (deg)
     max_accuracy_deg: float = Field(default=1.0, gt=0, le=10)
     calibration_points: Literal[5, 9] = 9

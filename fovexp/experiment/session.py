@@ -167,7 +167,7 @@ class Session:
         self.protocol = protocol
         self.opts = opts
         self.participant = check_participant(opts.participant)
-        if opts.dry_run and opts.tracker not in ("simulated", "scripted"):
+        if opts.dry_run and opts.tracker != "simulated":
             raise FovexpError("--dry-run uses simulated gaze: leave out --tracker or use "
                               "--tracker simulated")
         self.display = load_display(protocol.display_name)
@@ -456,12 +456,12 @@ class Session:
         """Calibrate (Tobii) and validate; refuse to start when accuracy is worse than the
         protocol's limit (``tracker.max_accuracy_deg``)."""
         spec = self.protocol.spec.tracker
-        if self.opts.tracker == "mouse" or self.opts.tracker == "scripted":
-            self.info["tracker_quality"].append({"time": now_iso(), "skipped": self.opts.tracker})
+        if not getattr(self.gaze, "validated", True):  # the mouse (and test scripts)
+            self.info["tracker_quality"].append({"time": now_iso(), "skipped": self.gaze.name})
             self._write_info()
             return
         while True:
-            if self.opts.tracker == "tobii":
+            if hasattr(self.gaze, "calibrate"):  # a real tracker
                 self._message("Eye-tracker calibration: look at each dot until it moves.\n\n"
                               "Press Space to start.", ["space"])
                 cal = self.gaze.calibrate(target_points(spec.calibration_points),
@@ -701,7 +701,7 @@ class Session:
             "wheel_events": st.adjuster.notches,
             "blanked_fraction": round(st.blanking.fraction, 5),
             "dropped_frames": st.timer.dropped,
-            "tracker": self.opts.tracker,
+            "tracker": self.gaze.name,
             "seed": self.seed,
             "software_version": software_version(),
             "timestamp": now_iso(),

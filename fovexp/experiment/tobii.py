@@ -21,7 +21,14 @@ import numpy as np
 
 from fovexp import FovexpError
 
-from .gaze import GazeSample, SampleBuffer, SourceEvent, monotonic_us
+from .gaze import (
+    GAZE_BUFFER_S,
+    TRACKER_RATE_HZ,
+    GazeSample,
+    SampleBuffer,
+    SourceEvent,
+    monotonic_us,
+)
 
 
 def import_tobii() -> Any:
@@ -68,7 +75,7 @@ class TobiiGaze:
 
     name = "tobii"
 
-    def __init__(self, frequency_hz: float = 600.0, address: str | None = None,
+    def __init__(self, frequency_hz: float = TRACKER_RATE_HZ, address: str | None = None,
                  tracker: Any = None, stall_s: float = 0.5, rate_tolerance: float = 0.1) -> None:
         self.tr = import_tobii()
         if tracker is None:
@@ -88,7 +95,7 @@ class TobiiGaze:
             tracker = found[0]
         self.tracker = tracker
         self.frequency_hz = float(frequency_hz)
-        self.buffer = SampleBuffer(maxlen=int(self.frequency_hz * 120))
+        self.buffer = SampleBuffer(maxlen=int(self.frequency_hz * GAZE_BUFFER_S))
         self._notes = SampleBuffer(maxlen=1000)
         self._connected = True
         self._subscribed = False
