@@ -13,9 +13,8 @@ the calibrated f_e of Table 2 means the same thing. Where sigma = 0 the image is
 The pipeline applies it to luminance, since the method processes luminance only (paper
 section 4.5), and adds the change to every colour channel, as it does the noise.
 
-The box means come from summed-area tables built tile by tile (each tile with the margin its
-widest box needs), so each pixel costs the same whatever its width, only the two widths a
-pixel needs are evaluated (no stack of filtered images), and fovea tiles are copied.
+The box means come from a summed-area table (float64), so each pixel costs the same whatever
+its width, and only the two widths a pixel needs are evaluated (no stack of filtered images).
 Even widths follow MATLAB's anchoring: the window of width ``n`` covers
 ``[x - floor((n - 1) / 2), x + ceil((n - 1) / 2)]``.
 """
@@ -35,84 +34,76 @@ def box_width_px(level: int) -> int:
     return int(math.ceil(4 * level))
 
 
-@numba.njit(cache=True, inline="always")
-def _mirror(i, n):  # pragma: no cover - compiled
-    """Symmetric border (MATLAB 'symmetric'): -1 -> 0, -2 -> 1, n -> n - 1."""
-    if i < 0:
-        i = -i - 1
-    if i >= n:
-        i = 2 * n - i - 1
-    return min(max(i, 0), n - 1)
-
-
-#: Side of the tiles the enhancement is computed in; each tile builds its own summed-area
-#: table (small enough to stay in cache, and float64 sums stay small and exact).
-TILE_PX = 128
+@numba.njit(parallel=True, cache=True, fastmath=True)
+def _sat(img, pad):  # pragma: no cover - compiled
+    """Summed-area table (float64, leading zero row and column) of a grey image padded by
+    ``pad`` pixels with symmetric borders (MATLAB 'symmetric': -1 -> 0, n -> n - 1)."""
+    h, w = img.shape
+    hp, wp = h + 2 * pad, w + 2 * pad
+    s = np.zeros((hp + 1, wp + 1))
+    for y in numba.prange(hp):  # row prefix sums, rows in parallel
+        sy = y - pad
+        if sy < 0:
+            sy = -sy - 1
+        if sy >= h:
+            sy = 2 * h - sy - 1
+        run = 0.0
+        for x in range(wp):
+            sx = x - pad
+            if sx < 0:
+                sx = -sx - 1
+            if sx >= w:
+                sx = 2 * w - sx - 1
+            run += img[sy, sx]
+            s[y + 1, x + 1] = run
+    nblk = (wp + 63) // 64
+    for b in numba.prange(nblk):  # then column sums, blocks of columns in parallel
+        x0 = b * 64 + 1
+        x1 = min(x0 + 64, wp + 1)
+        for y in range(1, hp + 1):
+            for x in range(x0, x1):
+                s[y, x] += s[y - 1, x]
+    return s
 
 
 @numba.njit(parallel=True, cache=True, fastmath=True)
-def _enhance_tiles(img, sigma, f_e, tile):  # pragma: no cover - compiled
-    h, w, c = img.shape
+def _enhance(img, sigma, sat, pad, f_e):  # pragma: no cover - compiled
+    h, w = img.shape
     out = np.empty_like(img)
-    nty = (h + tile - 1) // tile
-    ntx = (w + tile - 1) // tile
-    for t in numba.prange(nty * ntx):
-        y0 = (t // ntx) * tile
-        x0 = (t % ntx) * tile
-        y1 = min(y0 + tile, h)
-        x1 = min(x0 + tile, w)
-        smax = 0.0
-        for y in range(y0, y1):
-            for x in range(x0, x1):
-                smax = max(smax, sigma[y, x])
-        if smax <= 0.0:  # the fovea: nothing to do
-            for y in range(y0, y1):
-                for x in range(x0, x1):
-                    for ch in range(c):
-                        out[y, x, ch] = img[y, x, ch]
-            continue
-        # widest box this tile needs: level floor(smax) + 1
-        m = int(math.ceil(4.0 * (int(math.floor(smax)) + 1))) // 2 + 1
-        th, tw = y1 - y0 + 2 * m, x1 - x0 + 2 * m
-        sat = np.zeros((c, th + 1, tw + 1), dtype=np.float64)
-        for yy in range(th):
-            sy = _mirror(y0 - m + yy, h)
-            for ch in range(c):
-                run = 0.0
-                for xx in range(tw):
-                    run += img[sy, _mirror(x0 - m + xx, w), ch]
-                    sat[ch, yy + 1, xx + 1] = sat[ch, yy, xx + 1] + run
-        for y in range(y0, y1):
-            for x in range(x0, x1):
-                s = sigma[y, x]
-                if s <= 0.0:
-                    for ch in range(c):
-                        out[y, x, ch] = img[y, x, ch]
+    for y in numba.prange(h):
+        for x in range(w):
+            s = sigma[y, x]
+            v = img[y, x]
+            if s <= 0.0:
+                out[y, x] = v
+                continue
+            k0 = int(s)
+            t = s - k0
+            acc = 0.0
+            for j in range(2):
+                k = k0 + j
+                wgt = (1.0 - t) if j == 0 else t
+                if k == 0:  # width 0: the pixel itself
+                    acc += wgt * v
                     continue
-                k0 = int(math.floor(s))
-                frac = s - k0
-                for ch in range(c):
-                    out[y, x, ch] = 0.0
-                for j in range(2):
-                    k = k0 + j
-                    wgt = (1.0 - frac) if j == 0 else frac
-                    if wgt == 0.0:
-                        continue
-                    if k == 0:  # width 0: the pixel itself
-                        for ch in range(c):
-                            out[y, x, ch] += wgt * img[y, x, ch]
-                        continue
-                    n = int(math.ceil(4.0 * k))
-                    lo = (n - 1) // 2
-                    ya = y - y0 + m - lo
-                    xa = x - x0 + m - lo
-                    yb, xb = ya + n, xa + n
-                    gain = f_e * (1.0 + k)
-                    inv = 1.0 / (n * n)
-                    for ch in range(c):
-                        box = sat[ch, yb, xb] - sat[ch, ya, xb] - sat[ch, yb, xa] + sat[ch, ya, xa]
-                        avg = box * inv
-                        out[y, x, ch] += wgt * (avg + gain * (img[y, x, ch] - avg))
+                # width ceil(4 k) = 4 k, MATLAB anchoring: [x - (2k - 1), x + 2k]
+                ya = y + pad - 2 * k + 1
+                xa = x + pad - 2 * k + 1
+                yb = ya + 4 * k
+                xb = xa + 4 * k
+                box = sat[yb, xb] - sat[ya, xb] - sat[yb, xa] + sat[ya, xa]
+                avg = box / (16.0 * k * k)
+                acc += wgt * (avg + f_e * (1.0 + k) * (v - avg))
+            out[y, x] = acc
+    return out
+
+
+def _enhance_channels(img: np.ndarray, sigma: np.ndarray, max_sigma: float, f_e: float):
+    pad = box_width_px(int(max_sigma) + 1) // 2 + 1
+    out = np.empty_like(img)
+    for ch in range(img.shape[2]):
+        plane = np.ascontiguousarray(img[..., ch])
+        out[..., ch] = _enhance(plane, sigma, _sat(plane, pad), pad, f_e)
     return out
 
 
@@ -123,7 +114,4 @@ def contrast_enhance(linear: np.ndarray, sigma_map_px: np.ndarray, f_e: float) -
     (Table 2: 0.15 .. 0.28). The result may leave [0, 1]; the noise's clipping control
     accounts for that.
     """
-    return per_pixel_sigma(
-        linear, sigma_map_px,
-        lambda img, sigma, _max, fe: _enhance_tiles(img, sigma, fe, TILE_PX), np.float32(f_e),
-    )
+    return per_pixel_sigma(linear, sigma_map_px, _enhance_channels, float(f_e))
