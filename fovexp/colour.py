@@ -8,6 +8,7 @@ and the result is re-encoded.
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 
 #: BT.601 luma weights. The release's Y of YCbCr, normalised as (Y - 16/255) / (219/255), equals
@@ -32,18 +33,36 @@ def linearize(encoded: np.ndarray, gamma: float, transfer: str = "power") -> np.
     return np.power(out, np.float32(gamma), out=out)
 
 
+@numba.njit(parallel=True, cache=True, fastmath=True)
+def _add_grey_clip(img, a, b, out):  # pragma: no cover - compiled
+    """out = clip(img + a + b, 0, 1), a and b grey (H, W) added to every channel."""
+    h, w, c = img.shape
+    for y in numba.prange(h):
+        for x in range(w):
+            g = a[y, x] + b[y, x]
+            for ch in range(c):
+                out[y, x, ch] = min(max(img[y, x, ch] + g, np.float32(0.0)), np.float32(1.0))
+
+
 def encode(
-    linear: np.ndarray, gamma: float, transfer: str = "power", add: np.ndarray | None = None
+    linear: np.ndarray, gamma: float, transfer: str = "power", *grey: np.ndarray
 ) -> np.ndarray:
-    """Inverse of :func:`linearize`, after adding the grey ``add`` (H, W) to every channel;
-    values outside [0, 1] are clipped first (a display shows nothing else)."""
+    """Inverse of :func:`linearize`, after adding up to two grey (H, W) images (the contrast
+    change, the noise) to every channel; values outside [0, 1] are clipped first (a display
+    shows nothing else). One pass adds and clips, then NumPy's vectorised power."""
     lin = np.asarray(linear, dtype=np.float32)
     out = np.empty(lin.shape, dtype=np.float32)
-    if add is None:
-        out[...] = lin
+    if grey:
+        if len(grey) > 2:
+            raise ValueError("encode adds at most two grey images")
+        a = np.ascontiguousarray(grey[0], dtype=np.float32)
+        b = np.ascontiguousarray(grey[1], dtype=np.float32) if len(grey) == 2 else (
+            np.zeros_like(a))
+        three = lin.ndim == 3
+        _add_grey_clip(np.ascontiguousarray(lin if three else lin[..., None]), a, b,
+                       out if three else out[..., None])
     else:
-        np.add(lin, add[..., None] if lin.ndim == 3 else add, out=out)
-    np.clip(out, 0.0, 1.0, out=out)
+        np.clip(lin, 0.0, 1.0, out=out)
     np.power(out, np.float32(1.0 / gamma), out=out)
     if transfer == "release":
         out *= np.float32(1.0 + _RELEASE_OFFSET)

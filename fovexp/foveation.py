@@ -42,8 +42,11 @@ def sigma_px(
     release preset (fovea 12 deg, 42.67 px/deg) blur-rate 0.46875 gives the release's
     "6 px at 30 deg".
     """
-    arcmin = blur_rate * np.maximum(0.0, np.asarray(ecc_deg) - fovea_deg)
-    return arcmin_to_px(arcmin, ppd).astype(np.float32)
+    out = np.array(ecc_deg, dtype=np.float32)  # a copy, worked on in place
+    out -= np.float32(fovea_deg)
+    np.maximum(out, 0.0, out=out)
+    out *= np.float32(blur_rate)  # arcmin
+    return arcmin_to_px(out, ppd).astype(np.float32, copy=False)
 
 
 #: Ratio of consecutive blur-stack sigmas past 1.5 px (the speed / error trade-off:

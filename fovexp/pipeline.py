@@ -387,8 +387,9 @@ class Enhancer:
         of the linear foveated image, then encoded (section 4.5); values outside [0, 1] clip."""
         if method == "foveated":
             return self._encode(foveated)
-        add = contrast() if method == "contrast" else contrast() + noise()
-        return colour.encode(foveated, self._gamma(), self.preset.transfer, add=add)
+        if method == "contrast":
+            return colour.encode(foveated, self._gamma(), self.preset.transfer, contrast())
+        return colour.encode(foveated, self._gamma(), self.preset.transfer, contrast(), noise())
 
     # ------------------------------------------------------------------------------- maps
     def linear(self, name: str) -> np.ndarray:
