@@ -232,8 +232,10 @@ def load_results(
     if not frames:
         raise FovexpError(f"{root}: no usable trials in {len(files)} trials.csv file(s)"
                           + _first_reason(exclusions))
-    trials = pd.concat(frames, ignore_index=True)
-    trials = _typed(trials)
+    # all-empty columns (e.g. s_f in calibration-fe) carry no dtype; they are typed just below
+    columns = frames[0].columns
+    trials = pd.concat([f.dropna(axis=1, how="all") for f in frames], ignore_index=True)
+    trials = _typed(trials.reindex(columns=columns))
 
     # R4 practice.
     trials = _exclude(trials, trials["practice"], "R4 practice", "practice trial", exclusions)

@@ -67,7 +67,8 @@ def _sat(img, pad):  # pragma: no cover - compiled
 
 
 @numba.njit(parallel=True, cache=True, fastmath=True)
-def _enhance(img, sigma, sat, pad, f_e):  # pragma: no cover - compiled
+def _enhance(img, sigma, sat, pad, f_e, minus):  # pragma: no cover - compiled
+    """The enhanced image, less ``minus`` times the input (1: just the change)."""
     h, w = img.shape
     out = np.empty_like(img)
     for y in numba.prange(h):
@@ -75,7 +76,7 @@ def _enhance(img, sigma, sat, pad, f_e):  # pragma: no cover - compiled
             s = sigma[y, x]
             v = img[y, x]
             if s <= 0.0:
-                out[y, x] = v
+                out[y, x] = v - minus * v
                 continue
             k0 = int(s)
             t = s - k0
@@ -94,17 +95,22 @@ def _enhance(img, sigma, sat, pad, f_e):  # pragma: no cover - compiled
                 box = sat[yb, xb] - sat[ya, xb] - sat[yb, xa] + sat[ya, xa]
                 avg = box / (16.0 * k * k)
                 acc += wgt * (avg + f_e * (1.0 + k) * (v - avg))
-            out[y, x] = acc
+            out[y, x] = acc - minus * v
     return out
 
 
 def _enhance_channels(img: np.ndarray, sigma: np.ndarray, max_sigma: float, f_e: float):
-    pad = box_width_px(int(max_sigma) + 1) // 2 + 1
+    pad = _pad_for(max_sigma)
     out = np.empty_like(img)
     for ch in range(img.shape[2]):
         plane = np.ascontiguousarray(img[..., ch])
-        out[..., ch] = _enhance(plane, sigma, _sat(plane, pad), pad, f_e)
+        out[..., ch] = _enhance(plane, sigma, _sat(plane, pad), pad, f_e, np.float32(0.0))
     return out
+
+
+def _pad_for(max_sigma: float) -> int:
+    """Border the summed-area table needs: half the widest box (level floor(max) + 1)."""
+    return box_width_px(int(max_sigma) + 1) // 2 + 1
 
 
 def contrast_enhance(linear: np.ndarray, sigma_map_px: np.ndarray, f_e: float) -> np.ndarray:
@@ -115,3 +121,15 @@ def contrast_enhance(linear: np.ndarray, sigma_map_px: np.ndarray, f_e: float) -
     accounts for that.
     """
     return per_pixel_sigma(linear, sigma_map_px, _enhance_channels, float(f_e))
+
+
+def contrast_change(grey: np.ndarray, sigma_map_px: np.ndarray, f_e: float) -> np.ndarray:
+    """``contrast_enhance(grey) - grey`` of an (H, W) linear luminance image, in one pass: the
+    change the pipeline adds to every colour channel (the method works on luminance)."""
+    img = np.ascontiguousarray(grey, dtype=np.float32)
+    sigma = np.ascontiguousarray(sigma_map_px, dtype=np.float32)
+    max_sigma = float(sigma.max()) if sigma.size else 0.0
+    if max_sigma <= 0.0:
+        return np.zeros(img.shape, dtype=np.float32)
+    pad = _pad_for(max_sigma)
+    return _enhance(img, sigma, _sat(img, pad), pad, np.float32(f_e), np.float32(1.0))

@@ -25,7 +25,7 @@ from scipy import ndimage
 
 from . import amplitude as amp
 from . import colour, frequency, gabor, orientation, pyramids
-from .contrast import contrast_enhance
+from .contrast import contrast_change
 from .errors import FovexpError
 from .foveation import foveate, sigma_px
 from .geometry import Display, GeometryModel, ViewingGeometry
@@ -302,7 +302,7 @@ class Enhancer:
         """The change of luminance the contrast enhancement makes (grey, linear). The method
         processes luminance only (section 4.5): like the noise, this change is added to
         every channel of the foveated image."""
-        return contrast_enhance(luma, sigma, f_e) - luma
+        return contrast_change(luma, sigma, f_e)
 
     def _headroom(self, foveated, luma, delta) -> tuple[np.ndarray, np.ndarray, int]:
         """Local minimum and maximum of the image the noise is added to (section 4.2).

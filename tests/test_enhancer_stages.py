@@ -9,7 +9,7 @@ from scipy import ndimage, stats
 from fovexp import amplitude as amp
 from fovexp import frequency, gabor, pyramids
 from fovexp.colour import encode, linearize
-from fovexp.contrast import box_width_px, contrast_enhance
+from fovexp.contrast import box_width_px, contrast_change, contrast_enhance
 from fovexp.foveation import foveate, foveate_exact
 
 from engine_helpers import textured_image
@@ -80,6 +80,12 @@ def test_contrast_interpolates_between_integer_levels_and_keeps_the_fovea():
     assert np.abs(mid - (0.75 * s1 + 0.25 * s2)).max() < 1e-5
     sig = np.zeros((40, 50), np.float32)
     assert np.array_equal(contrast_enhance(img, sig, 0.3), img)
+    # the pipeline's one-pass change of luminance is the enhanced image less the input
+    grey = img[..., 1].copy()
+    ramp = np.linspace(0, 3.5, 50, dtype=np.float32)[None, :].repeat(40, 0)
+    change = contrast_change(grey, ramp, 0.3)
+    assert np.abs(change - (contrast_enhance(grey, ramp, 0.3) - grey)).max() < 1e-6
+    assert np.all(change[:, 0] == 0)
 
 
 # ---------------------------------------------------------------------------- frequency
