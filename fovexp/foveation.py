@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numba
 import numpy as np
@@ -256,17 +257,47 @@ def foveate(
     return per_pixel_sigma(linear, sigma_map_px, _foveate, ratio, min_residual_px)
 
 
-def _foveate(
-    img: np.ndarray, sigma: np.ndarray, max_sigma: float, ratio: float, min_residual_px: float
-) -> np.ndarray:
-    levels = stack_sigmas_px(max_sigma, ratio)
+@dataclass(frozen=True)
+class BlurStackPlan:
+    """What the fast foveation computes for a given largest sigma (shared by the CPU and GPU
+    backends): the stack sigmas, the Gaussian-pyramid level each is blurred on, the residual
+    kernel there, and the replicated border the pyramid is built with."""
+
+    sigmas_px: np.ndarray  # float64 (n,)
+    pyramid_level: np.ndarray  # int64 (n,)
+    kernels: tuple[np.ndarray, ...]  # float32, one per stack level (length 1: no blur)
+    pad_px: int  # full-resolution border replicated before the pyramid (0 when top == 0)
+
+    @property
+    def top(self) -> int:
+        return int(self.pyramid_level.max())
+
+
+def blur_stack_plan(
+    max_sigma_px: float, ratio: float = STACK_RATIO, min_residual_px: float = MIN_RESIDUAL_LEVEL_PX
+) -> BlurStackPlan:
+    """The blur stack for sigmas up to ``max_sigma_px`` (see the module docstring)."""
+    levels = stack_sigmas_px(max_sigma_px, ratio)
     lvl_m = np.array([_pyramid_level_for(float(s), min_residual_px) for s in levels],
                      dtype=np.int64)
     top = int(lvl_m.max())
     # Replicate borders at full resolution (as the exact convolution does) by padding before
     # the pyramid; a multiple of 2**top keeps the level grids aligned with the image's.
     step = level_scale(top)
-    pad = -(-int(TRUNCATE_SIGMAS * max_sigma + 2 * step) // step) * step if top else 0
+    pad = -(-int(TRUNCATE_SIGMAS * max_sigma_px + 2 * step) // step) * step if top else 0
+    kernels = [np.ones(1, np.float32)]
+    for k in range(1, levels.size):
+        m = int(lvl_m[k])
+        residual = math.sqrt(max(levels[k] ** 2 - gaussian_sigma_px(m) ** 2, 0.0)) / level_scale(m)
+        kernels.append(gaussian_kernel(residual) if residual > 0 else np.ones(1, np.float32))
+    return BlurStackPlan(levels, lvl_m, tuple(kernels), pad)
+
+
+def _foveate(
+    img: np.ndarray, sigma: np.ndarray, max_sigma: float, ratio: float, min_residual_px: float
+) -> np.ndarray:
+    plan = blur_stack_plan(max_sigma, ratio, min_residual_px)
+    pad, top = plan.pad_px, plan.top
     padded = np.pad(img, ((pad, pad), (pad, pad), (0, 0)), mode="edge") if pad else img
     pyramid = gaussian_pyramid(padded, top)
     pyramid[0] = img  # level 0 is read unpadded (its borders replicate by clamping)
@@ -276,19 +307,15 @@ def _foveate(
         pmeta[m] = (start, lvl.shape[0], lvl.shape[1])
         start += lvl.size
     pbuf = np.concatenate([lvl.ravel() for lvl in pyramid])
-    kernels = [np.ones(1, np.float32)]
-    for k in range(1, levels.size):
-        m = int(lvl_m[k])
-        residual = math.sqrt(max(levels[k] ** 2 - gaussian_sigma_px(m) ** 2, 0.0)) / level_scale(m)
-        kernels.append(gaussian_kernel(residual) if residual > 0 else np.ones(1, np.float32))
-    kmeta = np.zeros((levels.size, 2), dtype=np.int64)
+    kmeta = np.zeros((len(plan.kernels), 2), dtype=np.int64)
     start = 0
-    for k, g in enumerate(kernels):
+    for k, g in enumerate(plan.kernels):
         kmeta[k] = (start, g.size // 2)
         start += g.size
-    kbuf = np.concatenate(kernels)
+    kbuf = np.concatenate(plan.kernels)
     return _foveate_bands(
-        img, sigma, levels.astype(np.float32), lvl_m, kbuf, kmeta, pbuf, pmeta, pad, BAND_ROWS
+        img, sigma, plan.sigmas_px.astype(np.float32), plan.pyramid_level, kbuf, kmeta, pbuf,
+        pmeta, pad, BAND_ROWS,
     )
 
 

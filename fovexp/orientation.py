@@ -1,7 +1,8 @@
 """Noise orientation from image gradients (paper section 4.3; notes section 3.5).
 
 Sobel gradients of the foveated grey image on Gaussian-pyramid level 3 (1/8 resolution, for
-spatial and temporal smoothness), interpolated bicubically to the points where they are needed.
+spatial and temporal smoothness), interpolated bicubically to the points where they are needed
+(Keys cubic convolution, a = -0.5: MATLAB's imresize 'bicubic', which the release uses).
 The orientation follows the release's convention (x right, y down)::
 
     omega = atan2(G_y, G_x) - pi / 2
@@ -15,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
-from .pyramids import level_scale
+from .pyramids import sample_cubic
 
 #: Gaussian-pyramid level the gradients are computed on (paper section 4.3).
 ORIENTATION_LEVEL = 3
@@ -31,10 +32,9 @@ def orientation_at(
     gx: np.ndarray, gy: np.ndarray, x_px: np.ndarray, y_px: np.ndarray,
     level: int = ORIENTATION_LEVEL,
 ) -> np.ndarray:
-    """``omega`` (rad) at full-resolution points: G_x, G_y interpolated bicubically (cubic
-    spline, interpolating) from their level grid, then ``atan2(G_y, G_x) - pi/2``."""
-    s = float(level_scale(level))
-    coords = [np.asarray(y_px) / s, np.asarray(x_px) / s]
-    gxs = ndimage.map_coordinates(gx, coords, order=3, mode="nearest")
-    gys = ndimage.map_coordinates(gy, coords, order=3, mode="nearest")
+    """``omega`` (rad) at full-resolution points: G_x, G_y interpolated bicubically (Keys,
+    :func:`fovexp.pyramids.sample_cubic`) from their level grid, then
+    ``atan2(G_y, G_x) - pi/2`` (0 - pi/2 where both vanish, as numpy's atan2(0, 0) = 0)."""
+    gxs = sample_cubic(gx, x_px, y_px, level)
+    gys = sample_cubic(gy, x_px, y_px, level)
     return (np.arctan2(gys, gxs) - 0.5 * np.pi).astype(np.float32)
