@@ -185,8 +185,14 @@ class Enhancer:
         )
         self.table = table
         self._version = 0
-        c = self._c = _StageCache()
-        p = self.preset
+        self._c = _StageCache()
+        self._define_stages()
+
+    #: which implementation runs the stages ("cpu": NumPy/Numba; "gpu": fovexp.gpu)
+    backend = "cpu"
+
+    def _define_stages(self) -> None:
+        c, p = self._c, self.preset
         c.stage("geometry", ("shape", "viewport"), self._geometry)
         c.stage("linear", ("image",), self._linear)
         c.stage("grids", ("geometry", "gaze"), lambda geom, gaze:
@@ -270,8 +276,11 @@ class Enhancer:
             s_f=params.s_f, n_impulses=params.impulses, seed=params.seed, method=params.method,
         )
         self._version += 1
-        out = self._c.get("output")
+        out = self._output()
         return EnhanceResult(out, params, dict(self._c.timings_s), self, self._version)
+
+    def _output(self) -> np.ndarray:
+        return self._c.get("output")
 
     # ------------------------------------------------------------------------------- stages
     def _geometry(self, shape: tuple[int, int], viewport) -> ViewingGeometry:

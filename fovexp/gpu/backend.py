@@ -1,0 +1,510 @@
+"""The GPU backend: :class:`GpuEnhancer`, the pipeline's stages as OpenGL 4.5 compute shaders.
+
+It is a :class:`fovexp.Enhancer` (same ``set_image`` / ``enhance`` / ``EnhanceResult``, same
+stage cache: a wheel step recomputes only what the changed parameter invalidates) whose stages
+dispatch the entries of ``shaders/<stage>.glsl`` instead of NumPy/Numba code. Every stage
+keeps its result in GPU buffers; only the finished frame (and any map asked for) is read
+back. What is not per-pixel work stays in Python and is shared with the CPU backend: the
+viewing geometry's constants, the blur-stack plan, the impulses (generated once per image
+size, impulse count and seed) and the noise normalisation.
+
+The backend implements the ``paper`` preset; the ``release`` preset (kept to compare with the
+authors' prototype) runs on the CPU backend. A context is used from the thread that created
+it: create the enhancer on the thread that renders.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .. import gabor
+from ..amplitude import MAX_LAPLACIAN_LEVEL
+from ..contrast import _pad_for as contrast_pad_px
+from ..errors import FovexpError
+from ..foveation import blur_stack_plan
+from ..geometry import Display, GeometryModel, ViewingGeometry
+from ..orientation import ORIENTATION_LEVEL
+from ..params import ParameterTable, get_preset
+from ..pipeline import MAP_NAMES, Enhancer
+from ..pyramids import level_scale
+from .programs import (
+    BINDINGS,
+    GEOMETRY_MODELS,
+    IMPULSE_FIELDS,
+    LOCAL_1D,
+    LOCAL_2D,
+    Programs,
+    create_context,
+    renderer_name,
+)
+
+_F4 = 4  # bytes per float32
+
+
+@dataclass(frozen=True)
+class _Grid:
+    """One level of a packed pyramid: ``offset`` in values (floats) into its buffer."""
+
+    offset: int
+    height: int
+    width: int
+
+
+@dataclass(frozen=True)
+class _GpuImpulses:
+    impulses: gabor.Impulses
+    order: np.ndarray  # GPU record i is impulse order[i] of ``impulses``
+    cells_xy: tuple[int, int]
+    count: int
+
+
+class GpuEnhancer(Enhancer):
+    """:class:`fovexp.Enhancer` on the GPU (OpenGL 4.5 compute shaders through moderngl).
+
+    ``ctx``: a moderngl context to run in (e.g. a window's, from ``moderngl.create_context()``);
+    by default a standalone one through EGL. ``profile=True`` waits for the GPU after each
+    stage so that ``EnhanceResult.timings_s`` holds each stage's execution time (otherwise
+    the times are those of submitting the work; the frame read-back waits for all of it).
+    """
+
+    backend = "gpu"
+
+    def __init__(
+        self, display: Display, preset: str = "paper", geometry: GeometryModel | None = None,
+        table: ParameterTable | None = None, ctx: Any = None, profile: bool = False,
+    ) -> None:
+        if get_preset(preset).name != "paper":
+            raise FovexpError(
+                f"the GPU backend implements the paper preset, not {preset!r}: the release "
+                "preset runs on the CPU backend (backend='cpu')"
+            )
+        self.ctx = create_context(ctx)
+        self.renderer = renderer_name(self.ctx)
+        self.profile = profile
+        self._programs = Programs(self.ctx)
+        self._buffers: dict[str, Any] = {}
+        super().__init__(display, preset, geometry, table)
+
+    # ------------------------------------------------------------------------- stage graph
+    def _define_stages(self) -> None:
+        c, t = self._c, self._timed
+        c.stage("geometry", ("shape", "viewport"), self._geometry)
+        c.stage("upload", ("image",), t(self._upload))
+        c.stage("linear", ("upload",), t(self._gpu_linear))
+        c.stage("sigma", ("sigma_given", "geometry", "gaze", "blur_rate"), t(self._gpu_sigma))
+        c.stage("foveated", ("linear", "sigma", "already_foveated"), t(self._gpu_foveated))
+        c.stage("luma", ("foveated",), t(self._gpu_luma))
+        c.stage("pyramid", ("luma",), t(self._gpu_pyramid))
+        c.stage("abs_laplacian", ("pyramid",), t(self._gpu_abs_laplacian))
+        c.stage("gradients", ("pyramid",), t(self._gpu_gradients))
+        c.stage("sat", ("luma", "sigma"), t(self._gpu_sat))
+        c.stage("contrast", ("sat", "f_e"), t(self._gpu_contrast))
+        c.stage("headroom", ("foveated", "contrast"), t(self._gpu_headroom))
+        c.stage("impulses", ("shape", "n_impulses", "seed"), t(self._gpu_impulses))
+        c.stage("imp_params", ("impulses", "geometry", "gaze", "sigma", "blur_rate", "s_f",
+                               "s_k", "abs_laplacian", "gradients", "headroom"),
+                t(self._gpu_imp_params))
+        c.stage("noise", ("impulses", "imp_params"), t(self._gpu_noise))
+        c.stage("output", ("method", "foveated", "?contrast", "?noise"), t(self._gpu_output))
+
+    def _timed(self, fn):
+        if not self.profile:
+            return fn
+
+        def run(*args):
+            out = fn(*args)
+            self.ctx.finish()
+            return out
+
+        return run
+
+    # ------------------------------------------------------------------------- plumbing
+    def _buffer(self, name: str, nbytes: int) -> Any:
+        """The buffer ``name`` of at least ``nbytes`` (reallocated, zeroed, when it grows)."""
+        nbytes = max(int(nbytes), 16)
+        buf = self._buffers.get(name)
+        if buf is None or buf.size < nbytes:
+            if buf is not None:
+                buf.release()
+            buf = self._buffers[name] = self.ctx.buffer(reserve=nbytes)
+            buf.clear()
+        return buf
+
+    def _run(self, file: str, entry: str, groups: tuple[int, ...], buffers: dict[str, Any],
+             **uniforms: Any) -> None:
+        prog = self._programs.get(file, entry)
+        for name, buf in buffers.items():
+            buf.bind_to_storage_buffer(BINDINGS[name])
+        for key, value in uniforms.items():
+            if key not in prog:  # unused by this entry: the compiler removed it
+                continue
+            if isinstance(value, np.ndarray):
+                prog[key].write(value.tobytes())
+            else:
+                prog[key].value = value
+        prog.run(*groups)
+        self.ctx.memory_barrier()
+
+    @staticmethod
+    def _groups_2d(height: int, width: int) -> tuple[int, int, int]:
+        return (-(-width // LOCAL_2D[0]), -(-height // LOCAL_2D[1]), 1)
+
+    @staticmethod
+    def _groups_1d(n: int) -> tuple[int, int, int]:
+        return (max(-(-n // LOCAL_1D), 1), 1, 1)
+
+    def _hwc(self) -> tuple[int, int, int]:
+        img = self._c.get("image")
+        return img.shape[0], img.shape[1], (img.shape[2] if img.ndim == 3 else 1)
+
+    def _read(self, name: str, count: int, dtype: str = "f4") -> np.ndarray:
+        return np.frombuffer(self._buffers[name].read(size=count * np.dtype(dtype).itemsize),
+                             dtype=dtype).copy()
+
+    def _geometry_uniforms(self) -> dict[str, Any]:
+        geom: ViewingGeometry = self._c.get("geometry")
+        gx, gy = geom.gaze_px(self._c.get("gaze"))
+        ppd_c = geom.ppd_constant if math.isfinite(geom.ppd_constant) else 0.0
+        return dict(
+            geom_model=GEOMETRY_MODELS[geom.model],
+            geom_pitch_cm=(geom.pitch_x_cm, geom.pitch_y_cm),
+            geom_distance_cm=geom.distance_cm, geom_ppd_constant=ppd_c,
+            geom_screen_px=(float(geom.screen_width_px), float(geom.screen_height_px)),
+            geom_origin_px=(float(geom.x0_px), float(geom.y0_px)), gaze_px=(gx, gy),
+            blur_rate_arcmin_per_deg=float(self._c.get("blur_rate")),
+            fovea_deg=float(self.preset.fovea_deg),
+        )
+
+    # ------------------------------------------------------------------------- stages
+    def _upload(self, image: np.ndarray) -> Any:
+        data = np.ascontiguousarray(image, dtype=np.float32)
+        buf = self._buffer("IMAGE", data.nbytes)
+        buf.write(data.tobytes())
+        return buf
+
+    def _gpu_linear(self, image_buf: Any) -> Any:
+        h, w, c = self._hwc()
+        lin = self._buffer("LINEAR", h * w * c * _F4)
+        self._run("colour.glsl", "LINEARIZE", self._groups_2d(h, w),
+                  {"IMAGE": image_buf, "LINEAR": lin}, image_hwc=(h, w, c), gamma=self._gamma())
+        return lin
+
+    def _gpu_sigma(self, given, geom, gaze, blur_rate) -> float:
+        """The sigma map in its buffer; returns its maximum (px), which sizes the blur stack."""
+        h, w, _ = self._hwc()
+        sigma = self._buffer("SIGMA", h * w * _F4)
+        if given is not None:
+            sigma.write(np.ascontiguousarray(given, np.float32).tobytes())
+            return float(given.max())
+        top = self._buffer("SIGMA_MAX", 16)
+        top.write(np.zeros(4, np.uint32).tobytes())
+        self._run("foveation.glsl", "SIGMA", self._groups_2d(h, w),
+                  {"SIGMA": sigma, "SIGMA_MAX": top}, size_wh=(w, h), **self._geometry_uniforms())
+        return float(np.frombuffer(top.read(size=4), dtype=np.float32)[0])
+
+    def _gpu_foveated(self, linear: Any, max_sigma: float, already_foveated: bool) -> Any:
+        """foveation.foveate: the blur stack of foveation.blur_stack_plan."""
+        if already_foveated or max_sigma <= 0.0:
+            return linear
+        h, w, c = self._hwc()
+        plan = blur_stack_plan(max_sigma)
+        pad = plan.pad_px
+        # levels 1..top of the padded image's pyramid, packed; level 0 is `linear` itself
+        grids = [_Grid(0, h, w)]
+        ph, pw, offset = h + 2 * pad, w + 2 * pad, 0
+        for _ in range(plan.top):
+            ph, pw = (ph + 1) // 2, (pw + 1) // 2
+            grids.append(_Grid(offset, ph, pw))
+            offset += ph * pw * c
+        pyr = self._buffer("FOV_PYR", offset * _F4)
+        for m in range(1, plan.top + 1):
+            src, g = (linear, grids[0]) if m == 1 else (pyr, grids[m - 1])
+            self._run("pyramids.glsl", "REDUCE", self._groups_2d(grids[m].height, grids[m].width),
+                      {"REDUCE_SRC": src, "REDUCE_DST": pyr}, src_hwc=(g.height, g.width, c),
+                      src_offset=g.offset, src_pad=pad if m == 1 else 0,
+                      dst_hw=(grids[m].height, grids[m].width), dst_offset=grids[m].offset)
+        levels = self._buffer("LEVELS", plan.sigmas_px.size * _F4)
+        levels.write(plan.sigmas_px.astype(np.float32).tobytes())
+        kernels = np.concatenate(plan.kernels).astype(np.float32)
+        kbuf = self._buffer("KERNELS", kernels.nbytes)
+        kbuf.write(kernels.tobytes())
+        bracket = self._buffer("BRACKET", h * w * 2 * _F4)
+        fov = self._buffer("FOVEATED", h * w * c * _F4)
+        sigma = self._buffers["SIGMA"]
+        self._run("foveation.glsl", "STACK_INIT", self._groups_2d(h, w),
+                  {"LINEAR": linear, "SIGMA": sigma, "LEVELS": levels, "BRACKET": bracket,
+                   "FOVEATED": fov}, image_hwc=(h, w, c), n_levels=int(plan.sigmas_px.size))
+        largest = max(grids[int(m)].height * grids[int(m)].width for m in plan.pyramid_level)
+        tmp = self._buffer("BLUR_TMP", largest * c * _F4)
+        out = self._buffer("BLUR_OUT", largest * c * _F4)
+        k_offset = 1  # kernels[0] is stack level 0's (the image itself)
+        for lv in range(1, plan.sigmas_px.size):
+            m = int(plan.pyramid_level[lv])
+            g = grids[m]
+            src = linear if m == 0 else pyr
+            radius = plan.kernels[lv].size // 2
+            groups = self._groups_2d(g.height, g.width)
+            for along_y, (a, b, off) in ((1, (src, tmp, g.offset)), (0, (tmp, out, 0))):
+                self._run("foveation.glsl", "BLUR", groups, {"BLUR_SRC": a, "BLUR_DST": b,
+                          "KERNELS": kbuf}, grid_hwc=(g.height, g.width, c), src_offset=off,
+                          kernel_offset=k_offset, kernel_radius=radius, along_y=along_y)
+            k_offset += plan.kernels[lv].size
+            self._run("foveation.glsl", "STACK_ACCUMULATE", self._groups_2d(h, w),
+                      {"BLUR_DST": out, "BRACKET": bracket, "FOVEATED": fov},
+                      image_hwc=(h, w, c), stack_level=lv, level_scale=level_scale(m),
+                      level_pad_px=pad if m > 0 else 0, level_hw=(g.height, g.width))
+        return fov
+
+    def _luma_grids(self) -> list[_Grid]:
+        """Levels of pyramids.gaussian_pyramid(luma, MAX_LAPLACIAN_LEVEL), packed."""
+        h, w, _ = self._hwc()
+        grids, offset = [_Grid(0, h, w)], h * w
+        while len(grids) <= MAX_LAPLACIAN_LEVEL and min(h, w) >= 2:
+            h, w = (h + 1) // 2, (w + 1) // 2
+            grids.append(_Grid(offset, h, w))
+            offset += h * w
+        return grids
+
+    def _gpu_luma(self, fov: Any) -> list[_Grid]:
+        h, w, c = self._hwc()
+        grids = self._luma_grids()
+        last = grids[-1]
+        pyr = self._buffer("LUMA_PYR", (last.offset + last.height * last.width) * _F4)
+        self._run("colour.glsl", "LUMINANCE", self._groups_2d(h, w),
+                  {"FOVEATED": fov, "LUMA_PYR": pyr}, image_hwc=(h, w, c))
+        return grids
+
+    def _gpu_pyramid(self, grids: list[_Grid]) -> list[_Grid]:
+        pyr = self._buffers["LUMA_PYR"]
+        for m in range(1, len(grids)):
+            s, d = grids[m - 1], grids[m]
+            self._run("pyramids.glsl", "REDUCE", self._groups_2d(d.height, d.width),
+                      {"REDUCE_SRC": pyr, "REDUCE_DST": pyr}, src_hwc=(s.height, s.width, 1),
+                      src_offset=s.offset, src_pad=0, dst_hw=(d.height, d.width),
+                      dst_offset=d.offset)
+        return grids
+
+    def _gpu_abs_laplacian(self, grids: list[_Grid]) -> dict[str, Any]:
+        """pyramids.smoothed_abs_laplacian: |L_k|, k = 1..top, each on G_{k-1}'s grid."""
+        top = min(MAX_LAPLACIAN_LEVEL, len(grids) - 1)
+        offsets = np.zeros(MAX_LAPLACIAN_LEVEL + 1, np.int32)
+        sizes = np.zeros((MAX_LAPLACIAN_LEVEL + 1, 2), np.int32)
+        total = 0
+        for k in range(1, top + 1):
+            g = grids[k - 1]
+            offsets[k], sizes[k] = total, (g.width, g.height)
+            total += g.height * g.width
+        lap = self._buffer("ABSLAP", total * _F4)
+        tmp = self._buffer("LAP_TMP", grids[0].height * grids[0].width * _F4)
+        pyr = self._buffers["LUMA_PYR"]
+        for k in range(1, top + 1):
+            f, co = grids[k - 1], grids[k]
+            groups = self._groups_2d(f.height, f.width)
+            self._run("pyramids.glsl", "ABS_LAPLACIAN", groups, {"LUMA_PYR": pyr, "LAP_TMP": tmp},
+                      fine_hw=(f.height, f.width), fine_offset=f.offset,
+                      coarse_hw=(co.height, co.width), coarse_offset=co.offset)
+            self._run("pyramids.glsl", "BOX3", groups, {"LAP_TMP": tmp, "ABSLAP": lap},
+                      grid_hw=(f.height, f.width), dst_offset=int(offsets[k]))
+        return dict(lap_top=top, lap_offset=offsets, lap_size_wh=sizes)
+
+    def _gpu_gradients(self, grids: list[_Grid]) -> dict[str, Any]:
+        g = grids[ORIENTATION_LEVEL]
+        grad = self._buffer("GRADIENTS", 2 * g.height * g.width * _F4)
+        self._run("orientation.glsl", "SOBEL", self._groups_2d(g.height, g.width),
+                  {"LUMA_PYR": self._buffers["LUMA_PYR"], "GRADIENTS": grad},
+                  level_hw=(g.height, g.width), level_offset=g.offset)
+        return dict(gradient_size_wh=(g.width, g.height))
+
+    def _gpu_sat(self, grids: list[_Grid], max_sigma: float) -> int | None:
+        """contrast._sat: the summed-area table (float64) of the padded luminance."""
+        if max_sigma <= 0.0:
+            return None
+        h, w, _ = self._hwc()
+        pad = contrast_pad_px(max_sigma)
+        hp, wp = h + 2 * pad, w + 2 * pad
+        sat = self._buffer("SAT", (hp + 1) * (wp + 1) * 8)
+        pyr = self._buffers["LUMA_PYR"]
+        self._run("contrast.glsl", "SAT_ROWS", self._groups_1d(hp), {"LUMA_PYR": pyr, "SAT": sat},
+                  image_hw=(h, w), pad_px=pad)
+        self._run("contrast.glsl", "SAT_COLS", self._groups_1d(wp), {"SAT": sat},
+                  image_hw=(h, w), pad_px=pad)
+        return pad
+
+    def _gpu_contrast(self, pad: int | None, f_e: float) -> Any:
+        """contrast.contrast_change: the luminance change, added later to every channel."""
+        h, w, _ = self._hwc()
+        delta = self._buffer("CONTRAST", h * w * _F4)
+        if pad is None:  # no blur anywhere: no change
+            delta.clear()
+            return delta
+        self._run("contrast.glsl", "CONTRAST_CHANGE", self._groups_2d(h, w),
+                  {"LUMA_PYR": self._buffers["LUMA_PYR"], "SIGMA": self._buffers["SIGMA"],
+                   "SAT": self._buffers["SAT"], "CONTRAST": delta},
+                  image_hw=(h, w), pad_px=pad, f_e=float(f_e))
+        return delta
+
+    def _gpu_headroom(self, fov: Any, delta: Any) -> dict[str, Any]:
+        """Enhancer._headroom (paper preset): level-3 block extremes over the channels of the
+        image the noise is added to, widened to every block a kernel reaches."""
+        h, w, c = self._hwc()
+        p = self.preset
+        block = level_scale(p.minmax_level)
+        radius = int(np.ceil(gabor.kernel_radius_px(p.gabor_a_cpp) / block))
+        bh, bw = -(-h // block), -(-w // block)
+        ext = self._buffer("EXTREMES", 2 * bh * bw * _F4)
+        head = self._buffer("HEADROOM", 2 * bh * bw * _F4)
+        self._run("pyramids.glsl", "BLOCK_EXTREMES", self._groups_2d(bh, bw),
+                  {"FOVEATED": fov, "CONTRAST": delta, "EXTREMES": ext},
+                  image_hwc=(h, w, c), block=block, grid_hw=(bh, bw))
+        self._run("pyramids.glsl", "EXTREMES_FILTER", self._groups_2d(bh, bw),
+                  {"EXTREMES": ext, "HEADROOM": head}, grid_hw=(bh, bw), radius=radius)
+        return dict(headroom_size_wh=(bw, bh), headroom_block=block)
+
+    def _gpu_impulses(self, shape: tuple[int, int], n: int, seed: int) -> _GpuImpulses:
+        """gabor.generate_impulses (the same impulses as the CPU backend), grouped by cell."""
+        h, w = shape
+        a = self.preset.gabor_a_cpp
+        imp = gabor.generate_impulses(w, h, n, a, seed)
+        cell = imp.cell_px
+        nx, ny = int(math.ceil(w / cell)) + 2, int(math.ceil(h / cell)) + 2
+        cx = np.clip(np.floor((imp.x_px + 0.5) / cell).astype(np.int64) + 1, 0, nx - 1)
+        cy = np.clip(np.floor((imp.y_px + 0.5) / cell).astype(np.int64) + 1, 0, ny - 1)
+        cell_id = cy * nx + cx
+        order = np.argsort(cell_id, kind="stable")
+        starts = np.searchsorted(cell_id[order], np.arange(nx * ny + 1)).astype(np.int32)
+        rec = np.zeros((len(imp), 4), np.float32)
+        rec[:, 0], rec[:, 1], rec[:, 2] = imp.x_px[order], imp.y_px[order], imp.weight[order]
+        q = np.stack([imp.quantile[order], 1.0 - imp.quantile[order]], axis=1).astype(np.float32)
+        for name, data in (("IMPULSES", rec), ("QUANTILES", q), ("CELLS", starts)):
+            self._buffer(name, data.nbytes).write(data.tobytes())
+        self._buffer("IMP_PARAMS", len(imp) * len(IMPULSE_FIELDS) * _F4)
+        return _GpuImpulses(imp, order, (nx, ny), len(imp))
+
+    def _gpu_imp_params(self, imp: _GpuImpulses, geom, gaze, max_sigma, blur_rate, s_f, s_k,
+                        lap: dict[str, Any], grad: dict[str, Any], head: dict[str, Any]) -> int:
+        """Per impulse: band, frequency, amplitude, orientation (pipeline.glsl)."""
+        h, w, _ = self._hwc()
+        b = self._buffers
+        self._run("pipeline.glsl", "IMPULSES", self._groups_1d(imp.count),
+                  {"IMPULSES": b["IMPULSES"], "QUANTILES": b["QUANTILES"], "SIGMA": b["SIGMA"],
+                   "ABSLAP": b["ABSLAP"], "GRADIENTS": b["GRADIENTS"], "HEADROOM": b["HEADROOM"],
+                   "IMP_PARAMS": b["IMP_PARAMS"]},
+                  n_impulses=imp.count, **self._point_uniforms(lap, grad, head))
+        return imp.count
+
+    def _point_uniforms(self, lap, grad, head) -> dict[str, Any]:
+        h, w, _ = self._hwc()
+        c = self._c
+        return dict(
+            image_wh=(w, h), sigma_from_map=int(c.get("sigma_given") is not None),
+            s_f=float(c.get("s_f")), s_k=float(c.get("s_k")),
+            noise_norm=gabor.normalisation(int(c.get("n_impulses")), self.preset.gabor_a_cpp),
+            attenuation=float(self.preset.attenuation), **self._geometry_uniforms(),
+            **(lap or {}), **grad, **(head or {}),
+        )
+
+    def _gpu_noise(self, imp: _GpuImpulses, _count: int) -> Any:
+        h, w, _ = self._hwc()
+        a = self.preset.gabor_a_cpp
+        b = self._buffers
+        noise = self._buffer("NOISE", h * w * _F4)
+        self._run("gabor.glsl", "NOISE", self._groups_2d(h, w),
+                  {"IMPULSES": b["IMPULSES"], "CELLS": b["CELLS"], "IMP_PARAMS": b["IMP_PARAMS"],
+                   "NOISE": noise},
+                  image_hw=(h, w), gabor_a_cpp=a, kernel_radius_px=gabor.kernel_radius_px(a),
+                  cell_px=imp.impulses.cell_px, cell_count_xy=imp.cells_xy)
+        return noise
+
+    def _gpu_output(self, method: str, fov: Any, contrast, noise) -> Any:
+        """Enhancer._compose: the grey change and noise on every channel, clipped, encoded."""
+        h, w, c = self._hwc()
+        out = self._buffer("OUTPUT", h * w * c * _F4)
+        delta = contrast() if method in ("contrast", "ours") else None
+        nz = noise() if method == "ours" else None
+        unused = self._buffer("UNUSED", 16)
+        self._run("colour.glsl", "COMPOSE", self._groups_2d(h, w),
+                  {"FOVEATED": fov, "CONTRAST": unused if delta is None else delta,
+                   "NOISE": unused if nz is None else nz,
+                   "OUTPUT": out},
+                  image_hwc=(h, w, c), add_contrast=int(delta is not None),
+                  add_noise=int(nz is not None), gamma=self._gamma())
+        return out
+
+    # ------------------------------------------------------------------------- read-back
+    def _image_shape(self) -> tuple[int, ...]:
+        h, w, c = self._hwc()
+        return (h, w, c) if self._c.get("image").ndim == 3 else (h, w)
+
+    def _output(self) -> np.ndarray:
+        self._c.get("output")
+        h, w, c = self._hwc()
+        return self._read("OUTPUT", h * w * c).reshape(self._image_shape())
+
+    def linear(self, name: str) -> np.ndarray:
+        if name not in ("foveated", "contrast"):
+            raise FovexpError(f"no linear image {name!r} (choose foveated or contrast)")
+        fov = self._c.get("foveated")
+        h, w, c = self._hwc()
+        img = np.frombuffer(fov.read(size=h * w * c * _F4), np.float32).reshape(
+            self._image_shape()).copy()
+        if name == "contrast":
+            self._c.get("contrast")
+            delta = self._read("CONTRAST", h * w).reshape(h, w)
+            img += delta[..., None] if img.ndim == 3 else delta
+        return img
+
+    def impulse_params(self) -> dict[str, np.ndarray]:
+        """Per-impulse parameters of the last frame, in the order of the impulses (``x_px``,
+        ``y_px``, then ``K``, ``F`` (cycles/px), ``OMEGA`` (rad), ``F_LOW``, ``F_HIGH``, and
+        ``AMP``, ``KX``, ``KY`` of the synthesis), for comparison with the CPU backend."""
+        imp: _GpuImpulses = self._c.get("impulses")
+        self._c.get("imp_params")
+        rec = self._read("IMP_PARAMS", imp.count * len(IMPULSE_FIELDS)).reshape(imp.count, -1)
+        back = np.empty_like(rec)
+        back[imp.order] = rec
+        out = {name: back[:, i] for i, name in enumerate(IMPULSE_FIELDS)}
+        out["x_px"], out["y_px"] = imp.impulses.x_px, imp.impulses.y_px
+        return out
+
+    def _map(self, name: str) -> np.ndarray:
+        c = self._c
+        h, w, _ = self._hwc()
+        if name == "output":
+            return self._output()
+        if name in ("foveated", "contrast"):
+            return self._encode(self.linear(name))
+        if name == "sigma_px":
+            c.get("sigma")
+            return self._read("SIGMA", h * w).reshape(h, w)
+        if name == "noise":
+            if c.get("method") != "ours":
+                return np.zeros((h, w), np.float32)
+            c.get("noise")
+            return self._read("NOISE", h * w).reshape(h, w)
+        fields = ("eccentricity_deg", "f_low_cpp", "f_high_cpp", "amplitude", "orientation_rad")
+        if name not in fields:
+            raise FovexpError(f"unknown map {name!r} (choose from {', '.join(MAP_NAMES)})")
+        with_noise = c.get("method") == "ours"
+        c.get("sigma")
+        grad = c.get("gradients")
+        lap = c.get("abs_laplacian") if with_noise else None
+        head = c.get("headroom") if with_noise else None
+        maps = self._buffer("MAPS", 5 * h * w * _F4)
+        b = self._buffers
+        bufs = {"SIGMA": b["SIGMA"], "GRADIENTS": b["GRADIENTS"], "MAPS": maps}
+        if with_noise:
+            bufs.update(ABSLAP=b["ABSLAP"], HEADROOM=b["HEADROOM"])
+        self._run("pipeline.glsl", "MAPS", self._groups_2d(h, w), bufs,
+                  with_noise=int(with_noise), **self._point_uniforms(lap, grad, head))
+        return self._read("MAPS", 5 * h * w)[fields.index(name) * h * w:][: h * w].reshape(h, w)
+
+    def close(self) -> None:
+        """Release the GPU buffers (the context stays with its owner)."""
+        for buf in self._buffers.values():
+            buf.release()
+        self._buffers.clear()
+

@@ -1,0 +1,133 @@
+// Foveation: fovexp/foveation.py. The sigma map (paper section 6.2) and the fast blur stack:
+// Gaussian blurs at fixed sigmas, each on the pyramid level its plan names (the plan is
+// foveation.blur_stack_plan, computed once in Python for both backends), and per pixel the
+// linear interpolation between the two stack levels that bracket its sigma.
+
+#include "geometry.glsl"
+
+uniform float blur_rate_arcmin_per_deg;
+uniform float fovea_deg;
+
+// foveation.sigma_px: blur_rate * max(0, e - fovea) arcmin, in px (geometry.arcmin_to_px)
+float sigma_px(float ecc_deg, float ppd) {
+    return max(ecc_deg - fovea_deg, 0.0) * blur_rate_arcmin_per_deg / 60.0 * ppd;
+}
+
+#ifdef ENTRY_SIGMA
+// sigma per pixel from the geometry, and its maximum (the blur stack's extent)
+LOCAL_2D
+uniform ivec2 size_wh;
+layout(std430, binding = B_SIGMA) writeonly buffer Sigma { float sigma[]; };
+layout(std430, binding = B_SIGMA_MAX) buffer SigmaMax { uint sigma_max_bits; };
+shared uint group_max_bits;
+void main() {
+    ivec2 p = ivec2(gl_GlobalInvocationID.xy);
+    if (gl_LocalInvocationIndex == 0u) group_max_bits = 0u;
+    barrier();
+    if (all(lessThan(p, size_wh))) {
+        float s = sigma_px(eccentricity_deg(vec2(p)), ppd(vec2(p)));
+        sigma[p.y * size_wh.x + p.x] = s;
+        // non-negative floats order as their bit patterns: one global atomic per group
+        atomicMax(group_max_bits, floatBitsToUint(s));
+    }
+    barrier();
+    if (gl_LocalInvocationIndex == 0u) atomicMax(sigma_max_bits, group_max_bits);
+}
+#endif
+
+#ifdef ENTRY_BLUR
+// one pass of a separable Gaussian (foveation._blur_patch): along y, then a second dispatch
+// along x; samples outside the grid replicate its border
+LOCAL_2D
+uniform ivec3 grid_hwc;
+uniform int src_offset;
+uniform int kernel_offset;
+uniform int kernel_radius;
+uniform int along_y;
+layout(std430, binding = B_BLUR_SRC) readonly buffer Src { float src[]; };
+layout(std430, binding = B_BLUR_DST) writeonly buffer Dst { float dst[]; };
+layout(std430, binding = B_KERNELS) readonly buffer Kernels { float kernels[]; };
+void main() {
+    ivec2 p = ivec2(gl_GlobalInvocationID.xy);
+    int h = grid_hwc.x, w = grid_hwc.y, c = grid_hwc.z;
+    if (p.x >= w || p.y >= h) return;
+    for (int ch = 0; ch < c; ++ch) {
+        float acc = 0.0;
+        for (int k = -kernel_radius; k <= kernel_radius; ++k) {
+            ivec2 q = along_y == 1 ? ivec2(p.x, clamp(p.y + k, 0, h - 1))
+                                   : ivec2(clamp(p.x + k, 0, w - 1), p.y);
+            acc += kernels[kernel_offset + k + kernel_radius] * src[src_offset + (q.y * w + q.x) * c + ch];
+        }
+        dst[(p.y * w + p.x) * c + ch] = acc;
+    }
+}
+#endif
+
+#ifdef ENTRY_STACK_INIT
+// each pixel's bracketing stack levels (k, t); level 0 (the image itself) accumulated here
+LOCAL_2D
+uniform ivec3 image_hwc;
+uniform int n_levels;
+layout(std430, binding = B_LINEAR) readonly buffer Linear { float linear[]; };
+layout(std430, binding = B_SIGMA) readonly buffer Sigma { float sigma[]; };
+layout(std430, binding = B_LEVELS) readonly buffer Levels { float levels[]; };
+layout(std430, binding = B_BRACKET) writeonly buffer Bracket { vec2 bracket[]; };
+layout(std430, binding = B_FOVEATED) writeonly buffer Foveated { float foveated[]; };
+void main() {
+    ivec2 p = ivec2(gl_GlobalInvocationID.xy);
+    int h = image_hwc.x, w = image_hwc.y, c = image_hwc.z;
+    if (p.x >= w || p.y >= h) return;
+    int i = p.y * w + p.x;
+    float s = sigma[i];
+    if (s <= 0.0) {  // untouched, bit for bit
+        bracket[i] = vec2(-1.0, 0.0);
+        for (int ch = 0; ch < c; ++ch) foveated[i * c + ch] = linear[i * c + ch];
+        return;
+    }
+    int k = -1;  // numpy.searchsorted(levels, s) - 1
+    for (int j = 0; j < n_levels; ++j) k += levels[j] < s ? 1 : 0;
+    k = min(k, n_levels - 2);
+    float t = min((s - levels[k]) / (levels[k + 1] - levels[k]), 1.0);
+    bracket[i] = vec2(float(k), t);
+    for (int ch = 0; ch < c; ++ch) foveated[i * c + ch] = k == 0 ? (1.0 - t) * linear[i * c + ch] : 0.0;
+}
+#endif
+
+#ifdef ENTRY_STACK_ACCUMULATE
+// add stack level `stack_level` (blurred on a pyramid level, sampled bilinearly) to the pixels
+// whose sigma it brackets
+LOCAL_2D
+uniform ivec3 image_hwc;
+uniform int stack_level;
+uniform int level_scale;      // full-resolution px per level sample
+uniform int level_pad_px;     // the level grid's replicated border, full-resolution px
+uniform ivec2 level_hw;
+layout(std430, binding = B_BLUR_DST) readonly buffer Blurred { float blurred[]; };
+layout(std430, binding = B_BRACKET) readonly buffer Bracket { vec2 bracket[]; };
+layout(std430, binding = B_FOVEATED) buffer Foveated { float foveated[]; };
+void main() {
+    ivec2 p = ivec2(gl_GlobalInvocationID.xy);
+    int h = image_hwc.x, w = image_hwc.y, c = image_hwc.z;
+    if (p.x >= w || p.y >= h) return;
+    int i = p.y * w + p.x;
+    vec2 kt = bracket[i];
+    int k = int(kt.x);
+    float wgt;
+    if (k == stack_level) wgt = 1.0 - kt.y;
+    else if (k == stack_level - 1) wgt = kt.y;
+    else return;
+    vec2 f = vec2(p + level_pad_px) / float(level_scale);
+    ivec2 i0 = ivec2(f);
+    vec2 a = f - vec2(i0);
+    ivec2 i1 = min(i0 + 1, ivec2(level_hw.y, level_hw.x) - 1);
+    int lw = level_hw.y;
+    float w00 = wgt * (1.0 - a.y) * (1.0 - a.x), w01 = wgt * (1.0 - a.y) * a.x;
+    float w10 = wgt * a.y * (1.0 - a.x), w11 = wgt * a.y * a.x;
+    for (int ch = 0; ch < c; ++ch) {
+        foveated[i * c + ch] += w00 * blurred[(i0.y * lw + i0.x) * c + ch]
+                              + w01 * blurred[(i0.y * lw + i1.x) * c + ch]
+                              + w10 * blurred[(i1.y * lw + i0.x) * c + ch]
+                              + w11 * blurred[(i1.y * lw + i1.x) * c + ch];
+    }
+}
+#endif

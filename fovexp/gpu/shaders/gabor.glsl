@@ -1,0 +1,41 @@
+// Sparse Gabor noise: fovexp/gabor.py (Lagae et al. 2009; paper section 4.4; notes 2, 3.9).
+// n(x) = sum_i A_i exp(-pi a^2 |d|^2) cos(k_i . d), d = x - x_i, over the impulses whose
+// kernel square |d_x|, |d_y| <= r reaches x; A_i = w_i K_i / (6 sqrt(V)) and the carrier
+// wave vector k_i = 2 pi F_i (cos t_i, sin t_i) come from the per-impulse stage. Each pixel
+// gathers from the 3 x 3 cells (side r) around it; impulses with A_i = 0 cost a read.
+
+#ifdef ENTRY_NOISE
+LOCAL_2D
+uniform ivec2 image_hw;
+uniform float gabor_a_cpp;
+uniform float kernel_radius_px;
+uniform float cell_px;
+uniform ivec2 cell_count_xy;    // cells from -1, row by row, as gabor._generate makes them
+layout(std430, binding = B_IMPULSES) readonly buffer Impulses { vec4 impulses[]; };  // x, y, w, -
+layout(std430, binding = B_CELLS) readonly buffer Cells { int cell_start[]; };
+layout(std430, binding = B_IMP_PARAMS) readonly buffer Params { float imp_params[]; };
+layout(std430, binding = B_NOISE) writeonly buffer Noise { float noise[]; };
+void main() {
+    ivec2 p = ivec2(gl_GlobalInvocationID.xy);
+    if (p.x >= image_hw.y || p.y >= image_hw.x) return;
+    vec2 q = vec2(p);
+    ivec2 c = ivec2(floor((q + 0.5) / cell_px)) + 1;
+    float pa2 = PI * gabor_a_cpp * gabor_a_cpp;
+    float r = kernel_radius_px;
+    float acc = 0.0;
+    for (int cy = max(c.y - 1, 0); cy <= min(c.y + 1, cell_count_xy.y - 1); ++cy) {
+        for (int cx = max(c.x - 1, 0); cx <= min(c.x + 1, cell_count_xy.x - 1); ++cx) {
+            int cell = cy * cell_count_xy.x + cx;
+            for (int i = cell_start[cell]; i < cell_start[cell + 1]; ++i) {
+                float amp = imp_params[i * IMP_STRIDE + IMP_AMP];
+                if (amp == 0.0) continue;
+                vec2 d = q - impulses[i].xy;
+                if (abs(d.x) > r || abs(d.y) > r) continue;
+                float phase = imp_params[i * IMP_STRIDE + IMP_KX] * d.x + imp_params[i * IMP_STRIDE + IMP_KY] * d.y;
+                acc += amp * exp(-pa2 * dot(d, d)) * cos(phase);
+            }
+        }
+    }
+    noise[p.y * image_hw.y + p.x] = acc;
+}
+#endif
