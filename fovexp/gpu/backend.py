@@ -85,7 +85,10 @@ class GpuEnhancer(Enhancer):
         self.ctx = create_context(ctx)
         self.renderer = renderer_name(self.ctx)
         self.profile = profile
-        self._programs = Programs(self.ctx)
+        # compiled programs live with the context: enhancers sharing it compile once
+        if not isinstance(self.ctx.extra, dict):
+            self.ctx.extra = {}
+        self._programs = self.ctx.extra.setdefault("fovexp_programs", Programs(self.ctx))
         self._buffers: dict[str, Any] = {}
         super().__init__(display, preset, geometry, table)
 
@@ -197,13 +200,21 @@ class GpuEnhancer(Enhancer):
         """The sigma map in its buffer; returns its maximum (px), which sizes the blur stack."""
         h, w, _ = self._hwc()
         sigma = self._buffer("SIGMA", h * w * _F4)
+        tx, ty, _ = self._groups_2d(h, w)  # one tile per full-resolution work group
+        tiles = self._buffer("TILES", tx * ty * 2 * _F4)
         if given is not None:
             sigma.write(np.ascontiguousarray(given, np.float32).tobytes())
+            t = LOCAL_2D[0]
+            padded = np.pad(given, ((0, ty * t - h), (0, tx * t - w)), mode="edge")
+            blocks = padded.reshape(ty, t, tx, t)
+            ranges = np.stack([blocks.min(axis=(1, 3)), blocks.max(axis=(1, 3))], axis=-1)
+            tiles.write(ranges.astype(np.float32).tobytes())
             return float(given.max())
         top = self._buffer("SIGMA_MAX", 16)
         top.write(np.zeros(4, np.uint32).tobytes())
-        self._run("foveation.glsl", "SIGMA", self._groups_2d(h, w),
-                  {"SIGMA": sigma, "SIGMA_MAX": top}, size_wh=(w, h), **self._geometry_uniforms())
+        self._run("foveation.glsl", "SIGMA", (tx, ty, 1),
+                  {"SIGMA": sigma, "SIGMA_MAX": top, "TILES": tiles}, size_wh=(w, h),
+                  **self._geometry_uniforms())
         return float(np.frombuffer(top.read(size=4), dtype=np.float32)[0])
 
     def _gpu_foveated(self, linear: Any, max_sigma: float, already_foveated: bool) -> Any:
@@ -241,22 +252,29 @@ class GpuEnhancer(Enhancer):
         largest = max(grids[int(m)].height * grids[int(m)].width for m in plan.pyramid_level)
         tmp = self._buffer("BLUR_TMP", largest * c * _F4)
         out = self._buffer("BLUR_OUT", largest * c * _F4)
+        tiles = self._buffers["TILES"]
+        tile_grid = self._groups_2d(h, w)[:2]
+        sig = plan.sigmas_px.astype(np.float32)
         k_offset = 1  # kernels[0] is stack level 0's (the image itself)
-        for lv in range(1, plan.sigmas_px.size):
+        for lv in range(1, sig.size):
             m = int(plan.pyramid_level[lv])
             g = grids[m]
             src = linear if m == 0 else pyr
             radius = plan.kernels[lv].size // 2
+            level = dict(level_scale=level_scale(m), level_pad_px=pad if m > 0 else 0,
+                         need_lo=float(sig[lv - 1]),
+                         need_hi=float(sig[lv + 1]) if lv + 1 < sig.size else float("inf"),
+                         tile_grid_wh=tile_grid)
             groups = self._groups_2d(g.height, g.width)
             for along_y, (a, b, off) in ((1, (src, tmp, g.offset)), (0, (tmp, out, 0))):
                 self._run("foveation.glsl", "BLUR", groups, {"BLUR_SRC": a, "BLUR_DST": b,
-                          "KERNELS": kbuf}, grid_hwc=(g.height, g.width, c), src_offset=off,
-                          kernel_offset=k_offset, kernel_radius=radius, along_y=along_y)
+                          "KERNELS": kbuf, "TILES": tiles}, grid_hwc=(g.height, g.width, c),
+                          src_offset=off, kernel_offset=k_offset, kernel_radius=radius,
+                          along_y=along_y, **level)
             k_offset += plan.kernels[lv].size
             self._run("foveation.glsl", "STACK_ACCUMULATE", self._groups_2d(h, w),
-                      {"BLUR_DST": out, "BRACKET": bracket, "FOVEATED": fov},
-                      image_hwc=(h, w, c), stack_level=lv, level_scale=level_scale(m),
-                      level_pad_px=pad if m > 0 else 0, level_hw=(g.height, g.width))
+                      {"BLUR_DST": out, "BRACKET": bracket, "FOVEATED": fov, "TILES": tiles},
+                      image_hwc=(h, w, c), stack_level=lv, level_hw=(g.height, g.width), **level)
         return fov
 
     def _luma_grids(self) -> list[_Grid]:

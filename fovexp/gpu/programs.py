@@ -30,7 +30,7 @@ BINDINGS: dict[str, int] = {name: i for i, name in enumerate((
     "IMAGE", "LINEAR", "SIGMA", "SIGMA_MAX", "BLUR_SRC", "BLUR_DST", "KERNELS", "LEVELS",
     "BRACKET", "FOVEATED", "REDUCE_SRC", "REDUCE_DST", "LUMA_PYR", "LAP_TMP", "ABSLAP",
     "GRADIENTS", "SAT", "CONTRAST", "EXTREMES", "HEADROOM", "IMPULSES", "QUANTILES", "CELLS",
-    "IMP_PARAMS", "NOISE", "OUTPUT", "MAPS",
+    "IMP_PARAMS", "NOISE", "OUTPUT", "MAPS", "TILES",
 ))}
 
 #: Fields of the per-impulse record the impulse stage writes and the synthesis reads.
@@ -39,7 +39,8 @@ IMPULSE_FIELDS: tuple[str, ...] = ("AMP", "KX", "KY", "K", "F", "OMEGA", "F_LOW"
 #: Geometry models as the shaders number them.
 GEOMETRY_MODELS: dict[str, int] = {"exact": 0, "linear": 1, "release": 2}
 
-#: Work-group sizes: 16 x 16 pixels, or 64 rows / columns / impulses.
+#: Work-group sizes: 16 x 16 pixels (a full-resolution group is one tile of the sigma
+#: ranges that let the foveation skip work), or 64 rows / columns / impulses.
 LOCAL_2D = (16, 16)
 LOCAL_1D = 64
 
@@ -56,6 +57,8 @@ def _header(entry: str) -> str:
         f"#define ENTRY_{entry} 1",
         f"#define LOCAL_2D layout(local_size_x = {LOCAL_2D[0]}, local_size_y = {LOCAL_2D[1]}) in;",
         f"#define LOCAL_1D layout(local_size_x = {LOCAL_1D}) in;",
+        f"#define LOCAL_2D_SIZE {LOCAL_2D[0] * LOCAL_2D[1]}",
+        f"#define TILE_PX {LOCAL_2D[0]}",
         *(f"#define B_{name} {i}" for name, i in BINDINGS.items()),
         f"#define IMP_STRIDE {len(IMPULSE_FIELDS)}",
         *(f"#define IMP_{name} {i}" for i, name in enumerate(IMPULSE_FIELDS)),

@@ -19,19 +19,56 @@ LOCAL_2D
 uniform ivec2 size_wh;
 layout(std430, binding = B_SIGMA) writeonly buffer Sigma { float sigma[]; };
 layout(std430, binding = B_SIGMA_MAX) buffer SigmaMax { uint sigma_max_bits; };
-shared uint group_max_bits;
+layout(std430, binding = B_TILES) writeonly buffer Tiles { vec2 tiles[]; };
+shared uint group_min_bits, group_max_bits;
 void main() {
     ivec2 p = ivec2(gl_GlobalInvocationID.xy);
-    if (gl_LocalInvocationIndex == 0u) group_max_bits = 0u;
+    if (gl_LocalInvocationIndex == 0u) { group_min_bits = 0x7F800000u; group_max_bits = 0u; }
     barrier();
     if (all(lessThan(p, size_wh))) {
         float s = sigma_px(eccentricity_deg(vec2(p)), ppd(vec2(p)));
         sigma[p.y * size_wh.x + p.x] = s;
-        // non-negative floats order as their bit patterns: one global atomic per group
+        // non-negative floats order as their bit patterns
+        atomicMin(group_min_bits, floatBitsToUint(s));
         atomicMax(group_max_bits, floatBitsToUint(s));
     }
     barrier();
-    if (gl_LocalInvocationIndex == 0u) atomicMax(sigma_max_bits, group_max_bits);
+    if (gl_LocalInvocationIndex == 0u) {  // the tile's sigma range, and one global atomic
+        tiles[gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x] =
+            vec2(uintBitsToFloat(group_min_bits), uintBitsToFloat(group_max_bits));
+        atomicMax(sigma_max_bits, group_max_bits);
+    }
+}
+#endif
+
+#if defined(ENTRY_BLUR) || defined(ENTRY_STACK_ACCUMULATE)
+// Work a stack level does not need is skipped by whole work groups: the sigma pass records
+// each TILE_PX x TILE_PX tile's sigma range, and a pixel uses stack level l only if its sigma
+// lies in (need_lo, need_hi] = (sigma_{l-1}, sigma_{l+1}] (the CPU backend skips the same
+// pixels by runs of columns).
+uniform float need_lo;
+uniform float need_hi;
+uniform ivec2 tile_grid_wh;
+layout(std430, binding = B_TILES) readonly buffer Tiles { vec2 tiles[]; };
+shared uint group_needed;
+
+bool tile_needed(ivec2 t) {
+    vec2 r = tiles[t.y * tile_grid_wh.x + t.x];
+    return r.y > need_lo && r.x <= need_hi;
+}
+
+// whether any tile meeting the full-resolution rectangle [lo_px, hi_px] needs this level;
+// the group's invocations share the tiles to look at (uniform result: call from all of them)
+bool region_needed(ivec2 lo_px, ivec2 hi_px) {
+    if (gl_LocalInvocationIndex == 0u) group_needed = 0u;
+    barrier();
+    ivec2 t0 = clamp(max(lo_px, 0) / TILE_PX, ivec2(0), tile_grid_wh - 1);
+    ivec2 t1 = clamp(max(hi_px, 0) / TILE_PX, ivec2(0), tile_grid_wh - 1);
+    int nx = t1.x - t0.x + 1, n = nx * (t1.y - t0.y + 1);
+    for (int t = int(gl_LocalInvocationIndex); t < n; t += LOCAL_2D_SIZE)
+        if (tile_needed(t0 + ivec2(t % nx, t / nx))) atomicOr(group_needed, 1u);
+    barrier();
+    return group_needed != 0u;
 }
 #endif
 
@@ -44,10 +81,19 @@ uniform int src_offset;
 uniform int kernel_offset;
 uniform int kernel_radius;
 uniform int along_y;
+uniform int level_scale;      // full-resolution px per level sample
+uniform int level_pad_px;     // the level grid's replicated border, full-resolution px
 layout(std430, binding = B_BLUR_SRC) readonly buffer Src { float src[]; };
 layout(std430, binding = B_BLUR_DST) writeonly buffer Dst { float dst[]; };
 layout(std430, binding = B_KERNELS) readonly buffer Kernels { float kernels[]; };
 void main() {
+    // the full-resolution pixels that read this group's samples (bilinearly: one sample
+    // either side), and, after the pass along y, those the pass along x reads (kernel_radius)
+    ivec2 g0 = ivec2(gl_WorkGroupID.xy) * ivec2(gl_WorkGroupSize.xy);
+    ivec2 margin = ivec2(along_y == 1 ? kernel_radius + 1 : 1, 1);
+    if (!region_needed((g0 - margin) * level_scale - level_pad_px,
+                       (g0 + ivec2(gl_WorkGroupSize.xy) + margin) * level_scale - level_pad_px))
+        return;
     ivec2 p = ivec2(gl_GlobalInvocationID.xy);
     int h = grid_hwc.x, w = grid_hwc.y, c = grid_hwc.z;
     if (p.x >= w || p.y >= h) return;
@@ -99,13 +145,14 @@ void main() {
 LOCAL_2D
 uniform ivec3 image_hwc;
 uniform int stack_level;
-uniform int level_scale;      // full-resolution px per level sample
-uniform int level_pad_px;     // the level grid's replicated border, full-resolution px
+uniform int level_scale;
+uniform int level_pad_px;
 uniform ivec2 level_hw;
 layout(std430, binding = B_BLUR_DST) readonly buffer Blurred { float blurred[]; };
 layout(std430, binding = B_BRACKET) readonly buffer Bracket { vec2 bracket[]; };
 layout(std430, binding = B_FOVEATED) buffer Foveated { float foveated[]; };
 void main() {
+    if (!tile_needed(ivec2(gl_WorkGroupID.xy))) return;  // the group is one tile
     ivec2 p = ivec2(gl_GlobalInvocationID.xy);
     int h = image_hwc.x, w = image_hwc.y, c = image_hwc.z;
     if (p.x >= w || p.y >= h) return;
