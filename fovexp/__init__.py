@@ -14,12 +14,13 @@ from .params import (
     ParameterTable,
     make_params,
 )
-from .pipeline import MAP_NAMES, Enhancer, EnhanceResult, enhance
+from .pipeline import BACKENDS, MAP_NAMES, Enhancer, EnhanceResult, enhance, make_enhancer
 
 __version__ = "0.1.0"
 
 __all__ = [
-    "MAP_NAMES", "METHODS", "PAPER_TABLE2", "PARAMETER_RANGES", "Display", "EnhanceParams",
-    "EnhanceResult", "Enhancer", "FovexpError", "ParameterTable", "enhance", "load_display",
-    "make_params", "read_image", "validation_error", "write_image", "__version__",
+    "BACKENDS", "MAP_NAMES", "METHODS", "PAPER_TABLE2", "PARAMETER_RANGES", "Display",
+    "EnhanceParams", "EnhanceResult", "Enhancer", "FovexpError", "ParameterTable", "enhance",
+    "load_display", "make_enhancer", "make_params", "read_image", "validation_error",
+    "write_image", "__version__",
 ]

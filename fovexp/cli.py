@@ -14,7 +14,7 @@ from .errors import FovexpError
 from .geometry import load_display
 from .io import IMAGE_SUFFIXES, read_image, save_npy, write_image
 from .params import METHODS, PRESETS, ParameterTable, make_params
-from .pipeline import MAP_NAMES, Enhancer, EnhanceResult
+from .pipeline import BACKENDS, MAP_NAMES, Enhancer, EnhanceResult, make_enhancer
 
 
 def _gaze(text: str) -> tuple[float, float]:
@@ -46,6 +46,8 @@ def add_enhance_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--impulses", type=int, default=64, help="impulses per kernel (12 is fast)")
     p.add_argument("--seed", type=int, default=1)
     p.add_argument("--preset", choices=sorted(PRESETS), default="paper")
+    p.add_argument("--backend", choices=BACKENDS, default="auto",
+                   help="cpu, gpu (OpenGL 4.5 compute), or auto: a hardware GPU if there is one")
     p.add_argument("--geometry", choices=("exact", "linear"), default=None,
                    help="viewing geometry of the paper preset (default exact)")
     p.add_argument("--table", type=Path, help="parameter table YAML (default: paper Table 2)")
@@ -79,8 +81,8 @@ def dump_maps(result: EnhanceResult, folder: Path) -> None:
 
 def _enhancer_and_params(args: argparse.Namespace):
     table = ParameterTable.load(args.table) if args.table else None
-    enh = Enhancer(load_display(args.display), preset=args.preset, geometry=args.geometry,
-                   table=table)
+    enh = make_enhancer(load_display(args.display), preset=args.preset, geometry=args.geometry,
+                        table=table, backend=args.backend)
     params = make_params(
         method=args.method, blur_rate=args.blur_rate, f_e=args.fe, s_k=args.sk, s_f=args.sf,
         impulses=args.impulses, seed=args.seed, preset=args.preset,
@@ -116,8 +118,13 @@ def enhance_command(args: argparse.Namespace) -> int:
     if args.dump_maps:
         dump_maps(result, args.dump_maps)
     print(f"wrote {args.output} ({params.method}, blur-rate {params.blur_rate}, "
-          f"f_e {result.params.f_e:.3g}, s_k {result.params.s_k:.3g}, s_f {result.params.s_f:.3g})")
+          f"f_e {result.params.f_e:.3g}, s_k {result.params.s_k:.3g}, s_f {result.params.s_f:.3g}; "
+          f"{_backend_name(enh)})")
     return 0
+
+
+def _backend_name(enh: Enhancer) -> str:
+    return f"gpu: {enh.renderer}" if enh.backend == "gpu" else "cpu"  # type: ignore[attr-defined]
 
 
 def _enhance_sequence(enh: Enhancer, params, args: argparse.Namespace, sigma) -> int:

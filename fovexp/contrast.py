@@ -100,7 +100,7 @@ def _enhance(img, sigma, sat, pad, f_e, minus):  # pragma: no cover - compiled
 
 
 def _enhance_channels(img: np.ndarray, sigma: np.ndarray, max_sigma: float, f_e: float):
-    pad = _pad_for(max_sigma)
+    pad = sat_pad_px(max_sigma)
     out = np.empty_like(img)
     for ch in range(img.shape[2]):
         plane = np.ascontiguousarray(img[..., ch])
@@ -108,7 +108,7 @@ def _enhance_channels(img: np.ndarray, sigma: np.ndarray, max_sigma: float, f_e:
     return out
 
 
-def _pad_for(max_sigma: float) -> int:
+def sat_pad_px(max_sigma: float) -> int:
     """Border the summed-area table needs: half the widest box (level floor(max) + 1)."""
     return box_width_px(int(max_sigma) + 1) // 2 + 1
 
@@ -131,5 +131,5 @@ def contrast_change(grey: np.ndarray, sigma_map_px: np.ndarray, f_e: float) -> n
     max_sigma = float(sigma.max()) if sigma.size else 0.0
     if max_sigma <= 0.0:
         return np.zeros(img.shape, dtype=np.float32)
-    pad = _pad_for(max_sigma)
+    pad = sat_pad_px(max_sigma)
     return _enhance(img, sigma, _sat(img, pad), pad, np.float32(f_e), np.float32(1.0))

@@ -36,3 +36,25 @@ def sponza():
     from fovexp import read_image
 
     return read_image(SPONZA)
+
+
+def band_power_fraction(res, ecc_deg: float, row: int = 540, size: int = 96, slack: float = 0.05):
+    """Local spectrum of ``res``'s noise in a ``size`` px window on ``row``, right of the centre,
+    where the eccentricity is ``ecc_deg``: the fraction of its power within [F_L, F_H] widened
+    by ``slack`` cycles/px (the Gabor kernel's and the window's spectral spread), and the share
+    of the spectrum that band covers."""
+    noise, ecc = res.map("noise"), res.map("eccentricity_deg")
+    f_lo, f_hi = res.map("f_low_cpp"), res.map("f_high_cpp")
+    mid = noise.shape[1] // 2
+    x = int(np.argmin(np.abs(ecc[row, mid:] - ecc_deg))) + mid
+    sl = np.s_[row - size // 2: row + size // 2, x - size // 2: x + size // 2]
+    patch = noise[sl]
+    assert patch.std() > 0
+    win = np.outer(np.hanning(size), np.hanning(size))
+    f = np.fft.fftfreq(size)
+    fr = np.hypot(f[None, :], f[:, None])
+    power = np.abs(np.fft.fft2((patch - patch.mean()) * win)) ** 2
+    lo, hi = float(f_lo[sl].min()), float(f_hi[sl].max())
+    assert lo < hi
+    inside = (fr >= lo - slack) & (fr <= hi + slack)
+    return power[inside].sum() / power.sum(), inside.mean()

@@ -10,7 +10,7 @@ from fovexp import EnhanceParams, Enhancer, FovexpError, load_display
 from fovexp.orientation import ORIENTATION_LEVEL
 from fovexp.pyramids import reduce, sample_cubic
 
-from engine_helpers import textured_image
+from engine_helpers import band_power_fraction, textured_image
 
 LG = load_display("lg-oled55cx")
 
@@ -146,20 +146,9 @@ def test_noise_power_lies_in_its_band(ctx):
     enh = GpuEnhancer(LG, ctx=ctx)
     enh.set_image(textured_image(1080, 1920, seed=7))
     res = enh.enhance((0.5, 0.5), EnhanceParams(blur_rate=0.57, impulses=64, s_f=1.0))
-    noise, ecc = res.map("noise"), res.map("eccentricity_deg")
-    f_lo, f_hi = res.map("f_low_cpp"), res.map("f_high_cpp")
-    size, row = 96, 540
-    win = np.outer(np.hanning(size), np.hanning(size))
-    f = np.fft.fftfreq(size)
-    fr = np.hypot(f[None, :], f[:, None])
     for e in (15.0, 25.0, 35.0):
-        x = int(np.argmin(np.abs(ecc[row, 960:] - e))) + 960
-        sl = np.s_[row - size // 2: row + size // 2, x - size // 2: x + size // 2]
-        power = np.abs(np.fft.fft2((noise[sl] - noise[sl].mean()) * win)) ** 2
-        lo, hi = float(f_lo[sl].min()), float(f_hi[sl].max())
-        inside = (fr >= lo - 0.05) & (fr <= hi + 0.05)
-        assert power[inside].sum() / power.sum() > 0.9, e
-        assert inside.mean() < 0.9
+        frac, covered = band_power_fraction(res, e)
+        assert frac > 0.9 and covered < 0.9, (e, frac, covered)
 
 
 def test_a_parameter_change_recomputes_only_what_depends_on_it(ctx, frame):
@@ -186,3 +175,46 @@ def test_the_release_preset_is_refused_with_a_clear_message(ctx):
 
     with pytest.raises(FovexpError, match="paper preset.*CPU backend"):
         GpuEnhancer(LG, preset="release", ctx=ctx)
+
+
+def test_make_enhancer_picks_the_backend(ctx):
+    from fovexp import make_enhancer
+    from fovexp.gpu import GpuEnhancer, is_software
+
+    assert make_enhancer(LG, backend="cpu").backend == "cpu"
+    gpu = make_enhancer(LG, backend="gpu")
+    assert isinstance(gpu, GpuEnhancer) and gpu.renderer
+    # auto: a software renderer (llvmpipe in CI) is slower than the CPU backend
+    expected = "cpu" if is_software(ctx) else "gpu"
+    assert make_enhancer(LG, backend="auto").backend == expected
+    assert make_enhancer(LG, preset="release", backend="auto").backend == "cpu"
+    with pytest.raises(FovexpError, match="unknown backend 'cuda'"):
+        make_enhancer(LG, backend="cuda")
+
+
+def test_the_cli_enhances_on_the_gpu_as_on_the_cpu(ctx, frame, tmp_path, capsys):
+    from fovexp import read_image, write_image
+    from fovexp.cli import main
+
+    src = tmp_path / "in.png"
+    write_image(src, frame, 16)
+    outs = {}
+    for backend in ("cpu", "gpu"):
+        outs[backend] = tmp_path / f"{backend}.png"
+        assert main(["enhance", str(src), str(outs[backend]), "--backend", backend,
+                     "--impulses", "12", "--bit-depth", "16"]) == 0
+    printed = capsys.readouterr().out
+    assert "; cpu)" in printed and "; gpu: " in printed
+    a, b = read_image(outs["cpu"]), read_image(outs["gpu"])
+    assert np.abs(a - b).max() <= 2e-3 + 1 / 65535
+
+
+def test_an_image_too_large_for_the_driver_is_refused_by_name(ctx, frame):
+    from fovexp.gpu import GpuEnhancer
+
+    enh = GpuEnhancer(LG, ctx=ctx)
+    enh._max_block_bytes = 1 << 20  # as a driver binding at most 1 MiB would
+    enh.set_image(frame)
+    with pytest.raises(FovexpError, match=r"too large for this GPU: buffer IMAGE needs 1.5 MiB"
+                                          r".*at most 1.0 MiB"):
+        enh.enhance((0.5, 0.5), EnhanceParams(impulses=12))

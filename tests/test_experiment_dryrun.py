@@ -161,3 +161,12 @@ def test_dry_run_validation(ws: Path, tmp_path: Path) -> None:
             assert (r["s_k"], r["s_f"]) == (pytest.approx(s_k), pytest.approx(s_f))
         else:
             assert r["s_k"] is None and r["s_f"] is None
+
+
+def test_dry_run_on_the_gpu_backend(ws: Path) -> None:
+    """The runner renders through the GPU backend (Mesa llvmpipe in CI) and records it."""
+    folder = dry(ws, "calibration-fe", "G01", "--practice", "0", "--limit-trials", "2",
+                 "--backend", "gpu")
+    rows = check_common(folder, 2, 0)
+    info = json.loads((folder / f"session-{rows[0]['session']}.json").read_text())
+    assert info["render"]["backend"] == "gpu" and info["render"]["renderer"]

@@ -12,7 +12,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from fovexp import FovexpError
+from fovexp import BACKENDS, FovexpError
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -47,6 +47,9 @@ def add_run_parser(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument("--window", type=_size, default=None, metavar="WxH",
                    help="window size instead of the display profile's (dry run: 480x270)")
     p.add_argument("--windowed", action="store_true", help="not full screen (pilots)")
+    p.add_argument("--backend", choices=BACKENDS, default="auto",
+                   help="enhancer backend: cpu, gpu (OpenGL 4.5 compute shaders), or auto: "
+                        "a hardware GPU if there is one, else the CPU")
     p.add_argument("--skip-display-check", action="store_true",
                    help="do not stop when the refresh rate or window size differ from the profile")
     p.add_argument("--limit-trials", type=int, default=None, metavar="N",
@@ -93,6 +96,7 @@ def run_command(args: argparse.Namespace) -> int:
             window_size=args.window or ((480, 270) if args.dry_run else None),
             fullscreen=not (args.windowed or args.dry_run),
             skip_display_check=args.skip_display_check, tracker_address=args.tracker_address,
+            backend=args.backend,
             sim_truth=truth, sim_speed=args.sim_speed, sim_noise_scale=args.sim_noise_scale,
             sim_seed=args.sim_seed,
         )

@@ -9,6 +9,10 @@ worker keeps only the latest request, so a fast wheel never queues stale frames,
 loop keeps flipping (and blanking) at the display rate while a frame is computed; every result
 carries the parameters it was computed with, so the frame loop knows what is on screen.
 Errors on the worker reach the frame loop as one-line :class:`fovexp.FovexpError`.
+
+The enhancer runs on the CPU or the GPU backend (``backend``: auto, cpu, gpu; see
+:func:`fovexp.make_enhancer`); it is created on the worker thread, which owns its OpenGL
+context, and :meth:`TestRenderer.info` says which backend and renderer it got.
 """
 
 from __future__ import annotations
@@ -28,11 +32,12 @@ SCREEN_CENTRE = (0.5, 0.5)
 class TestRenderer:
     """Renders the right (test) half for the latest requested parameters."""
 
-    def __init__(self, display: Any, preset: str = "paper", geometry: str | None = None) -> None:
-        from fovexp import Enhancer  # public API (docs/API.md)
-
-        self.enhancer = Enhancer(display, preset=preset, geometry=geometry)  # type: ignore[arg-type]
+    def __init__(self, display: Any, preset: str = "paper", geometry: str | None = None,
+                 backend: str = "auto") -> None:
         self.preset = preset
+        self.enhancer: Any = None
+        self._make = (display, preset, geometry, backend)
+        self._ready = threading.Event()
         self._cv = threading.Condition()
         self._image: tuple[np.ndarray, tuple[int, int, int, int]] | None = None
         self._image_new = False
@@ -54,6 +59,15 @@ class TestRenderer:
             self._image_new = True
             self._request = None
             self._result = None
+
+    def info(self, timeout: float = 60.0) -> dict[str, str]:
+        """``{"backend": "cpu" | "gpu", "renderer": ...}`` once the worker has its enhancer."""
+        if not self._ready.wait(timeout):
+            raise TimeoutError(f"the renderer did not start within {timeout} s")
+        with self._cv:
+            self._raise_error()
+        enh = self.enhancer
+        return {"backend": enh.backend, "renderer": getattr(enh, "renderer", "numpy/numba")}
 
     def request(self, params: Any) -> int:
         """Ask for the test half with ``params`` (an EnhanceParams); returns a serial number."""
@@ -98,6 +112,18 @@ class TestRenderer:
         self._thread.join(timeout=30)
 
     def _run(self) -> None:
+        from fovexp import make_enhancer  # public API (docs/API.md)
+
+        try:
+            display, preset, geometry, backend = self._make
+            self.enhancer = make_enhancer(display, preset, geometry, backend=backend)
+        except Exception as exc:  # e.g. --backend gpu with no OpenGL 4.5: reported, then stop
+            with self._cv:
+                self._error = exc
+                self._cv.notify_all()
+            return
+        finally:
+            self._ready.set()
         while True:
             with self._cv:
                 while not self._stop and self._request is None:

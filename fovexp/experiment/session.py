@@ -91,6 +91,8 @@ class SessionOptions:
     fullscreen: bool = True
     skip_display_check: bool = False
     tracker_address: str | None = None
+    #: enhancer backend: auto (a hardware GPU if there is one), cpu or gpu
+    backend: str = "auto"
     sim_truth: SimTruth = field(default_factory=SimTruth)
     sim_speed: float = 4.0
     sim_noise_scale: float = 1.0
@@ -355,7 +357,8 @@ class Session:
             from .render import TestRenderer
 
             self.renderer = TestRenderer(self.display, proto.spec.preset,
-                                         proto.spec.geometry_model)
+                                         proto.spec.geometry_model, self.opts.backend)
+            self._write_info(render=self.renderer.info())
             self.gaze.start()
             self._write_info(tracker=self.gaze.info())
             if self.opts.dry_run:

@@ -23,7 +23,7 @@ import numpy as np
 
 from .. import gabor
 from ..amplitude import MAX_LAPLACIAN_LEVEL
-from ..contrast import _pad_for as contrast_pad_px
+from ..contrast import sat_pad_px
 from ..errors import FovexpError
 from ..foveation import blur_stack_plan
 from ..geometry import Display, GeometryModel, ViewingGeometry
@@ -90,6 +90,7 @@ class GpuEnhancer(Enhancer):
             self.ctx.extra = {}
         self._programs = self.ctx.extra.setdefault("fovexp_programs", Programs(self.ctx))
         self._buffers: dict[str, Any] = {}
+        self._max_block_bytes = int(self.ctx.info.get("GL_MAX_SHADER_STORAGE_BLOCK_SIZE") or 2**27)
         super().__init__(display, preset, geometry, table)
 
     # ------------------------------------------------------------------------- stage graph
@@ -131,10 +132,22 @@ class GpuEnhancer(Enhancer):
         nbytes = max(int(nbytes), 16)
         buf = self._buffers.get(name)
         if buf is None or buf.size < nbytes:
+            if nbytes > self._max_block_bytes:
+                raise FovexpError(
+                    f"the image is too large for this GPU: buffer {name} needs "
+                    f"{nbytes / 2**20:.1f} MiB, the driver binds at most "
+                    f"{self._max_block_bytes / 2**20:.1f} MiB ({self.renderer})"
+                )
             if buf is not None:
                 buf.release()
-            buf = self._buffers[name] = self.ctx.buffer(reserve=nbytes)
+                del self._buffers[name]
+            try:
+                buf = self.ctx.buffer(reserve=nbytes)
+            except Exception as exc:  # moderngl.Error: out of GPU memory
+                raise FovexpError(f"cannot allocate {nbytes / 2**20:.0f} MiB on the GPU "
+                                  f"for {name}: {exc}") from None
             buf.clear()
+            self._buffers[name] = buf
         return buf
 
     def _run(self, file: str, entry: str, groups: tuple[int, ...], buffers: dict[str, Any],
@@ -342,7 +355,7 @@ class GpuEnhancer(Enhancer):
         if max_sigma <= 0.0:
             return None
         h, w, _ = self._hwc()
-        pad = contrast_pad_px(max_sigma)
+        pad = sat_pad_px(max_sigma)
         hp, wp = h + 2 * pad, w + 2 * pad
         sat = self._buffer("SAT", (hp + 1) * (wp + 1) * 8)
         pyr = self._buffers["LUMA_PYR"]
@@ -404,7 +417,8 @@ class GpuEnhancer(Enhancer):
 
     def _gpu_imp_params(self, imp: _GpuImpulses, geom, gaze, max_sigma, blur_rate, s_f, s_k,
                         lap: dict[str, Any], grad: dict[str, Any], head: dict[str, Any]) -> int:
-        """Per impulse: band, frequency, amplitude, orientation (pipeline.glsl)."""
+        """Per impulse: band, frequency, amplitude, orientation (pipeline.glsl). The arguments
+        are the stages this one depends on; their data are in the GPU buffers."""
         h, w, _ = self._hwc()
         b = self._buffers
         self._run("pipeline.glsl", "IMPULSES", self._groups_1d(imp.count),
