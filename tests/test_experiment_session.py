@@ -31,6 +31,7 @@ class FakeEnhancer:
     shows the f_e it was computed with as the grey level of the test half."""
 
     instances: list[FakeEnhancer] = []
+    backend = "fake"
 
     def __init__(self, display, preset="paper", geometry=None) -> None:
         self.preset, self.geometry = preset, geometry
@@ -51,6 +52,12 @@ class FakeEnhancer:
         return Res()
 
 
+def use_enhancer(monkeypatch, cls) -> None:
+    """The runner gets its enhancer from fovexp.make_enhancer (public API): hand it ``cls``."""
+    monkeypatch.setattr(fovexp, "make_enhancer", lambda display, preset="paper", geometry=None,
+                        table=None, backend="auto": cls(display, preset, geometry))
+
+
 def options(tmp_path: Path, pid: str, **kw) -> SessionOptions:
     base = dict(participant=pid, results_root=tmp_path / "results", tracker="mouse",
                 dry_run=False, window_size=(W, H), practice_trials=0, limit_trials=1,
@@ -67,7 +74,7 @@ def test_logged_value_is_the_one_on_screen(tmp_path: Path, monkeypatch) -> None:
     """Enter pressed while the render of the last wheel step is still computed: the trial ends
     on the first frame that shows it, and that value (not merely the requested one) is logged,
     per frame and as final_value."""
-    monkeypatch.setattr(fovexp, "Enhancer", FakeEnhancer)
+    use_enhancer(monkeypatch, FakeEnhancer)
     FakeEnhancer.instances.clear()
     lp = load_protocol(REPO / "protocols" / "calibration-fe.yaml")
     _, plan = lp.plan("V01", limit=1, practice=0)
@@ -106,7 +113,7 @@ def test_render_error_is_one_line_and_recorded(tmp_path: Path, monkeypatch) -> N
         def enhance(self, gaze, params):
             raise FovexpError("no memory for the pyramids")
 
-    monkeypatch.setattr(fovexp, "Enhancer", Broken)
+    use_enhancer(monkeypatch, Broken)
     s = Session(load_protocol(REPO / "protocols" / "calibration-fe.yaml"),
                 options(tmp_path, "R01"))
     with pytest.raises(FovexpError) as err:
@@ -138,7 +145,7 @@ def test_failed_validation_is_recorded_and_blocks_nothing(tmp_path: Path) -> Non
 
 
 def test_resume_with_nothing_left_opens_no_window(tmp_path: Path, monkeypatch) -> None:
-    monkeypatch.setattr(fovexp, "Enhancer", FakeEnhancer)
+    use_enhancer(monkeypatch, FakeEnhancer)
     lp = load_protocol(REPO / "protocols" / "calibration-fe.yaml")
     s = Session(lp, options(tmp_path, "N01"))
     assert s.run(screen_factory=lambda **kw: StubScreen(inputs={3: [Key("return")]}, **kw),
