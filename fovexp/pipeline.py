@@ -466,7 +466,7 @@ def make_enhancer(
     if backend == "cpu" or (backend == "auto" and get_preset(preset).name != "paper"):
         return Enhancer(display, preset, geometry, table)
     try:
-        from .gpu import GpuEnhancer, create_context, is_software
+        from .gpu import GpuEnhancer, create_context, is_software, release_context
     except ImportError as exc:  # moderngl absent
         if backend == "gpu":
             raise FovexpError(f"the GPU backend is not installed ({exc}): install the "
@@ -479,7 +479,7 @@ def make_enhancer(
     except FovexpError:
         return Enhancer(display, preset, geometry, table)
     if is_software(ctx):
-        ctx.release()
+        release_context(ctx)
         return Enhancer(display, preset, geometry, table)
     return GpuEnhancer(display, preset, geometry, table, ctx=ctx)
 

@@ -129,7 +129,7 @@ class TestRenderer:
                 while not self._stop and self._request is None:
                     self._cv.wait()
                 if self._stop:
-                    return
+                    break
                 serial, params = self._request  # type: ignore[misc]
                 self._request = None
                 image = self._image if self._image_new else None
@@ -148,3 +148,6 @@ class TestRenderer:
                 with self._cv:
                     self._error = exc
                     self._cv.notify_all()
+        close = getattr(self.enhancer, "close", None)
+        if close is not None:  # the GPU backend's buffers and context, on their own thread
+            close()

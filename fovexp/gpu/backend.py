@@ -39,6 +39,7 @@ from .programs import (
     LOCAL_2D,
     Programs,
     create_context,
+    release_context,
     renderer_name,
 )
 
@@ -82,6 +83,7 @@ class GpuEnhancer(Enhancer):
                 f"the GPU backend implements the paper preset, not {preset!r}: the release "
                 "preset runs on the CPU backend (backend='cpu')"
             )
+        self._owns_context = ctx is None
         self.ctx = create_context(ctx)
         self.renderer = renderer_name(self.ctx)
         self.profile = profile
@@ -535,8 +537,12 @@ class GpuEnhancer(Enhancer):
         return self._read("MAPS", 5 * h * w)[fields.index(name) * h * w:][: h * w].reshape(h, w)
 
     def close(self) -> None:
-        """Release the GPU buffers (the context stays with its owner)."""
+        """Release the GPU buffers, and the context if this enhancer created it (a given
+        context stays with its owner). Call it on the thread that created the enhancer."""
         for buf in self._buffers.values():
             buf.release()
         self._buffers.clear()
+        if self._owns_context:
+            release_context(self.ctx)
+            self._owns_context = False
 

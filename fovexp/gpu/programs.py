@@ -9,6 +9,7 @@ GLSL: the header is generated from the Python modules, so each constant has one 
 
 from __future__ import annotations
 
+import ctypes
 import re
 from pathlib import Path
 from typing import Any
@@ -118,6 +119,29 @@ def create_context(ctx: Any = None) -> Any:
     if ctx.version_code < 450:
         raise FovexpError(f"the GPU backend needs OpenGL 4.5, this context has {ctx.version_code}")
     return ctx
+
+
+def detach_thread() -> None:
+    """Leave no EGL context current on the calling thread (``eglMakeCurrent`` with no context,
+    then ``eglReleaseThread``). With libglvnd, a thread that has made an EGL context current
+    cannot create a GLX context (a PsychoPy window) until it does; releasing the moderngl
+    context alone is not enough (measured under Xvfb: "invalid operation")."""
+    try:
+        egl = ctypes.CDLL("libEGL.so.1")
+    except OSError:
+        return
+    egl.eglGetCurrentDisplay.restype = ctypes.c_void_p
+    egl.eglMakeCurrent.argtypes = [ctypes.c_void_p] * 4
+    display = egl.eglGetCurrentDisplay()
+    if display:
+        egl.eglMakeCurrent(display, None, None, None)
+    egl.eglReleaseThread()
+
+
+def release_context(ctx: Any) -> None:
+    """Release a context this package created, and detach the thread from EGL."""
+    ctx.release()
+    detach_thread()
 
 
 def renderer_name(ctx: Any) -> str:
