@@ -426,23 +426,24 @@ def _snapshot(path: Path, base: Path, name: str, src: ParamSource, lp: LoadedPro
                 raise FovexpError(f"{where}.table: {tpath} does not exist (a parameter table "
                                   "YAML or a calibration results folder)")
         return {"kind": "table", "from": src.table, "table": table.model_dump()}
-    if src.fe_results is not None:
-        folder = _resolve_path(base, src.fe_results)
+    # values derived from an earlier experiment's results folder (section 6.2's chain)
+    derived = (
+        ("fe_results", "fe_by_blur_rate",
+         lambda fe: {"f_e": [[float(b), float(v)] for b, v in sorted(fe.items())]}),
+        ("sk_line_results", "sk_line_by_blur_rate",
+         lambda lines: {"slope_intercept": [[float(b), float(v[0]), float(v[1])]
+                                            for b, v in sorted(lines.items())]}),
+    )
+    for key, fn_name, pack in derived:
+        rel = getattr(src, key)
+        if rel is None:
+            continue
+        folder = _resolve_path(base, rel)
         lp.dependency_folders[name] = str(folder)
-        _require_results(where + ".fe_results", folder, check)
-        from analysis.derive import fe_by_blur_rate
-        fe = _call(where + ".fe_results", fe_by_blur_rate, folder)
-        return {"kind": "fe_results", "from": str(folder),
-                "f_e": [[float(b), float(v)] for b, v in sorted(fe.items())]}
-    if src.sk_line_results is not None:
-        folder = _resolve_path(base, src.sk_line_results)
-        lp.dependency_folders[name] = str(folder)
-        _require_results(where + ".sk_line_results", folder, check)
-        from analysis.derive import sk_line_by_blur_rate
-        lines = _call(where + ".sk_line_results", sk_line_by_blur_rate, folder)
-        return {"kind": "sk_line_results", "from": str(folder),
-                "slope_intercept": [[float(b), float(v[0]), float(v[1])]
-                                    for b, v in sorted(lines.items())]}
+        _require_results(f"{where}.{key}", folder, check)
+        from analysis import derive
+        values = _call(f"{where}.{key}", getattr(derive, fn_name), folder)
+        return {"kind": key, "from": str(folder), **pack(values)}
     return None
 
 
