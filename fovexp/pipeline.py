@@ -170,6 +170,9 @@ class Enhancer:
     a parameter change recomputes only what depends on it.
     """
 
+    #: which implementation runs the stages ("cpu": NumPy/Numba; "gpu": fovexp.gpu)
+    backend = "cpu"
+
     def __init__(
         self, display: Display, preset: str = "paper", geometry: GeometryModel | None = None,
         table: ParameterTable | None = None,
@@ -187,9 +190,6 @@ class Enhancer:
         self._version = 0
         self._c = _StageCache()
         self._define_stages()
-
-    #: which implementation runs the stages ("cpu": NumPy/Numba; "gpu": fovexp.gpu)
-    backend = "cpu"
 
     def _define_stages(self) -> None:
         c, p = self._c, self.preset
@@ -465,18 +465,13 @@ def make_enhancer(
         raise FovexpError(f"unknown backend {backend!r} (choose from {', '.join(BACKENDS)})")
     if backend == "cpu" or (backend == "auto" and get_preset(preset).name != "paper"):
         return Enhancer(display, preset, geometry, table)
-    try:
-        from .gpu import GpuEnhancer, create_context, is_software, release_context
-    except ImportError as exc:  # moderngl absent
-        if backend == "gpu":
-            raise FovexpError(f"the GPU backend is not installed ({exc}): install the "
-                              "'gpu' extra") from None
-        return Enhancer(display, preset, geometry, table)
-    if backend == "gpu":
+    from .gpu import GpuEnhancer, create_context, is_software, release_context
+
+    if backend == "gpu":  # no context (or no moderngl): a FovexpError that says so
         return GpuEnhancer(display, preset, geometry, table)
     try:
         ctx = create_context()
-    except FovexpError:
+    except FovexpError:  # no moderngl, no EGL, no OpenGL 4.5
         return Enhancer(display, preset, geometry, table)
     if is_software(ctx):
         release_context(ctx)
