@@ -34,27 +34,29 @@ def box_width_px(level: int) -> int:
     return int(math.ceil(4 * level))
 
 
+@numba.njit(cache=True, inline="always")
+def _symmetric(i, n):  # pragma: no cover - compiled
+    """MATLAB 'symmetric' padding index (-1 -> 0, n -> n - 1), repeated past the edges as
+    padarray does when the pad is wider than the image (period 2 n)."""
+    i = i % (2 * n)  # Python semantics: in [0, 2n)
+    return 2 * n - 1 - i if i >= n else i
+
+
 @numba.njit(parallel=True, cache=True, fastmath=True)
 def _sat(img, pad):  # pragma: no cover - compiled
     """Summed-area table (float64, leading zero row and column) of a grey image padded by
-    ``pad`` pixels with symmetric borders (MATLAB 'symmetric': -1 -> 0, n -> n - 1)."""
+    ``pad`` pixels with symmetric borders (:func:`_symmetric`)."""
     h, w = img.shape
     hp, wp = h + 2 * pad, w + 2 * pad
     s = np.zeros((hp + 1, wp + 1))
+    cols = np.empty(wp, dtype=np.int64)
+    for x in range(wp):
+        cols[x] = _symmetric(x - pad, w)
     for y in numba.prange(hp):  # row prefix sums, rows in parallel
-        sy = y - pad
-        if sy < 0:
-            sy = -sy - 1
-        if sy >= h:
-            sy = 2 * h - sy - 1
+        sy = _symmetric(y - pad, h)
         run = 0.0
         for x in range(wp):
-            sx = x - pad
-            if sx < 0:
-                sx = -sx - 1
-            if sx >= w:
-                sx = 2 * w - sx - 1
-            run += img[sy, sx]
+            run += img[sy, cols[x]]
             s[y + 1, x + 1] = run
     nblk = (wp + 63) // 64
     for b in numba.prange(nblk):  # then column sums, blocks of columns in parallel

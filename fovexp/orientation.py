@@ -21,6 +21,11 @@ from .pyramids import sample_cubic
 #: Gaussian-pyramid level the gradients are computed on (paper section 4.3).
 ORIENTATION_LEVEL = 3
 
+#: Gradient magnitude (linear luminance per level pixel) below which the direction is taken as
+#: undefined: in a flat area G is float32 rounding (~1e-7) and its atan2 any angle, differently
+#: on every backend; there omega = atan2(0, 0) - pi/2. Real edges are 1e-3 and more.
+GRADIENT_EPS = 1e-5
+
 
 def sobel_gradients(grey_level: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``(G_x, G_y)``: Sobel derivatives along x (right) and y (down), replicated borders."""
@@ -34,7 +39,8 @@ def orientation_at(
 ) -> np.ndarray:
     """``omega`` (rad) at full-resolution points: G_x, G_y interpolated bicubically (Keys,
     :func:`fovexp.pyramids.sample_cubic`) from their level grid, then
-    ``atan2(G_y, G_x) - pi/2`` (0 - pi/2 where both vanish, as numpy's atan2(0, 0) = 0)."""
+    ``atan2(G_y, G_x) - pi/2``; ``-pi/2`` where ``|G| < GRADIENT_EPS`` (a flat area)."""
     gxs = sample_cubic(gx, x_px, y_px, level)
     gys = sample_cubic(gy, x_px, y_px, level)
-    return (np.arctan2(gys, gxs) - 0.5 * np.pi).astype(np.float32)
+    flat = np.hypot(gxs, gys) < GRADIENT_EPS
+    return (np.where(flat, 0.0, np.arctan2(gys, gxs)) - 0.5 * np.pi).astype(np.float32)

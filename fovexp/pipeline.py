@@ -476,7 +476,10 @@ def make_enhancer(
     if is_software(ctx):
         release_context(ctx)
         return Enhancer(display, preset, geometry, table)
-    return GpuEnhancer(display, preset, geometry, table, ctx=ctx)
+    try:  # GpuEnhancer compiles every shader: a driver that cannot falls back to the CPU
+        return GpuEnhancer(display, preset, geometry, table, ctx=ctx, owns_context=True)
+    except FovexpError:
+        return Enhancer(display, preset, geometry, table)
 
 
 def enhance(

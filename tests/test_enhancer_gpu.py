@@ -222,3 +222,51 @@ def test_an_image_too_large_for_the_driver_is_refused_by_name(ctx, frame):
     with pytest.raises(FovexpError, match=r"too large for this GPU: buffer IMAGE needs 1.5 MiB"
                                           r".*at most 1.0 MiB"):
         enh.enhance((0.5, 0.5), EnhanceParams(impulses=12))
+
+
+def test_several_enhancers_share_a_thread(frame):
+    """Each enhancer makes its own context current for each call; closing one leaves the
+    other working."""
+    from fovexp.gpu import GpuEnhancer
+
+    p = EnhanceParams(blur_rate=0.57, impulses=12, seed=2)
+    cpu = Enhancer(LG)
+    cpu.set_image(frame)
+    a, b = GpuEnhancer(LG), GpuEnhancer(LG)
+    for enh in (a, b):
+        enh.set_image(frame)
+    for s_k in (5.0, 6.0):
+        ref = cpu.enhance((0.5, 0.5), p.model_copy(update={"s_k": s_k})).output
+        for enh in (a, b):
+            assert np.abs(enh.enhance((0.5, 0.5), p.model_copy(update={"s_k": s_k})).output
+                          - ref).max() < 2e-3
+    a.close()
+    assert np.abs(b.enhance((0.5, 0.5), p).output - cpu.enhance((0.5, 0.5), p).output).max() < 2e-3
+    b.close()
+
+
+def test_one_enhancer_follows_size_channel_and_method_changes(ctx):
+    """Buffers are reused when large enough: every stage must index by the current size."""
+    from fovexp.gpu import GpuEnhancer
+
+    gpu = GpuEnhancer(LG, ctx=ctx)
+    big, small = textured_image(128, 160, seed=1), textured_image(64, 96, seed=3)
+    cases = [(big, "ours"), (small, "ours"), (small.mean(axis=2), "ours"), (small, "contrast"),
+             (small, "foveated"), (big, "ours")]
+    for image, method in cases:
+        p = EnhanceParams(blur_rate=2.0, impulses=12, method=method)
+        cpu = Enhancer(LG)
+        cpu.set_image(image)
+        gpu.set_image(image.copy())
+        ref, got = cpu.enhance((0.4, 0.5), p), gpu.enhance((0.4, 0.5), p)
+        assert got.output.shape == image.shape
+        assert np.abs(ref.output - got.output).max() < 2e-3, (image.shape, method)
+
+
+def test_the_contrast_padding_wider_than_the_image_matches(ctx):
+    """A 16 x 24 image with sigma 10 px: the summed-area table's border (23 px) is wider than
+    the image, where the symmetric padding repeats (as MATLAB's padarray)."""
+    image = textured_image(16, 24, seed=2)
+    sigma = np.full((16, 24), 10.0, np.float32)
+    (_, cpu), (_, gpu) = _pair(ctx, image, set_kw={"sigma_px": sigma}, method="contrast")
+    assert np.abs(cpu.linear("contrast") - gpu.linear("contrast")).max() < 1e-5

@@ -56,17 +56,19 @@ def test_foveation_leaves_sigma_zero_pixels_bit_exact():
 # ----------------------------------------------------------------------------- contrast
 
 
-@pytest.mark.parametrize("k", [1, 2, 3])
-def test_contrast_enhancement_matches_brute_force_release_formula(k):
-    img = textured_image(40, 50)
-    out = contrast_enhance(img, np.full((40, 50), float(k), np.float32), 0.2)
+@pytest.mark.parametrize("k,h,w", [(1, 40, 50), (2, 40, 50), (3, 40, 50), (6, 12, 14)])
+def test_contrast_enhancement_matches_brute_force_release_formula(k, h, w):
+    """Box means on the symmetric padding, as MATLAB's padarray makes it; the last case's box
+    (24 px) is wider than the image, where the padding repeats its mirror."""
+    img = textured_image(h, w)[: h, : w]
+    out = contrast_enhance(img, np.full((h, w), float(k), np.float32), 0.2)
     n = box_width_px(k)
     p = n
     pad = np.pad(img, ((p, p), (p, p), (0, 0)), mode="symmetric")
     lo = (n - 1) // 2
     ref = np.empty_like(img)
-    for y in range(40):
-        for x in range(50):
+    for y in range(h):
+        for x in range(w):
             a = pad[y + p - lo : y + p - lo + n, x + p - lo : x + p - lo + n].mean(axis=(0, 1))
             ref[y, x] = a + 0.2 * (1 + k) * (img[y, x] - a)
     assert np.abs(out - ref).max() < 1e-5

@@ -4,9 +4,10 @@ It is a :class:`fovexp.Enhancer` (same ``set_image`` / ``enhance`` / ``EnhanceRe
 stage cache: a wheel step recomputes only what the changed parameter invalidates) whose stages
 dispatch the entries of ``shaders/<stage>.glsl`` instead of NumPy/Numba code. Every stage
 keeps its result in GPU buffers; only the finished frame (and any map asked for) is read
-back. What is not per-pixel work stays in Python and is shared with the CPU backend: the
-viewing geometry's constants, the blur-stack plan, the impulses (generated once per image
-size, impulse count and seed) and the noise normalisation.
+back, besides one 4-byte read of the largest sigma when the gaze or the blur-rate changes (it
+sizes the blur stack). What is not per-pixel work stays in Python and is shared with the CPU
+backend: the viewing geometry's constants, the blur-stack plan, the impulses (generated once
+per image size, impulse count and seed) and the noise normalisation.
 
 The backend implements the ``paper`` preset; the ``release`` preset (kept to compare with the
 authors' prototype) runs on the CPU backend. A context is used from the thread that created
@@ -37,8 +38,8 @@ from .programs import (
     IMPULSE_FIELDS,
     LOCAL_1D,
     LOCAL_2D,
-    Programs,
     create_context,
+    programs_for,
     release_context,
     renderer_name,
 )
@@ -77,23 +78,38 @@ class GpuEnhancer(Enhancer):
     def __init__(
         self, display: Display, preset: str = "paper", geometry: GeometryModel | None = None,
         table: ParameterTable | None = None, ctx: Any = None, profile: bool = False,
+        owns_context: bool | None = None,
     ) -> None:
         if get_preset(preset).name != "paper":
             raise FovexpError(
                 f"the GPU backend implements the paper preset, not {preset!r}: the release "
                 "preset runs on the CPU backend (backend='cpu')"
             )
-        self._owns_context = ctx is None
+        #: release the context in close() (default: when this enhancer created it)
+        self._owns_context = ctx is None if owns_context is None else owns_context
         self.ctx = create_context(ctx)
-        self.renderer = renderer_name(self.ctx)
-        self.profile = profile
-        # compiled programs live with the context: enhancers sharing it compile once
-        if not isinstance(self.ctx.extra, dict):
-            self.ctx.extra = {}
-        self._programs = self.ctx.extra.setdefault("fovexp_programs", Programs(self.ctx))
         self._buffers: dict[str, Any] = {}
-        self._max_block_bytes = int(self.ctx.info.get("GL_MAX_SHADER_STORAGE_BLOCK_SIZE") or 2**27)
-        super().__init__(display, preset, geometry, table)
+        try:
+            self.renderer = renderer_name(self.ctx)
+            self.profile = profile
+            self._programs = programs_for(self.ctx)
+            self._max_block_bytes = int(
+                self.ctx.info.get("GL_MAX_SHADER_STORAGE_BLOCK_SIZE") or 2**27)
+            with self.ctx:
+                # every entry now: a driver that cannot compile one fails here, not mid-session
+                self._programs.compile_all()
+            super().__init__(display, preset, geometry, table)
+        except BaseException:
+            self.close()
+            raise
+
+    # Every public method that touches the GPU makes this enhancer's context current for its
+    # duration: several enhancers (contexts) may share a thread.
+    def enhance(self, *args: Any, **kwargs: Any):  # noqa: D102 - Enhancer.enhance
+        with self.ctx:
+            return super().enhance(*args, **kwargs)
+
+    enhance.__doc__ = Enhancer.enhance.__doc__
 
     # ------------------------------------------------------------------------- stage graph
     def _define_stages(self) -> None:
@@ -479,6 +495,10 @@ class GpuEnhancer(Enhancer):
         return self._read("OUTPUT", h * w * c).reshape(self._image_shape())
 
     def linear(self, name: str) -> np.ndarray:
+        with self.ctx:
+            return self._linear_read(name)
+
+    def _linear_read(self, name: str) -> np.ndarray:
         if name not in ("foveated", "contrast"):
             raise FovexpError(f"no linear image {name!r} (choose foveated or contrast)")
         fov = self._c.get("foveated")
@@ -495,6 +515,10 @@ class GpuEnhancer(Enhancer):
         """Per-impulse parameters of the last frame, in the order of the impulses (``x_px``,
         ``y_px``, then ``K``, ``F`` (cycles/px), ``OMEGA`` (rad), ``F_LOW``, ``F_HIGH``, and
         ``AMP``, ``KX``, ``KY`` of the synthesis), for comparison with the CPU backend."""
+        with self.ctx:
+            return self._impulse_params()
+
+    def _impulse_params(self) -> dict[str, np.ndarray]:
         imp: _GpuImpulses = self._c.get("impulses")
         self._c.get("imp_params")
         rec = self._read("IMP_PARAMS", imp.count * len(IMPULSE_FIELDS)).reshape(imp.count, -1)
@@ -505,12 +529,16 @@ class GpuEnhancer(Enhancer):
         return out
 
     def _map(self, name: str) -> np.ndarray:
+        with self.ctx:
+            return self._map_read(name)
+
+    def _map_read(self, name: str) -> np.ndarray:
         c = self._c
         h, w, _ = self._hwc()
         if name == "output":
             return self._output()
         if name in ("foveated", "contrast"):
-            return self._encode(self.linear(name))
+            return self._encode(self._linear_read(name))
         if name == "sigma_px":
             c.get("sigma")
             return self._read("SIGMA", h * w).reshape(h, w)
@@ -539,9 +567,11 @@ class GpuEnhancer(Enhancer):
     def close(self) -> None:
         """Release the GPU buffers, and the context if this enhancer created it (a given
         context stays with its owner). Call it on the thread that created the enhancer."""
-        for buf in self._buffers.values():
-            buf.release()
-        self._buffers.clear()
+        if self._buffers:
+            with self.ctx:
+                for buf in self._buffers.values():
+                    buf.release()
+            self._buffers.clear()
         if self._owns_context:
             release_context(self.ctx)
             self._owns_context = False

@@ -21,7 +21,7 @@ from ..amplitude import MAX_LAPLACIAN_LEVEL, RELEASE_AMPLITUDE_GAIN
 from ..colour import LUMA_BT601
 from ..errors import FovexpError
 from ..frequency import CUTOFF_SIGMAS_F, NYQUIST_CPP
-from ..orientation import ORIENTATION_LEVEL
+from ..orientation import GRADIENT_EPS, ORIENTATION_LEVEL
 from ..pyramids import BINOMIAL_5, KEYS_A
 
 SHADER_DIR = Path(__file__).resolve().parent / "shaders"
@@ -77,6 +77,7 @@ def _header(entry: str) -> str:
         f"const float KEYS_A = {KEYS_A!r};",
         f"const int MAX_LAPLACIAN_LEVEL = {MAX_LAPLACIAN_LEVEL};",
         f"const int ORIENTATION_LEVEL = {ORIENTATION_LEVEL};",
+        f"const float GRADIENT_EPS = {GRADIENT_EPS!r};",
     ]
     return "\n".join(lines) + "\n"
 
@@ -118,6 +119,10 @@ def create_context(ctx: Any = None) -> Any:
             raise FovexpError(f"no OpenGL 4.5 context through EGL: {exc}") from None
     if ctx.version_code < 450:
         raise FovexpError(f"the GPU backend needs OpenGL 4.5, this context has {ctx.version_code}")
+    bindings = int(ctx.info.get("GL_MAX_SHADER_STORAGE_BUFFER_BINDINGS") or 0)
+    if bindings < len(BINDINGS):
+        raise FovexpError(f"the GPU backend binds {len(BINDINGS)} storage buffers, this driver "
+                          f"{bindings} ({renderer_name(ctx)})")
     return ctx
 
 
@@ -139,7 +144,10 @@ def detach_thread() -> None:
 
 
 def release_context(ctx: Any) -> None:
-    """Release a context this package created, and detach the thread from EGL."""
+    """Release a context this package created (and its compiled programs), and detach the
+    thread from EGL (any enhancer still using the thread makes its own context current again
+    on its next call)."""
+    _PROGRAMS.pop(id(ctx), None)
     ctx.release()
     detach_thread()
 
@@ -155,12 +163,29 @@ def is_software(ctx: Any) -> bool:
     return any(s in name for s in _SOFTWARE_RENDERERS)
 
 
+#: Every compute entry, by file: what Programs.compile_all builds.
+ENTRIES: dict[str, tuple[str, ...]] = {
+    "foveation.glsl": ("SIGMA", "BLUR", "STACK_INIT", "STACK_ACCUMULATE"),
+    "pyramids.glsl": ("REDUCE", "ABS_LAPLACIAN", "BOX3", "BLOCK_EXTREMES", "EXTREMES_FILTER"),
+    "contrast.glsl": ("SAT_ROWS", "SAT_COLS", "CONTRAST_CHANGE"),
+    "orientation.glsl": ("SOBEL",),
+    "gabor.glsl": ("NOISE",),
+    "colour.glsl": ("LINEARIZE", "LUMINANCE", "COMPOSE"),
+    "pipeline.glsl": ("IMPULSES", "MAPS"),
+}
+
+
 class Programs:
-    """Compiled entry points of one context, compiled on first use."""
+    """Compiled entry points of one context."""
 
     def __init__(self, ctx: Any) -> None:
         self.ctx = ctx
         self._cache: dict[tuple[str, str], Any] = {}
+
+    def compile_all(self) -> None:
+        for file, entries in ENTRIES.items():
+            for entry in entries:
+                self.get(file, entry)
 
     def get(self, file: str, entry: str) -> Any:
         key = (file, entry)
@@ -173,3 +198,15 @@ class Programs:
                     f"GPU backend: {file} entry {entry} does not compile: {exc}"
                 ) from None
         return self._cache[key]
+
+
+#: Programs per context (keyed by the context object; contexts are few and long-lived).
+_PROGRAMS: dict[int, tuple[Any, Programs]] = {}
+
+
+def programs_for(ctx: Any) -> Programs:
+    """The compiled programs of ``ctx``, shared by every enhancer that runs in it."""
+    held = _PROGRAMS.get(id(ctx))
+    if held is None or held[0] is not ctx:
+        held = _PROGRAMS[id(ctx)] = (ctx, Programs(ctx))
+    return held[1]

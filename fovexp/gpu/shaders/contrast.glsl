@@ -4,11 +4,12 @@
 // that bracket its sigma. Box means from a float64 summed-area table of the luminance padded
 // with symmetric borders; the result kept is the change, out - in.
 
-// MATLAB 'symmetric' padding: -1 -> 0, n -> n - 1
+// contrast._symmetric: MATLAB 'symmetric' padding (-1 -> 0, n -> n - 1), repeated past the
+// edges (period 2n) when the pad is wider than the image; GLSL's % is undefined for i < 0
 int symmetric(int i, int n) {
-    i = i < 0 ? -i - 1 : i;
-    i = i >= n ? 2 * n - i - 1 : i;
-    return clamp(i, 0, n - 1);
+    int m = 2 * n;
+    i -= m * int(floor(float(i) / float(m)));
+    return i >= n ? m - 1 - i : i;
 }
 
 #ifdef ENTRY_SAT_ROWS

@@ -55,9 +55,9 @@ float gradient_cubic(int component, vec2 p_px) {
     return acc;
 }
 
-// orientation.orientation_at: omega in rad (atan2(0, 0) = 0, as numpy)
+// orientation.orientation_at: omega in rad; -pi/2 where |G| < GRADIENT_EPS (a flat area)
 float orientation_at(vec2 p_px) {
     float gx = gradient_cubic(0, p_px), gy = gradient_cubic(1, p_px);
-    return (gx == 0.0 && gy == 0.0 ? 0.0 : atan(gy, gx)) - 0.5 * PI;
+    return (length(vec2(gx, gy)) < GRADIENT_EPS ? 0.0 : atan(gy, gx)) - 0.5 * PI;
 }
 #endif
