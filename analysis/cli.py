@@ -19,10 +19,10 @@ def _configure(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     p.add_argument("--out", type=Path, default=Path("report"),
                    help="output folder for report.md, tables/, figures/ (default: report)")
     p.add_argument("--include-incomplete", action="store_true",
-                   help="keep incomplete sessions (rule R8 then only reports them)")
+                   help="keep incomplete sessions (rule R9 then only reports them)")
     p.add_argument("--protocol", action="append", default=[], metavar="EXPERIMENT=SHA256",
                    help="keep this protocol version (hash or prefix) of an experiment instead "
-                        "of the majority one (rule R7); repeatable")
+                        "of the majority one (rule R8); repeatable")
     p.add_argument("--no-figures", action="store_true", help="skip the PNG/PDF figures")
     p.add_argument("--table-out", type=Path, default=None,
                    help="also write the calibrated Table 2 (ParameterTable YAML) here")

@@ -21,10 +21,15 @@ R5 duplicated trials
 R6 wrong parameter
     In the paper's four experiments, rows whose ``adjusted_parameter`` is not the one the
     experiment adjusts are excluded.
-R7 mixed protocol versions
+R7 simulated sessions
+    Where an experiment has trials with a participant's own gaze (tracker ``tobii`` or
+    ``mouse``), its trials with simulated gaze (dry runs, demos) are excluded: a dry run left in
+    the lab's results folder never enters its calibration. A folder of simulated sessions alone
+    (CI, demos) is analysed as it is, with a note saying so.
+R8 mixed protocol versions
     Per experiment, the protocol version (``protocol_sha256``) run by the most participants is
     kept (ties: more trials, then the later last trial); rows of other versions are excluded.
-R8 incomplete sessions
+R9 incomplete sessions
     A session whose ``session-<id>.json`` records it as not completed is excluded; without a
     readable completion state, a session with fewer trials than the largest session of the same
     experiment and protocol version is excluded.
@@ -40,7 +45,12 @@ from pathlib import Path
 import pandas as pd
 
 from fovexp import FovexpError
-from fovexp.experiment.logformat import FLOAT_COLUMNS, INT_COLUMNS, TRIAL_COLUMNS
+from fovexp.experiment.logformat import (
+    FLOAT_COLUMNS,
+    INT_COLUMNS,
+    SIMULATED_TRACKER,
+    TRIAL_COLUMNS,
+)
 from fovexp.experiment.logformat import read_trials_file as _read_file
 
 #: ``trials.csv`` columns in their documented order (docs/LOGS.md); the format is defined once,
@@ -69,9 +79,11 @@ RULES: dict[str, str] = {
     "identical copies merged, conflicting copies keep the last one written",
     "R6 wrong parameter": "a row of calibration-fe/-sk/-sf or validation whose "
     "adjusted_parameter is not the experiment's (f_e/s_k/s_f/blur_rate): excluded",
-    "R7 mixed protocol versions": "per experiment, only the protocol version run by the most "
+    "R7 simulated sessions": "trials with simulated gaze (dry runs) of an experiment that also "
+    "has trials with a participant's own gaze (tobii, mouse): excluded",
+    "R8 mixed protocol versions": "per experiment, only the protocol version run by the most "
     "participants (ties: more trials, then the later last trial) is kept",
-    "R8 incomplete session": "a session recorded as not completed in session-<id>.json (or, "
+    "R9 incomplete session": "a session recorded as not completed in session-<id>.json (or, "
     "without one, with fewer trials than the largest session of its experiment and protocol "
     "version): excluded",
 }
@@ -208,11 +220,11 @@ def load_results(
     include_incomplete: bool = False,
     protocol: Mapping[str, str] | None = None,
 ) -> Dataset:
-    """Load every ``trials.csv`` under ``root`` and apply rules R1-R8 (see module docstring).
+    """Load every ``trials.csv`` under ``root`` and apply rules R1-R9 (see module docstring).
 
-    ``include_incomplete`` keeps incomplete sessions (R8 then only reports them);
+    ``include_incomplete`` keeps incomplete sessions (R9 then only reports them);
     ``protocol`` maps an experiment to the ``protocol_sha256`` (or a prefix) to keep instead of
-    the majority version (R7). Raises :class:`FovexpError` for an empty or missing folder, a
+    the majority version (R8). Raises :class:`FovexpError` for an empty or missing folder, a
     corrupt row, or when no trial is left.
     """
     root = Path(root)
@@ -265,7 +277,20 @@ def load_results(
         trials = _exclude(trials, wrong, "R6 wrong parameter",
                           "adjusted_parameter is not the experiment's", exclusions)
 
-    # R7 mixed protocol versions.
+    # R7 simulated sessions (before R8: dry runs must not outvote the real participants).
+    simulated = trials["tracker"] == SIMULATED_TRACKER
+    for exp, grp in list(trials.groupby("experiment", sort=True)):
+        sim = simulated & (trials["experiment"] == exp)
+        if sim.any() and not sim[grp.index].all():
+            trials = _exclude(trials, sim, "R7 simulated sessions",
+                              "simulated gaze (a dry run) beside real participants' sessions",
+                              exclusions)
+            simulated = simulated[trials.index]
+        elif sim.any():
+            notes.append(f"experiment {exp}: every trial comes from simulated gaze (dry runs), "
+                         "not from real participants")
+
+    # R8 mixed protocol versions.
     protocol = dict(protocol or {})
     for exp, grp in list(trials.groupby("experiment", sort=True)):
         versions = grp.groupby("protocol_sha256").agg(
@@ -285,11 +310,11 @@ def load_results(
             continue
         other = (trials["experiment"] == exp) & (trials["protocol_sha256"] != keep)
         if other.any():
-            trials = _exclude(trials, other, "R7 mixed protocol versions",
+            trials = _exclude(trials, other, "R8 mixed protocol versions",
                               f"protocol {_short(trials.loc[other, 'protocol_sha256'])} "
                               f"differs from the kept {keep[:12]}", exclusions)
 
-    # R8 incomplete sessions.
+    # R9 incomplete sessions.
     sess_key = ["experiment", "protocol_sha256", "participant", "session"]
     sizes = trials.groupby(sess_key, sort=True).agg(n=("trial_index", "size"),
                                                     file=("file", "first"))
@@ -308,11 +333,11 @@ def load_results(
         mask = ((trials["experiment"] == exp) & (trials["participant"] == part)
                 & (trials["session"] == sess) & (trials["protocol_sha256"] == sha))
         if include_incomplete:
-            exclusions.append(Exclusion("R8 incomplete session", str(row["file"]),
+            exclusions.append(Exclusion("R9 incomplete session", str(row["file"]),
                                         reason + "; kept (--include-incomplete)", 0,
                                         str(exp), str(part), str(sess)))
         else:
-            trials = _exclude(trials, mask, "R8 incomplete session", reason, exclusions)
+            trials = _exclude(trials, mask, "R9 incomplete session", reason, exclusions)
 
     if trials.empty:
         raise FovexpError(f"{root}: no trials left after the exclusion rules"

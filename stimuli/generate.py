@@ -92,7 +92,7 @@ def _draw_text(draw: ImageDraw.ImageDraw, rng: np.random.Generator, box, colour)
 
 
 def scene(index: int) -> np.ndarray:
-    """Scene ``index`` (0..9) as uint8 RGB; its look is fixed by ``index`` alone."""
+    """Scene ``index`` (0..14) as uint8 RGB; its look is fixed by ``index`` alone."""
     rng = np.random.default_rng(1000 + index)
     dark = index % 3 == 2  # some dark scenes, as in the paper's selection
     k = 0.35 if dark else 1.0
@@ -135,7 +135,7 @@ def scene(index: int) -> np.ndarray:
 def main() -> None:
     OUT.mkdir(exist_ok=True)
     entries = []
-    for i in range(10):
+    for i in range(15):
         name = f"scene-{i:02d}"
         path = OUT / f"{name}.png"
         rgb = Image.fromarray(scene(i))

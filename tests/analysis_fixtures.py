@@ -160,15 +160,17 @@ def write_trials(folder: Path, rows: list[dict], *, completed: bool | None = Tru
 
 def write_study(root: Path, n_participants: int = 10, seed: int = 0, truth: Truth | None = None,
                 noise: Noise | None = None, repetitions: int = 1,
-                experiments: tuple[str, ...] = tuple(EXPERIMENT_PARAMETER)) -> Path:
-    """Write results/<experiment>/<participant>/trials.csv for every experiment and participant."""
+                experiments: tuple[str, ...] = tuple(EXPERIMENT_PARAMETER),
+                tracker: str = "simulated", prefix: str = "P") -> Path:
+    """Write results/<experiment>/<participant>/trials.csv for every experiment and participant
+    (participants ``<prefix>01``...; ``tracker``: the gaze source the rows record)."""
     truth = truth or Truth()
     noise = noise or Noise()
     rng = np.random.default_rng(seed)
     for k, exp in enumerate(experiments):
         for p in range(n_participants):
-            pid = f"P{p + 1:02d}"
+            pid = f"{prefix}{p + 1:02d}"
             rows = simulate_rows(exp, pid, session_id(10 * k + p), rng, truth, noise,
                                  repetitions=repetitions)
-            write_trials(root / exp / pid, rows)
+            write_trials(root / exp / pid, [dict(r, tracker=tracker) for r in rows])
     return root

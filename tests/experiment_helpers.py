@@ -63,8 +63,9 @@ def xvfb_display():
 def make_workspace(root: Path) -> Path:
     """A scratch project: ``protocols/`` (copied, editable), ``stimuli/`` (linked), ``results/``.
 
-    The shipped protocols name ``../results/<experiment>`` as their dependencies, so inside the
-    scratch project they find the dry runs' own results.
+    The shipped protocols name their dependencies as ``<experiment>`` folders of the results
+    root: run from ``root`` (or given ``results_root=root / "results"``) they find the dry runs'
+    own results.
     """
     (root / "protocols").mkdir(parents=True)
     for p in (REPO / "protocols").glob("*.yaml"):

@@ -1,4 +1,4 @@
-"""Loading and validation of trial logs: each exclusion rule of docs/ANALYSIS.md (R1-R8), and the
+"""Loading and validation of trial logs: each exclusion rule of docs/ANALYSIS.md (R1-R9), and the
 clear errors for empty folders, non-numeric values and corrupt rows."""
 
 from __future__ import annotations
@@ -161,7 +161,7 @@ def test_mixed_protocol_versions(tmp_path: Path) -> None:
     write_trials(tmp_path / "calibration-fe" / "P09", rows(pid="P09", k=9, sha="b" * 64))
     ds = load_results(tmp_path)
     assert set(ds.trials["participant"]) == {"P00", "P01", "P02"}
-    mixed = [e for e in ds.exclusions if e.rule == "R7 mixed protocol versions"]
+    mixed = [e for e in ds.exclusions if e.rule == "R8 mixed protocol versions"]
     assert len(mixed) == 1 and mixed[0].participant == "P09" and mixed[0].n_trials == 15
     assert "bbbbbbbbbbbb" in mixed[0].detail
     chosen = load_results(tmp_path, protocol={"calibration-fe": "bbbb"})
@@ -170,16 +170,36 @@ def test_mixed_protocol_versions(tmp_path: Path) -> None:
         load_results(tmp_path, protocol={"calibration-fe": "c"})
 
 
+def test_dry_runs_beside_real_sessions(tmp_path: Path) -> None:
+    """R7: three dry runs (another protocol version) beside two real participants: the dry runs
+    are left out before R8, so they cannot outvote the real sessions' protocol version."""
+    for k, pid in enumerate(("SIM01", "SIM02", "SIM03")):
+        write_trials(tmp_path / "calibration-fe" / pid, rows(pid=pid, k=k, sha="d" * 64))
+    only_dry = load_results(tmp_path)
+    assert len(only_dry.trials) == 45 and "R7 simulated sessions" not in rules(only_dry)
+    assert any("simulated gaze" in n for n in only_dry.notes)
+    for k, pid in enumerate(("P01", "P02"), start=3):
+        real = [dict(r, tracker="tobii") for r in rows(pid=pid, k=k)]
+        write_trials(tmp_path / "calibration-fe" / pid, real)
+    ds = load_results(tmp_path)
+    assert sorted(ds.trials["participant"].unique()) == ["P01", "P02"]
+    assert (ds.trials["tracker"] == "tobii").all()
+    dry = [e for e in ds.exclusions if e.rule == "R7 simulated sessions"]
+    assert sorted(e.participant for e in dry) == ["SIM01", "SIM02", "SIM03"]
+    assert sum(e.n_trials for e in dry) == 45
+    assert "R8 mixed protocol versions" not in rules(ds)
+
+
 def test_incomplete_session_from_json(tmp_path: Path) -> None:
     write_trials(tmp_path / "calibration-fe" / "P01", rows())
     write_trials(tmp_path / "calibration-fe" / "P02", rows(pid="P02", k=1), completed=False)
     ds = load_results(tmp_path)
     assert set(ds.trials["participant"]) == {"P01"}
-    inc = [e for e in ds.exclusions if e.rule == "R8 incomplete session"]
+    inc = [e for e in ds.exclusions if e.rule == "R9 incomplete session"]
     assert len(inc) == 1 and "not completed" in inc[0].detail and inc[0].n_trials == 15
     kept = load_results(tmp_path, include_incomplete=True)
     assert set(kept.trials["participant"]) == {"P01", "P02"}
-    assert "R8 incomplete session" in rules(kept)
+    assert "R9 incomplete session" in rules(kept)
 
 
 def test_incomplete_session_from_trial_count(tmp_path: Path) -> None:
@@ -187,7 +207,7 @@ def test_incomplete_session_from_trial_count(tmp_path: Path) -> None:
     write_trials(tmp_path / "calibration-fe" / "P02", rows(pid="P02", k=1)[:10], completed=None)
     ds = load_results(tmp_path)
     assert set(ds.trials["participant"]) == {"P01"}
-    inc = [e for e in ds.exclusions if e.rule == "R8 incomplete session"]
+    inc = [e for e in ds.exclusions if e.rule == "R9 incomplete session"]
     assert "8 trials, fewer than the 15" in inc[0].detail
 
 
@@ -247,7 +267,7 @@ def test_runner_writer_round_trip(tmp_path: Path) -> None:
     got = ds.trials.sort_values("trial_index")
     assert got["final_value"].tolist() == [x["final_value"] for x in main]
     assert got["s_k"].isna().all()  # empty in the log, NaN here
-    # a session the runner marked incomplete is excluded (R8)
+    # a session the runner marked incomplete is excluded (R9)
     logs.write_json_atomic(folder / f"session-{session_id(0)}.json",
                            {"session": session_id(0), "state": "interrupted", "completed": False})
     write_trials(tmp_path / "calibration-fe" / "P02", rows(pid="P02", k=1))

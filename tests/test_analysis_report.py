@@ -44,7 +44,7 @@ def test_cli_writes_the_report(results: Path, tmp_path: Path,
     report = (out / "report.md").read_text()
     for heading in ("## Calibration (section 6.3)", "### Table 2", "## Validation: validation",
                     "### Paired t-test, ours vs contrast", "sampling-rate reduction",
-                    "## Exclusions", "R4 practice", "R8 incomplete session"):
+                    "## Exclusions", "R4 practice", "R9 incomplete session"):
         assert heading in report, heading
     # 2 practice trials per session, 6 participants x 4 experiments
     assert "| R4 practice | 48 |" in report
@@ -118,7 +118,7 @@ def test_report_lists_exclusions(tmp_path: Path, capsys: pytest.CaptureFixture[s
     captured = capsys.readouterr()
     assert "warning:" in captured.err and "torn last row" in captured.err
     report = (out / "report.md").read_text()
-    assert "| R1 torn last row | 1 |" in report and "| R8 incomplete session | 20 |" in report
+    assert "| R1 torn last row | 1 |" in report and "| R9 incomplete session | 20 |" in report
     assert "validation/P03/trials.csv" in report  # the details name the file
     assert main([str(root), "--out", str(out), "--no-figures", "--include-incomplete"]) == 0
     report = (out / "report.md").read_text()

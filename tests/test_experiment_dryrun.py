@@ -111,7 +111,7 @@ def test_dry_run_calibration_fe(ws: Path) -> None:
 def test_dry_run_calibration_sk(ws: Path) -> None:
     from analysis.derive import fe_by_blur_rate
 
-    lp = load_protocol(ws / "protocols" / "calibration-sk.yaml")
+    lp = load_protocol(ws / "protocols" / "calibration-sk.yaml", results_root=ws / "results")
     fe = fe_by_blur_rate(ws / "results" / "calibration-fe")
     # The shortest prefix of the order with two s_f values per blur-rate (needed for a line).
     _, plan = lp.plan("S01", practice=0)
@@ -147,10 +147,12 @@ def test_dry_run_calibration_sf(ws: Path) -> None:
 def test_dry_run_validation(ws: Path, tmp_path: Path) -> None:
     truth = tmp_path / "truth.yaml"
     truth.write_text("validation_blur_rate: {contrast: 0.3, ours: 0.5}\n")
-    folder = dry(ws, "validation", "S01", "--practice", "0", "--limit-trials", "4",
+    folder = dry(ws, "validation", "S01", "--practice", "1", "--limit-trials", "4",
                  "--sim-truth", str(truth), "--sim-noise-scale", "0")
-    rows = check_common(folder, 4, 0)
-    for r in rows:
+    rows = check_common(folder, 5, 1)
+    # practice on plain foveation, a method not under test (paper section 7.1)
+    assert rows[0]["practice"] and rows[0]["method"] == "foveated" and rows[0]["f_e"] is None
+    for r in rows[1:]:
         assert r["adjusted_parameter"] == "blur_rate" and r["start_value"] == 0.0
         assert r["blur_rate"] == r["final_value"]
         target = 0.3 if r["method"] == "contrast" else 0.5

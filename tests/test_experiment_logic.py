@@ -23,7 +23,15 @@ from fovexp.experiment.gaze import (
 from fovexp.experiment.logs import TRIAL_COLUMNS, BatchLog, TrialLog, read_trials
 from fovexp.experiment.participant import SimTruth, SimulatedParticipant
 from fovexp.experiment.quality import validation_result
-from fovexp.experiment.trial import BlankingLog, FrameTimer, Key, TrialState, ValueAdjuster, Wheel
+from fovexp.experiment.trial import (
+    BlankingLog,
+    FrameTimer,
+    Key,
+    TrialState,
+    ValueAdjuster,
+    Wheel,
+    wheel_notches,
+)
 
 DISPLAY = load_display("lg-oled55cx")
 
@@ -68,6 +76,18 @@ def test_adjuster_steps_and_clamps() -> None:
     assert a.notches == 3 + 2 + 100 + 1
     a.apply(Wheel(-1000))
     assert a.value == 0.0
+
+
+def test_wheel_notches_sum_fractions() -> None:
+    """A high-resolution wheel reports fractions of a notch: they add up to whole notches."""
+    assert wheel_notches([(1.0, False), (2.0, False), (-1.0, True)]) == (
+        [Wheel(3), Wheel(-1, fine=True)], 0.0)
+    wheel, carry = wheel_notches([(0.4, False)] * 3)
+    assert wheel == [Wheel(1)] and carry == pytest.approx(0.2)
+    wheel, carry = wheel_notches([(0.4, False), (0.5, False)], carry)  # carried over
+    assert wheel == [Wheel(1)] and carry == pytest.approx(0.1)
+    wheel, carry = wheel_notches([(-0.3, False)] * 4, carry)  # back the other way
+    assert wheel == [Wheel(-1)] and carry == pytest.approx(-0.1)  # 0.1 - 1.2 = -1 - 0.1
 
 
 @given(st.lists(st.tuples(st.integers(-5, 5), st.booleans()), max_size=200))
@@ -124,6 +144,22 @@ def test_blanking_switches_exactly_at_radius(fix: FixationGeometry) -> None:
             d = mon.update([sample(1000 * i, p)], 1000 * i)
             assert d.blank == (e > 1.25), (angle, e)
             assert d.reason == ("outside" if e > 1.25 else "")
+
+
+def test_blanking_radius_in_centimetres_on_the_screen(fix: FixationGeometry) -> None:
+    """The 1.25 deg radius from the display's own measurements, not from the geometry code: a
+    point d cm from the cross (the screen centre, where the line of sight is perpendicular) is
+    atan(d / distance) away, so the edge lies at d = distance * tan(1.25 deg) in any direction."""
+    mon = BlankingMonitor(fix, 1.25, timeout_s=0.05)
+    d_cm = DISPLAY.distance_cm * math.tan(math.radians(1.25))  # 1.560 cm on the LG OLED55CX
+    for i, angle in enumerate((0.0, math.pi / 2, 2.3, -0.7)):
+        for j, scale in enumerate((0.995, 1.005)):
+            dx, dy = scale * d_cm * math.cos(angle), scale * d_cm * math.sin(angle)
+            p = (0.5 + dx / DISPLAY.width_cm, 0.5 + dy / DISPLAY.height_cm)
+            expected = math.degrees(math.atan(math.hypot(dx, dy) / DISPLAY.distance_cm))
+            assert fix.eccentricity(p) == pytest.approx(expected, rel=1e-3)
+            t = 1000 * (2 * i + j)
+            assert mon.update([sample(t, p)], t).blank == (scale > 1), (angle, scale)
 
 
 def test_blanking_invalid_lost_and_off_screen(fix: FixationGeometry) -> None:
@@ -333,6 +369,41 @@ def test_batch_log(tmp_path: Path) -> None:
         fh.write("3,0.")  # torn by a kill
     BatchLog(path, ["a", "b"]).flush()
     assert path.read_text() == "a,b\n1,0.5\n2,\n"
+
+
+def test_synced_flush_waits_for_a_flush_under_way(tmp_path: Path,
+                                                  monkeypatch: pytest.MonkeyPatch) -> None:
+    """The periodic flusher has taken rows 1 and is writing them when the trial ends: the trial's
+    synced flush of rows 2 must not return before rows 1 are on disk, nor write 2 before 1."""
+    import threading
+
+    from fovexp.experiment import logs
+
+    started, release = threading.Event(), threading.Event()
+    real = logs.format_line
+
+    def slow(row):  # the first batch stalls in the middle of its write
+        if row == (1, 1):
+            started.set()
+            assert release.wait(5)
+        return real(row)
+
+    monkeypatch.setattr(logs, "format_line", slow)
+    path = tmp_path / "gaze.csv"
+    log = BatchLog(path, ["a", "b"])
+    log.add((1, 1))
+    background = threading.Thread(target=log.flush)
+    background.start()
+    assert started.wait(5)
+    log.add((2, 2))
+    synced = threading.Thread(target=log.flush, kwargs={"sync": True})
+    synced.start()
+    synced.join(0.3)
+    assert synced.is_alive()  # waits for the write under way
+    release.set()
+    background.join(5)
+    synced.join(5)
+    assert path.read_text() == "a,b\n1,1\n2,2\n"
 
 
 # -- display check ---------------------------------------------------------------------------

@@ -12,6 +12,7 @@ from fovexp import FovexpError
 from fovexp.experiment.protocol import load_protocol
 from fovexp.experiment.validation import check_participant
 
+from analysis_fixtures import Truth, write_study
 from experiment_helpers import REPO, make_workspace, run_cli
 
 
@@ -56,9 +57,23 @@ def test_shipped_protocols_state_the_paper_design() -> None:
     assert v["s_f"] == pytest.approx(2.83) and v["blur_rate"] == 0.225
     for name in ("calibration-sk", "calibration-sf"):
         spec = yaml.safe_load((REPO / "protocols" / f"{name}.yaml").read_text())
-        assert spec["parameters"]["f_e"] == {"fe_results": "../results/calibration-fe"}
+        assert spec["parameters"]["f_e"] == {"fe_results": "calibration-fe"}
     sk = yaml.safe_load((REPO / "protocols" / "calibration-sk.yaml").read_text())
     assert sk["s_f_values"] == [1.0, 1.9, 3.61, 6.81] and sk["adjust"]["range"] == [0.0, 45.0]
+    sf = yaml.safe_load((REPO / "protocols" / "calibration-sf.yaml").read_text())
+    assert sf["adjust"]["range"] == [min(sk["s_f_values"]), max(sk["s_f_values"])]
+    # Validation scenes are not the calibration images; practice is on another method.
+    assert not set(val.spec.images) & set(fe.spec.images)
+    _, trials = val.plan("P01")
+    practice = [t for t in trials if t.practice]
+    assert len(practice) == 2 and {t.method for t in practice} == {"foveated"}
+    assert {t.method for t in trials if not t.practice} == {"contrast", "ours"}
+
+
+def test_practice_methods_must_use_the_adjusted_parameter(ws: Path) -> None:
+    with pytest.raises(FovexpError, match=r"practice_methods: foveated does not use the "
+                                          r"adjusted f_e"):
+        load_protocol(edit(ws, "calibration-fe", practice_methods=["foveated"]))
 
 
 def test_plan_is_seeded_per_participant_and_stable() -> None:
@@ -101,10 +116,43 @@ def test_bad_protocol_names_file_and_key(ws: Path, change: dict, needle: str) ->
 
 def test_missing_dependency_folder(ws: Path) -> None:
     with pytest.raises(FovexpError) as err:
-        load_protocol(ws / "protocols" / "calibration-sk.yaml")
+        load_protocol(ws / "protocols" / "calibration-sk.yaml", results_root=ws / "results")
     msg = str(err.value)
     assert "calibration-sk.yaml" in msg and "parameters.f_e.fe_results" in msg
-    assert "does not exist" in msg
+    assert "does not exist" in msg and str(ws / "results" / "calibration-fe") in msg
+
+
+def test_dependencies_come_from_the_results_root(ws: Path, tmp_path: Path) -> None:
+    """A study kept elsewhere (--results /data/study) reads its own calibration-fe, not the
+    results folder beside the protocols."""
+    study = write_study(tmp_path / "study", n_participants=2, seed=3,
+                        experiments=("calibration-fe",), tracker="tobii")
+    write_study(ws / "results", n_participants=2, seed=4, experiments=("calibration-fe",),
+                truth=Truth(f_e={0.11: 0.05, 0.34: 0.1, 0.57: 0.15}), tracker="tobii")
+    here = load_protocol(ws / "protocols" / "calibration-sk.yaml", results_root=ws / "results")
+    there = load_protocol(ws / "protocols" / "calibration-sk.yaml", results_root=study)
+    assert there.dependency_folders["f_e"] == str(study / "calibration-fe")
+    assert here.sources["f_e"](0.34, None) == pytest.approx(0.1, abs=0.03)
+    assert there.sources["f_e"](0.34, None) != pytest.approx(here.sources["f_e"](0.34, None),
+                                                             abs=0.03)
+
+
+def test_participant_sessions_never_use_dry_runs(ws: Path) -> None:
+    """Dependencies holding only dry runs serve dry runs, and stop a real session; beside real
+    participants' results, dry runs are left out (analysis rule R7)."""
+    root = ws / "results"
+    write_study(root, n_participants=2, seed=5, experiments=("calibration-fe",),
+                truth=Truth(f_e={0.11: 0.3, 0.34: 0.3, 0.57: 0.3}), prefix="SIM")
+    sk = ws / "protocols" / "calibration-sk.yaml"
+    assert load_protocol(sk, results_root=root).sources["f_e"](0.34, None) > 0.25
+    with pytest.raises(FovexpError, match=r"parameters\.f_e\.fe_results: .* only simulated "
+                                          r"sessions \(dry runs\)"):
+        load_protocol(sk, results_root=root, real_only=True)
+    write_study(root, n_participants=2, seed=6, experiments=("calibration-fe",),
+                truth=Truth(f_e={0.11: 0.1, 0.34: 0.1, 0.57: 0.1}), tracker="tobii")
+    for real_only in (False, True):
+        f_e = load_protocol(sk, results_root=root, real_only=real_only).sources["f_e"]
+        assert f_e(0.34, None) == pytest.approx(0.1, abs=0.03)  # the dry runs' 0.3 left out
 
 
 def test_method_needs_its_parameters(ws: Path) -> None:
@@ -143,7 +191,8 @@ def test_participant_ok(pid: str) -> None:
     assert check_participant(pid) == pid
 
 
-@pytest.mark.parametrize("pid", ["", "../x", "P 01", "P01/", "é", "X" * 33, "a.b"])
+@pytest.mark.parametrize("pid", ["", "../x", "P 01", "P01/", "é", "X" * 33, "a.b", "P01\n",
+                                 "con", "NUL", "Com1"])
 def test_participant_rejected(pid: str) -> None:
     with pytest.raises(FovexpError, match="participant ID"):
         check_participant(pid)

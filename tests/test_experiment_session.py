@@ -159,6 +159,10 @@ def test_resume_with_nothing_left_opens_no_window(tmp_path: Path, monkeypatch) -
     def no_window(**kw):
         raise AssertionError("a window was opened")
 
+    # A participant's session is never finished by a dry run, nor by another gaze source.
+    for mode in (dict(dry_run=True, tracker="simulated"), dict(tracker="tobii")):
+        with pytest.raises(FovexpError, match="started as a session with --tracker mouse"):
+            Session(lp, options(tmp_path, "N01", resume=True, **mode))
     s2 = Session(lp, options(tmp_path, "N01", resume=True))
     assert s2.session_id == s.session_id and not s2.remaining
     assert s2.run(screen_factory=no_window, gaze=centre_gaze()) == 0
@@ -169,7 +173,7 @@ def test_resume_with_nothing_left_opens_no_window(tmp_path: Path, monkeypatch) -
 def test_resume_keeps_the_dependency_values_it_started_with(tmp_path: Path) -> None:
     ws = make_workspace(tmp_path / "ws")
     write_study(ws / "results", n_participants=2, seed=1, experiments=("calibration-fe",))
-    lp = load_protocol(ws / "protocols" / "calibration-sk.yaml")
+    lp = load_protocol(ws / "protocols" / "calibration-sk.yaml", results_root=ws / "results")
     snap = lp.derived["f_e"]
     assert snap["kind"] == "fe_results" and [b for b, _ in snap["f_e"]] == [0.11, 0.34, 0.57]
     opts = dict(tracker="simulated", dry_run=True, results_root=ws / "results")
@@ -178,7 +182,7 @@ def test_resume_keeps_the_dependency_values_it_started_with(tmp_path: Path) -> N
     fe_before = lp.sources["f_e"](0.34, None)
     # More calibration-fe participants arrive before the session is resumed.
     write_study(ws / "results", n_participants=6, seed=2, experiments=("calibration-fe",))
-    lp2 = load_protocol(ws / "protocols" / "calibration-sk.yaml")
+    lp2 = load_protocol(ws / "protocols" / "calibration-sk.yaml", results_root=ws / "results")
     assert lp2.sources["f_e"](0.34, None) != pytest.approx(fe_before, abs=1e-9)
     s2 = Session(lp2, options(tmp_path, "D01", resume=True, **opts))
     assert s2.protocol.sources["f_e"](0.34, None) == pytest.approx(fe_before, abs=1e-12)

@@ -14,6 +14,8 @@ from typing import Any
 
 from fovexp import BACKENDS, FovexpError
 
+from .logformat import SIMULATED_TRACKER, TRACKERS
+
 
 def _size(text: str) -> tuple[int, int]:
     try:
@@ -32,7 +34,7 @@ def add_run_parser(subparsers: Any) -> argparse.ArgumentParser:
         description="Run one of the paper's adjustment experiments (protocols/*.yaml).")
     p.add_argument("protocol", type=Path, help="protocol YAML, e.g. protocols/calibration-fe.yaml")
     p.add_argument("--participant", required=True, help="participant ID ([A-Za-z0-9_-]{1,32})")
-    p.add_argument("--tracker", choices=["tobii", "simulated", "mouse"], default=None,
+    p.add_argument("--tracker", choices=TRACKERS, default=None,
                    help="gaze source (default: tobii; simulated with --dry-run)")
     p.add_argument("--tracker-address", default=None,
                    help="Tobii tracker address or serial number (default: the first found)")
@@ -43,7 +45,8 @@ def add_run_parser(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument("--new-session", action="store_true",
                    help="start a new session although an incomplete one exists")
     p.add_argument("--results", type=Path, default=Path("results"),
-                   help="results root (default: ./results)")
+                   help="results root; the protocol's dependencies are read from it too "
+                        "(default: ./results)")
     p.add_argument("--window", type=_size, default=None, metavar="WxH",
                    help="window size instead of the display profile's (dry run: 480x270)")
     p.add_argument("--windowed", action="store_true", help="not full screen (pilots)")
@@ -86,9 +89,11 @@ def run_command(args: argparse.Namespace) -> int:
             raise FovexpError("--sim-speed must be > 0 and --sim-noise-scale >= 0")
         if args.resume and args.new_session:
             raise FovexpError("--resume and --new-session exclude each other")
-        tracker = args.tracker or ("simulated" if args.dry_run else "tobii")
+        tracker = args.tracker or (SIMULATED_TRACKER if args.dry_run else "tobii")
         truth = SimTruth.load(args.sim_truth) if args.sim_truth else SimTruth()
-        protocol = load_protocol(args.protocol)
+        # dependencies come from the same results root; a participant's never from dry runs
+        protocol = load_protocol(args.protocol, results_root=args.results,
+                                 real_only=tracker != SIMULATED_TRACKER)
         opts = SessionOptions(
             participant=args.participant, results_root=args.results, tracker=tracker,
             dry_run=args.dry_run, resume=args.resume, new_session=args.new_session,

@@ -42,9 +42,13 @@ REQUIRED_VALUES: tuple[str, ...] = (
     "image", "blur_rate", "method", "adjusted_parameter", "final_value", "timestamp",
 )
 ADJUSTABLE: tuple[str, ...] = ("f_e", "s_k", "s_f", "blur_rate")
+#: Gaze sources (the ``tracker`` column); the simulated one marks dry runs, never a participant.
+TRACKERS: tuple[str, ...] = ("tobii", "simulated", "mouse")
+SIMULATED_TRACKER = "simulated"
 #: A participant ID, safe as a folder name.
 PARTICIPANT_PATTERN = r"[A-Za-z0-9_-]{1,32}"
-PARTICIPANT_RE = re.compile(rf"^{PARTICIPANT_PATTERN}$")
+#: ``\Z``, not ``$``: ``$`` also matches before a final newline ("P01\n").
+PARTICIPANT_RE = re.compile(rf"\A{PARTICIPANT_PATTERN}\Z")
 ISO_RE = re.compile(
     r"^\d{4}-\d{2}-\d{2}[T ]\d{2}:\d{2}(:\d{2}(\.\d+)?)?(Z|[+-]\d{2}(:?\d{2})?)?$"
 )

@@ -111,6 +111,7 @@ class BatchLog:
         self.path = Path(path)
         self.columns = tuple(columns)
         self._lock = threading.Lock()
+        self._write_lock = threading.Lock()  # one writer at a time, in the order rows came
         self._pending: list[Sequence[Any]] = []
         self.path.parent.mkdir(parents=True, exist_ok=True)
         if self.path.exists() and self.path.stat().st_size > 0:
@@ -128,17 +129,21 @@ class BatchLog:
             self._pending.extend(rows)
 
     def flush(self, sync: bool = False) -> int:
-        with self._lock:
-            rows, self._pending = self._pending, []
-        if not rows and not sync:
-            return 0
-        text = "".join(format_line(r) for r in rows)
-        with open(self.path, "a", encoding="utf-8", newline="") as fh:
-            fh.write(text)
-            fh.flush()
-            if sync:
-                os.fsync(fh.fileno())
-        return len(rows)
+        """Append the pending rows; ``sync`` also fsyncs. A flush waits for one already under
+        way (the periodic flusher's), so that when ``flush(sync=True)`` returns every row added
+        before it is on disk, in order: the trial row that follows never precedes its samples."""
+        with self._write_lock:
+            with self._lock:  # held only for the swap: add() from the tracker never waits on disk
+                rows, self._pending = self._pending, []
+            if not rows and not sync:
+                return 0
+            text = "".join(format_line(r) for r in rows)
+            with open(self.path, "a", encoding="utf-8", newline="") as fh:
+                fh.write(text)
+                fh.flush()
+                if sync:
+                    os.fsync(fh.fileno())
+            return len(rows)
 
 
 class PeriodicFlusher:

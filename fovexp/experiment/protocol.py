@@ -92,11 +92,14 @@ class ParamSource(_Strict):
     """Where a parameter that is not adjusted comes from; exactly one key is set.
 
     ``value``: a constant. ``condition``: the trial's condition (``s_f_values``).
-    ``table``: ``paper-table2``, a ParameterTable YAML, or a calibration root folder holding
-    ``calibration-fe/-sk/-sf`` results (``analysis.derive.parameter_table``), interpolated by
+    ``table``: ``paper-table2``, a ParameterTable YAML (``.yaml``/``.yml``, relative to the
+    protocol file), or a results folder holding ``calibration-fe/-sk/-sf``
+    (``analysis.derive.parameter_table``; ``.`` is the results root itself), interpolated by
     blur-rate. ``fe_results``: a calibration-fe results folder (``fe_by_blur_rate``).
     ``sk_line_results``: a calibration-sk results folder; s_k = slope * s_f + intercept per
-    blur-rate (``sk_line_by_blur_rate``).
+    blur-rate (``sk_line_by_blur_rate``). Relative results folders are taken in the results root
+    the session writes to (``fovexp run --results``, default ``./results``), so a chain of
+    experiments always reads its own earlier results, wherever they are kept.
     """
 
     value: float | None = None
@@ -153,6 +156,9 @@ class Protocol(_Strict):
     repetitions: int = Field(default=1, ge=1, le=100)
     seed: int = Field(ge=0, le=2**31 - 1)
     practice_trials: int = Field(default=2, ge=0, le=50)
+    #: methods of the practice trials (default: ``methods``). Paper section 7.1 practised on a
+    #: foveation method other than the evaluated ones, so as not to bias the participants.
+    practice_methods: list[MethodName] | None = Field(default=None, min_length=1)
     break_every: int = Field(default=0, ge=0)
     impulses: int = Field(default=64, ge=1, le=512)
     fixation: FixationSpec = FixationSpec()
@@ -188,12 +194,16 @@ class Protocol(_Strict):
                     raise ValueError(f"{key}: {why}")
         if p in self.parameters:
             raise ValueError(f"parameters.{p}: {p} is the adjusted parameter")
-        needed = {n for m in self.methods for n in METHOD_NEEDS[m]} - {p}
+        every = [*self.methods, *(self.practice_methods or [])]
+        needed = {n for m in every for n in METHOD_NEEDS[m]} - {p}
         if p in ("f_e", "s_k", "s_f") and not any(p in METHOD_NEEDS[m] for m in self.methods):
             raise ValueError(f"adjust.parameter: no method in {self.methods} uses {p}")
+        for m in self.practice_methods or []:
+            if p in ("f_e", "s_k", "s_f") and p not in METHOD_NEEDS[m]:
+                raise ValueError(f"practice_methods: {m} does not use the adjusted {p}")
         for n in sorted(needed):
             if n not in self.parameters:
-                raise ValueError(f"parameters.{n}: required (methods {self.methods} use it)")
+                raise ValueError(f"parameters.{n}: required (methods {every} use it)")
         for n, src in self.parameters.items():
             if src.condition and (n != "s_f" or not self.s_f_values):
                 raise ValueError(f"parameters.{n}.condition: only s_f can come from the "
@@ -315,6 +325,10 @@ class LoadedProtocol:
         n_practice = s.practice_trials if practice is None else practice
         prng = np.random.default_rng(seed + 1)
         practice_conds = [conds[int(i)] for i in prng.integers(0, len(conds), n_practice)]
+        if s.practice_methods:
+            pm = s.practice_methods
+            practice_conds = [(*c[:3], pm[int(prng.integers(len(pm)))], c[4])
+                              for c in practice_conds]
         main = [conds[int(i)] for i in order]
         if limit is not None:
             main = main[:limit]
@@ -344,11 +358,15 @@ def _resolve_path(base: Path, rel: str) -> Path:
     return p if p.is_absolute() else (base / p).resolve()
 
 
-def load_protocol(path: str | Path, check_dependencies: bool = True) -> LoadedProtocol:
+def load_protocol(path: str | Path, check_dependencies: bool = True,
+                  results_root: str | Path = "results", real_only: bool = False) -> LoadedProtocol:
     """Load and validate a protocol, its images and its dependencies, before any window opens.
 
-    Raises :class:`FovexpError` naming the file and the key for an unknown key, an out-of-range
-    value, an image missing from the manifest or disk, or a missing dependency folder.
+    Dependency folders are looked up under ``results_root`` (where the session writes; see
+    :class:`ParamSource`). ``real_only`` (a session with a participant, not a dry run) refuses a
+    dependency holding only simulated sessions. Raises :class:`FovexpError` naming the file and
+    the key for an unknown key, an out-of-range value, an image missing from the manifest or
+    disk, or a missing dependency folder.
     """
     path = Path(path)
     try:
@@ -384,8 +402,9 @@ def load_protocol(path: str | Path, check_dependencies: bool = True) -> LoadedPr
     }
     lp = LoadedProtocol(path=path, sha256=hashlib.sha256(raw).hexdigest(), text=text, spec=spec,
                         stimuli=stim, image_paths=image_paths, display_name=disp)
+    deps = _Dependencies(base, Path(results_root), check_dependencies, real_only)
     for name, src in spec.parameters.items():
-        snap = _snapshot(path, base, name, src, lp, check_dependencies)
+        snap = _snapshot(path, deps, name, src, lp)
         if snap is not None:
             lp.derived[name] = snap
     lp.use_derived(lp.derived)
@@ -402,8 +421,18 @@ def _interp(where: str, pairs: list[list[float]], needed: list[float]) -> Callab
     return lambda br: float(np.interp(br, xs, ys))
 
 
-def _snapshot(path: Path, base: Path, name: str, src: ParamSource, lp: LoadedProtocol,
-              check: bool) -> dict[str, Any] | None:
+@dataclass(frozen=True)
+class _Dependencies:
+    """Where a protocol's dependencies are found, and how strictly they are checked."""
+
+    protocol_dir: Path  # table YAML files
+    results_root: Path  # results folders
+    check: bool
+    real_only: bool
+
+
+def _snapshot(path: Path, deps: _Dependencies, name: str, src: ParamSource,
+              lp: LoadedProtocol) -> dict[str, Any] | None:
     """The values a parameter source derives from files (a table, earlier results), as JSON
     data; None for a constant or a condition. Stored in the session file at the first start so
     that ``--resume`` uses the same values even when the results folders changed since."""
@@ -412,19 +441,21 @@ def _snapshot(path: Path, base: Path, name: str, src: ParamSource, lp: LoadedPro
         if src.table in PAPER_TABLE_NAMES:
             from fovexp import PAPER_TABLE2
             table = PAPER_TABLE2
-        else:
-            tpath = _resolve_path(base, src.table)
+        elif src.table.endswith((".yaml", ".yml")):
+            from fovexp import ParameterTable
+
+            tpath = _resolve_path(deps.protocol_dir, src.table)
             lp.dependency_folders[name] = str(tpath)
-            if tpath.is_dir():
-                _require_results(where + ".table", tpath, check, nested=True)
-                from analysis.derive import parameter_table
-                table = _call(where + ".table", parameter_table, tpath)
-            elif tpath.is_file():
-                from fovexp import ParameterTable
-                table = ParameterTable.load(tpath)
-            else:
-                raise FovexpError(f"{where}.table: {tpath} does not exist (a parameter table "
-                                  "YAML or a calibration results folder)")
+            if not tpath.is_file():
+                raise FovexpError(f"{where}.table: parameter table {tpath} does not exist")
+            table = ParameterTable.load(tpath)
+        else:
+            tpath = _resolve_path(deps.results_root, src.table)
+            lp.dependency_folders[name] = str(tpath)
+            _require_results(where + ".table", tpath, deps.check, nested=True)
+            from analysis.derive import parameter_table
+            table = _call(where + ".table", lambda f: parameter_table(
+                f, real_only=deps.real_only), tpath)
         return {"kind": "table", "from": src.table, "table": table.model_dump()}
     # values derived from an earlier experiment's results folder (section 6.2's chain)
     derived = (
@@ -438,11 +469,13 @@ def _snapshot(path: Path, base: Path, name: str, src: ParamSource, lp: LoadedPro
         rel = getattr(src, key)
         if rel is None:
             continue
-        folder = _resolve_path(base, rel)
+        folder = _resolve_path(deps.results_root, rel)
         lp.dependency_folders[name] = str(folder)
-        _require_results(f"{where}.{key}", folder, check)
+        _require_results(f"{where}.{key}", folder, deps.check)
         from analysis import derive
-        values = _call(f"{where}.{key}", getattr(derive, fn_name), folder)
+        fn = getattr(derive, fn_name)
+        values = _call(f"{where}.{key}", lambda f, fn=fn: fn(f, real_only=deps.real_only),
+                       folder)
         return {"kind": key, "from": str(folder), **pack(values)}
     return None
 
@@ -483,8 +516,9 @@ def _make_source(where: str, name: str, src: ParamSource, snap: dict[str, Any] |
 
 def _require_results(where: str, folder: Path, check: bool, nested: bool = False) -> None:
     if not folder.is_dir():
-        raise FovexpError(f"{where}: results folder {folder} does not exist "
-                          "(run the experiment it depends on first, or fix the path)")
+        raise FovexpError(f"{where}: results folder {folder} does not exist (run the "
+                          "experiment it depends on first, with the same --results, or fix the "
+                          "path)")
     pattern = "*/*/trials.csv" if nested else "*/trials.csv"
     if check and not any(folder.glob(pattern)):
         raise FovexpError(f"{where}: results folder {folder} holds no trials.csv")

@@ -206,6 +206,16 @@ class Session:
                     f"started (sha256 {proto.sha256[:12]}... vs "
                     f"{str(info.get('protocol_sha256'))[:12]}...); resuming would mix protocol "
                     "versions")
+            first = (info.get("runs") or [{}])[0]
+            if (first.get("dry_run"), first.get("tracker")) not in (
+                    (None, None), (opts.dry_run, opts.tracker)):
+                # a dry run must never finish a participant's session, nor a mouse a tracker's
+                mode = "a dry run" if first.get("dry_run") else "a session"
+                raise FovexpError(
+                    f"--resume: session {info['session']} started as {mode} with "
+                    f"--tracker {first.get('tracker')}; resume it the same way "
+                    f"({'--dry-run' if first.get('dry_run') else 'without --dry-run'}, "
+                    f"--tracker {first.get('tracker')}), or start a --new-session")
             self.session_id = str(info["session"])
             self._reuse_derived(info)
             plan = info.get("plan", {})

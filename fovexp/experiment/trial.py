@@ -21,6 +21,29 @@ class Wheel:
     fine: bool = False
 
 
+def wheel_notches(scrolls: list[tuple[float, bool]],
+                  carry: float = 0.0) -> tuple[list[Wheel], float]:
+    """Whole wheel notches from scroll deltas ``(dy, fine)`` in order, and the fraction left over.
+
+    High-resolution wheels and touchpads report fractions of a notch per event; rounding each
+    event would lose them all, so they are summed and a notch is emitted each time the sum
+    passes a whole one (``carry`` is the fraction left from the last call). Consecutive notches
+    with the same modifier state are merged.
+    """
+    out: list[Wheel] = []
+    for dy, fine in scrolls:
+        carry += dy
+        n = int(carry)  # towards zero: a notch only once a whole one has been turned
+        carry -= n
+        if not n:
+            continue
+        if out and out[-1].fine == fine:
+            out[-1] = Wheel(out[-1].notches + n, fine)
+        else:
+            out.append(Wheel(n, fine))
+    return [w for w in out if w.notches], carry
+
+
 @dataclass(frozen=True)
 class Key:
     """A key press: ``enter`` (confirm), ``escape`` (pause), ``space``, ``q`` ..."""

@@ -9,12 +9,17 @@ from fovexp import FovexpError
 
 from .logformat import PARTICIPANT_PATTERN, PARTICIPANT_RE
 
+#: Names Windows reserves for devices, whatever the case (a lab's share may be on Windows).
+_RESERVED = frozenset({"con", "prn", "aux", "nul", *(f"com{i}" for i in range(1, 10)),
+                       *(f"lpt{i}" for i in range(1, 10))})
+
 
 def check_participant(pid: str) -> str:
-    """A participant ID safe for file names (``[A-Za-z0-9_-]{1,32}``)."""
-    if not isinstance(pid, str) or not PARTICIPANT_RE.match(pid):
+    """A participant ID safe for file names (``[A-Za-z0-9_-]{1,32}``, not a Windows device
+    name such as ``CON``)."""
+    if not isinstance(pid, str) or not PARTICIPANT_RE.match(pid) or pid.lower() in _RESERVED:
         raise FovexpError(
-            f"participant ID {pid!r} is not valid: use 1-32 letters, digits, '_' or '-' "
-            f"({PARTICIPANT_PATTERN}; it becomes a folder name)"
+            f"participant ID {pid!r} is not valid: use 1-32 letters, digits, '_' or '-', not a "
+            f"device name such as CON ({PARTICIPANT_PATTERN}; it becomes a folder name)"
         )
     return pid

@@ -16,7 +16,7 @@ import numpy as np
 
 from fovexp import FovexpError
 
-from .trial import InputEvent, Key, Wheel
+from .trial import InputEvent, Key, wheel_notches
 
 KEYS = ["return", "num_enter", "escape", "space", "q", "r"]
 #: measured refresh may differ from the profile by this fraction (a 120 Hz screen run at 60 Hz
@@ -87,6 +87,7 @@ class PsychoScreen:
         self._keys = pkey.KeyStateHandler()
         self._pkey = pkey
         self._wheel: list[tuple[float, bool]] = []
+        self._wheel_carry = 0.0  # a fraction of a notch turned so far (high-resolution wheels)
         # Our own pyglet handlers: PsychoPy's wheel handler drops scroll events whenever a
         # psychopy.hardware.mouse.Mouse exists, and the modifier must be read at scroll time.
         self.win.winHandle.push_handlers(self._keys, on_mouse_scroll=self._on_scroll)
@@ -196,18 +197,9 @@ class PsychoScreen:
     def poll_input(self) -> list[InputEvent]:
         """Wheel notches since the last call (merged per modifier state, in order) and keys."""
         self.win.winHandle.dispatch_events()
-        out: list[InputEvent] = []
         events, self._wheel = self._wheel, []
-        for dy, fine in events:
-            n = int(round(dy))
-            if not n:
-                continue
-            last = out[-1] if out else None
-            if isinstance(last, Wheel) and last.fine == fine:
-                out[-1] = Wheel(last.notches + n, fine)
-            else:
-                out.append(Wheel(n, fine))
-        out = [w for w in out if not isinstance(w, Wheel) or w.notches]
+        wheel, self._wheel_carry = wheel_notches(events, self._wheel_carry)
+        out: list[InputEvent] = list(wheel)
         for name in self._event.getKeys(keyList=KEYS):
             out.append(Key(name))
         return out
