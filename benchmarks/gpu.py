@@ -3,13 +3,22 @@ and benchmarks/gpu.json with the device (GL_RENDERER) and machine they came from
 
     .venv/bin/python benchmarks/gpu.py [--repeats 15] [--out DIR]
 
-Times are GPU execution times from GL timer queries (GL_TIME_ELAPSED) around each call, after
-a warm-up, median of the repeats; where the driver's timer query is not usable (Mesa llvmpipe
-returns no elapsed time) the wall-clock time of the call with a glFinish is used instead, and
-the table says which. Cases: a whole frame (new image, moved gaze), already foveated and with
-the foveation simulation; the runner's wheel steps on the processed half of a split screen
-(s_k, f_e, blur-rate); the read-back of the finished frame. Accuracy: the frame against the
-CPU backend's, and per-stage times from a profiled run.
+Each case is timed after a warm-up, median (and minimum) of the repeats, by ONE method for all
+its repeats: a GL timer query (GL_TIME_ELAPSED) around the call, or, where the driver's query
+is unusable for any repeat of the case (Mesa llvmpipe reports no elapsed time), the wall-clock
+time of the call between two glFinish; the table says which. GL_TIME_ELAPSED spans the call on
+the GPU's timeline, from glBeginQuery to glEndQuery: it includes the time the GPU idles while
+the CPU side of the call (Python, uploads, impulse generation) runs between dispatches. It is
+the GPU-timeline time of the call, not the shaders' execution time alone.
+
+Cases: a whole frame (new image, moved gaze), already foveated and with the foveation
+simulation; the runner's wheel steps on the processed half of a split screen (s_k, f_e,
+blur-rate); the read-back of the finished frame. Accuracy: the frame against the CPU backend's,
+and per-stage times from a profiled run (glFinish after each stage).
+
+The measuring drives the enhancer's stage cache directly (to time a frame without its
+read-back), so it makes the enhancer's context current itself (``with ctx:``), as the
+enhancer's public methods do.
 """
 
 from __future__ import annotations
@@ -19,6 +28,7 @@ import json
 import statistics
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -27,29 +37,37 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 from run import _frame, machine  # noqa: E402
 
+GL_TIMER = "GL timer query (GPU timeline of the call)"
+WALL_CLOCK = "wall clock + glFinish (timer query unusable on this driver)"
 
-def _timer(ctx, fn) -> tuple[float, str]:
-    """Seconds of GPU work ``fn`` submits (GL timer query), else wall-clock with glFinish."""
-    q = ctx.query(time=True)
+
+def _measure(ctx, query, fn: Callable[[], object]) -> tuple[float | None, float]:
+    """One call of ``fn``: (GL_TIME_ELAPSED in s, None where the driver's value is unusable;
+    wall-clock s between a glFinish before and one after). ``ctx`` must be current."""
     ctx.finish()
     t0 = time.perf_counter()
-    with q:
+    with query:
         fn()
     ctx.finish()
-    wall = time.perf_counter() - t0
-    gl = q.elapsed * 1e-9
-    if gl > 1e-5 or wall < 1e-3:
-        return gl, "GL timer query"
-    return wall, "wall clock + glFinish (timer query unusable on this driver)"
+    wall_s = time.perf_counter() - t0
+    gl_s = query.elapsed * 1e-9
+    # llvmpipe reports 0 ns, or next to it, for calls that take seconds
+    usable = gl_s > 0.0 and (gl_s > 1e-5 or wall_s < 1e-3)
+    return (gl_s if usable else None), wall_s
 
 
-def _median(ctx, fn, repeats: int) -> tuple[float, float, str]:
-    fn()  # warm-up: shader compilation, buffer allocation
-    times, how = [], ""
+def _median(ctx, query, fn: Callable[[], object], repeats: int) -> tuple[float, float, str]:
+    """(median s, min s, timing method) of ``repeats`` calls after a warm-up; one method for
+    every repeat: the timer query if it was usable for all of them, else the wall clock."""
+    fn()  # warm-up: buffer allocation, first-use costs
+    gl_s, wall_s = [], []
     for _ in range(repeats):
-        t, how = _timer(ctx, fn)
-        times.append(t)
-    return statistics.median(times), min(times), how
+        g, w = _measure(ctx, query, fn)
+        gl_s.append(g)
+        wall_s.append(w)
+    if all(g is not None for g in gl_s):
+        return statistics.median(gl_s), min(gl_s), GL_TIMER
+    return statistics.median(wall_s), min(wall_s), WALL_CLOCK
 
 
 def main() -> int:
@@ -64,78 +82,93 @@ def main() -> int:
         (args.out / "GPU.md").write_text(_markdown(data))
         return 0
 
-    from fovexp import EnhanceParams, Enhancer, load_display
+    from fovexp import load_display
     from fovexp.gpu import GpuEnhancer, is_software
 
     display = load_display("lg-oled55cx")
     image, source = _frame()
-    h, w = image.shape[:2]
-    enh = GpuEnhancer(display)
-    ctx = enh.ctx
-    results: dict = {"device": enh.renderer, "software_renderer": is_software(ctx),
-                     "machine": machine(), "frame": f"{source} ({w}x{h})",
-                     "repeats": args.repeats, "cases": {}}
-    cases = results["cases"]
-    gazes = [(0.5, 0.5), (0.52, 0.49)]
-
-    def record(name: str, fn) -> None:
-        med, best, how = _median(ctx, fn, args.repeats)
-        cases[name] = {"median_s": med, "min_s": best, "timing": how}
-        print(f"{name:58s} {med * 1e3:9.2f} ms (min {best * 1e3:.2f}; {how})", flush=True)
-
-    copies = [image.copy(), image.copy()]  # a new array is a new frame to the stage cache
-    for n in (12, 64):
-        p = EnhanceParams(blur_rate=0.34, impulses=n).resolved(None)
-        state = {"i": 0}
-
-        def frame(foveated: bool, p=p, state=state) -> None:
-            # Enhancer.enhance without its read-back (timed separately below); the upload of
-            # the frame is included (a renderer would have it on the GPU already)
-            state["i"] += 1
-            enh.set_image(copies[state["i"] % 2], foveated=foveated)
-            enh._c.set(**_inputs(p, gazes[state["i"] % 2]))
-            enh._c.get("output")
-
-        record(f"4K frame, already foveated, {n} impulses", lambda f=frame: f(True))
-        record(f"4K frame with the foveation simulation, {n} impulses", lambda f=frame: f(False))
-
-    # the runner: the processed half of a split screen, wheel steps (12 impulses)
-    half = np.ascontiguousarray(image[:, w // 2:])
-    enh.set_image(half, viewport=(w - half.shape[1], 0, w, h))
-    base = EnhanceParams(blur_rate=0.34, impulses=12).resolved(None)
-    enh.enhance((0.5, 0.5), base)
-    for field, values in (("s_k", (20.0, 21.0)), ("f_e", (0.20, 0.21)),
-                          ("blur_rate", (0.34, 0.35))):
-        state = {"i": 0}
-
-        def step(field=field, values=values, state=state) -> None:
-            state["i"] += 1
-            p = base.model_copy(update={field: values[state["i"] % 2]})
-            enh._c.set(**_inputs(p, (0.5, 0.5)))
-            enh._c.get("output")
-
-        record(f"wheel step {field}, 4K half frame (GPU work only)", step)
-    record("read-back of a 4K half frame (float32 RGB)", lambda: enh._output())
-
-    # accuracy and per-stage times, whole 4K frame
-    p = EnhanceParams(blur_rate=0.34, impulses=12)
-    prof = GpuEnhancer(display, ctx=ctx, profile=True)
-    prof.set_image(image)
-    prof.enhance((0.5, 0.5), p)  # warm-up
-    prof.set_image(image.copy())
-    res = prof.enhance((0.5, 0.5), p)
-    results["stages_s"] = res.timings_s
-    cpu = Enhancer(display)
-    cpu.set_image(image)
-    ref = cpu.enhance((0.5, 0.5), p)
-    d = np.abs(ref.output.astype(np.float64) - res.output)
-    results["accuracy_vs_cpu"] = {"max": float(d.max()), "rms": float(np.sqrt((d**2).mean())),
-                                  "p99_99": float(np.quantile(d, 0.9999))}
+    with GpuEnhancer(display) as enh:
+        results = _measure_all(enh, display, image, source, args.repeats)
+        results["software_renderer"] = is_software(enh.ctx)
     print("accuracy vs CPU:", results["accuracy_vs_cpu"])
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "gpu.json").write_text(json.dumps(results, indent=2) + "\n")
     (args.out / "GPU.md").write_text(_markdown(results))
     return 0
+
+
+def _measure_all(enh, display, image: np.ndarray, source: str, repeats: int) -> dict:
+    """Every case on ``enh``, whose context is current for the whole measurement."""
+    from fovexp import EnhanceParams, Enhancer
+    from fovexp.gpu import GpuEnhancer
+
+    ctx = enh.ctx
+    h, w = image.shape[:2]
+    results: dict = {"device": enh.renderer, "machine": machine(),
+                     "frame": f"{source} ({w}x{h})", "repeats": repeats, "cases": {}}
+    cases = results["cases"]
+    gazes = [(0.5, 0.5), (0.52, 0.49)]
+    with ctx:  # the cases call the stage cache directly, not through a public method
+        # one timer query, reused by every measurement: moderngl 5.13's Query has no
+        # release(), so one made per call would stay until the context goes
+        query = ctx.query(time=True)
+
+        def record(name: str, fn: Callable[[], object]) -> None:
+            med, best, how = _median(ctx, query, fn, repeats)
+            cases[name] = {"median_s": med, "min_s": best, "timing": how}
+            print(f"{name:58s} {med * 1e3:9.2f} ms (min {best * 1e3:.2f}; {how})", flush=True)
+
+        copies = [image.copy(), image.copy()]  # a new array is a new frame to the stage cache
+        for n in (12, 64):
+            p = EnhanceParams(blur_rate=0.34, impulses=n).resolved(None)
+            state = {"i": 0}
+
+            def frame(foveated: bool, p=p, state=state) -> None:
+                # Enhancer.enhance without its read-back (timed separately below); the upload
+                # of the frame is included (a renderer would have it on the GPU already)
+                state["i"] += 1
+                enh.set_image(copies[state["i"] % 2], foveated=foveated)
+                enh._c.set(**_inputs(p, gazes[state["i"] % 2]))
+                enh._c.get("output")
+
+            record(f"4K frame, already foveated, {n} impulses", lambda f=frame: f(True))
+            record(f"4K frame with the foveation simulation, {n} impulses",
+                   lambda f=frame: f(False))
+
+        # the runner: the processed half of a split screen, wheel steps (12 impulses)
+        half = np.ascontiguousarray(image[:, w // 2:])
+        enh.set_image(half, viewport=(w - half.shape[1], 0, w, h))
+        base = EnhanceParams(blur_rate=0.34, impulses=12).resolved(None)
+        enh.enhance((0.5, 0.5), base)
+        for field, values in (("s_k", (20.0, 21.0)), ("f_e", (0.20, 0.21)),
+                              ("blur_rate", (0.34, 0.35))):
+            state = {"i": 0}
+
+            def step(field=field, values=values, state=state) -> None:
+                state["i"] += 1
+                p = base.model_copy(update={field: values[state["i"] % 2]})
+                enh._c.set(**_inputs(p, (0.5, 0.5)))
+                enh._c.get("output")
+
+            record(f"wheel step {field}, 4K half frame (GPU work only)", step)
+        record("read-back of a 4K half frame (float32 RGB)", lambda: enh._output())
+
+    # accuracy and per-stage times, whole 4K frame (public calls: each makes ctx current)
+    p = EnhanceParams(blur_rate=0.34, impulses=12)
+    with GpuEnhancer(display, ctx=ctx, profile=True) as prof:
+        prof.set_image(image)
+        prof.enhance((0.5, 0.5), p)  # warm-up
+        prof.set_image(image.copy())
+        res = prof.enhance((0.5, 0.5), p)
+        output = res.output
+    results["stages_s"] = res.timings_s
+    cpu = Enhancer(display)
+    cpu.set_image(image)
+    ref = cpu.enhance((0.5, 0.5), p)
+    d = np.abs(ref.output.astype(np.float64) - output)
+    results["accuracy_vs_cpu"] = {"max": float(d.max()), "rms": float(np.sqrt((d**2).mean())),
+                                  "p99_99": float(np.quantile(d, 0.9999))}
+    return results
 
 
 def _inputs(p, gaze) -> dict:
@@ -165,6 +198,10 @@ def _markdown(r: dict) -> str:
                      f"| {c['timing']} |")
     a = r["accuracy_vs_cpu"]
     lines += [
+        "",
+        "Timing: one method per case. A GL timer query (GL_TIME_ELAPSED) is the call's span on "
+        "the GPU's timeline, GPU idle time while the CPU side of the call runs included; the "
+        "wall clock is the call between two glFinish.",
         "",
         f"Output against the CPU backend (display-encoded, [0, 1]): max {a['max']:.2g}, "
         f"RMS {a['rms']:.2g}, 99.99th percentile {a['p99_99']:.2g}.",

@@ -28,10 +28,13 @@ import numpy as np
 
 from .foveation import per_pixel_sigma
 
+#: Box-filter width per integer blur level (notes section 3.3): level k averages ceil(4 k) px.
+BOX_WIDTH_PX_PER_LEVEL = 4
+
 
 def box_width_px(level: int) -> int:
     """Box-filter width of integer blur level ``level`` (notes section 3.3): ceil(4 level)."""
-    return int(math.ceil(4 * level))
+    return int(math.ceil(BOX_WIDTH_PX_PER_LEVEL * level))
 
 
 @numba.njit(cache=True, inline="always")
@@ -89,13 +92,15 @@ def _enhance(img, sigma, sat, pad, f_e, minus):  # pragma: no cover - compiled
                 if k == 0:  # width 0: the pixel itself
                     acc += wgt * v
                     continue
-                # width ceil(4 k) = 4 k, MATLAB anchoring: [x - (2k - 1), x + 2k]
-                ya = y + pad - 2 * k + 1
-                xa = x + pad - 2 * k + 1
-                yb = ya + 4 * k
-                xb = xa + 4 * k
+                # width n = box_width_px(k) (k is an integer), MATLAB anchoring:
+                # [x - floor((n - 1) / 2), x + ceil((n - 1) / 2)]
+                n = BOX_WIDTH_PX_PER_LEVEL * k
+                ya = y + pad - (n - 1) // 2
+                xa = x + pad - (n - 1) // 2
+                yb = ya + n
+                xb = xa + n
                 box = sat[yb, xb] - sat[ya, xb] - sat[yb, xa] + sat[ya, xa]
-                avg = box / (16.0 * k * k)
+                avg = box / (n * n)
                 acc += wgt * (avg + f_e * (1.0 + k) * (v - avg))
             out[y, x] = acc - minus * v
     return out

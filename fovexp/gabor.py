@@ -50,11 +50,28 @@ NOISE_STD_DIVISOR = 6.0
 CELL_PERIOD = 256
 #: Rows per parallel band of the synthesis.
 BAND_ROWS = 128
+#: The cell grid reaches this many cells past each edge of the image: impulses there have
+#: kernels that reach into it.
+CELL_BORDER = 1
+#: Cell ``i`` covers ``[i cell + CELL_ORIGIN_PX, (i + 1) cell + CELL_ORIGIN_PX)`` px: cell edges
+#: lie on pixel edges (pixel x spans x +- 0.5).
+CELL_ORIGIN_PX = -0.5
 
 
 def kernel_radius_px(gabor_a_cpp: float) -> float:
     """Truncation radius ``sqrt(-ln 0.01 / pi) / a`` (20.2 px at a = 0.06, 15.1 at 0.08)."""
     return math.sqrt(-math.log(KERNEL_TRUNCATION) / math.pi) / gabor_a_cpp
+
+
+def cell_counts(width_px: int, height_px: int, cell_px: float) -> tuple[int, int]:
+    """Cells per row and per column of the grid the impulses are drawn on (borders included)."""
+    return (int(math.ceil(width_px / cell_px)) + 2 * CELL_BORDER,
+            int(math.ceil(height_px / cell_px)) + 2 * CELL_BORDER)
+
+
+def cell_index(pos_px: np.ndarray, cell_px: float) -> np.ndarray:
+    """Index along one axis (0: the first border cell) of the cell holding each coordinate."""
+    return np.floor((np.asarray(pos_px) - CELL_ORIGIN_PX) / cell_px).astype(np.int64) + CELL_BORDER
 
 
 def impulse_density(impulses_per_kernel: int, gabor_a_cpp: float) -> float:
@@ -108,10 +125,10 @@ def _uniform(state):  # pragma: no cover - compiled
 
 @numba.njit(cache=True)
 def _generate(width, height, cell, mean_count, seed, period):  # pragma: no cover - compiled
-    x0 = -1
-    y0 = -1
-    nx = int(math.ceil(width / cell)) + 2
-    ny = int(math.ceil(height / cell)) + 2
+    x0 = -CELL_BORDER
+    y0 = -CELL_BORDER
+    nx = int(math.ceil(width / cell)) + 2 * CELL_BORDER
+    ny = int(math.ceil(height / cell)) + 2 * CELL_BORDER
     cap = int(nx * ny * (mean_count + 6.0 * math.sqrt(mean_count) + 10.0))
     xs = np.empty(cap)
     ys = np.empty(cap)
@@ -143,8 +160,8 @@ def _generate(width, height, cell, mean_count, seed, period):  # pragma: no cove
                 state, uw = _uniform(state)
                 state, uq = _uniform(state)
                 if n < cap:
-                    xs[n] = (cx + ux) * cell - 0.5
-                    ys[n] = (cy + uy) * cell - 0.5
+                    xs[n] = (cx + ux) * cell + CELL_ORIGIN_PX
+                    ys[n] = (cy + uy) * cell + CELL_ORIGIN_PX
                     ws[n] = 2.0 * uw - 1.0
                     qs[n] = uq
                     n += 1
@@ -236,9 +253,10 @@ def _splat(height, width, xs, ys, amp, kx, ky, row_start, cell, r, a, band):  # 
         y1 = min(height, y0 + band)
         er = np.empty(nwin, dtype=np.float32)
         ei = np.empty(nwin, dtype=np.float32)
-        # cell rows (row 0 is cell row -1) whose kernels can reach the band
-        j0 = max(int(math.floor((y0 - r + 0.5) / cell)), 0)
-        j1 = min(int(math.floor((y1 - 1 + r + 0.5) / cell)) + 2, n_rows - 1)
+        # cell rows (cell_index) whose kernels can reach the band, one more each side
+        j0 = max(int(math.floor((y0 - r - CELL_ORIGIN_PX) / cell)) + CELL_BORDER - 1, 0)
+        j1 = min(int(math.floor((y1 - 1 + r - CELL_ORIGIN_PX) / cell)) + CELL_BORDER + 1,
+                 n_rows - 1)
         _splat_band(
             out[y0:y1], y0, y1, pad, xs, ys, amp, kx, ky, row_start[j0], row_start[j1 + 1],
             r, a, nwin, er, ei,
@@ -272,9 +290,9 @@ def synthesize(
     k = 2.0 * np.pi * np.asarray(frequency_cpp, np.float64)[keep]
     t = np.asarray(carrier_rad, np.float64)[keep]
     cell = impulses.cell_px
-    # impulses are generated cell row by cell row: index them by row (row 0 is cell row -1)
-    rows = np.floor((ys + 0.5) / cell).astype(np.int64) + 1
-    n_rows = int(math.ceil(h / cell)) + 2
+    # impulses are generated cell row by cell row: index them by row
+    rows = cell_index(ys, cell)
+    n_rows = cell_counts(w, h, cell)[1]
     row_start = np.searchsorted(rows, np.arange(n_rows + 1)).astype(np.int64)
     out = _splat(
         h, w, xs, ys, amp[keep], k * np.cos(t), k * np.sin(t), row_start, cell,

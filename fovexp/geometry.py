@@ -38,6 +38,9 @@ from .errors import FovexpError, validation_error
 
 GeometryModel = Literal["exact", "linear", "release"]
 
+#: Minutes of arc per degree of visual angle.
+ARCMIN_PER_DEG = 60.0
+
 #: Release constants (notes section 3): 3840 px over a 90 degree field, taken as constant.
 RELEASE_PPD_AT_3840 = 1920.0 / 45.0
 RELEASE_WIDTH_CM = 120.0
@@ -305,4 +308,4 @@ def cpp_to_cpd(f_cpp: np.ndarray | float, ppd: np.ndarray | float) -> np.ndarray
 
 def arcmin_to_px(arcmin: np.ndarray | float, ppd: np.ndarray | float) -> np.ndarray:
     """Visual angle in arcmin to pixels at ``ppd`` pixels per degree."""
-    return np.asarray(arcmin) / 60.0 * ppd
+    return np.asarray(arcmin) / ARCMIN_PER_DEG * ppd

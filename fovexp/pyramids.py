@@ -20,6 +20,15 @@ from scipy import ndimage
 
 #: Burt-Adelson 5-tap binomial kernel; its variance is 1 px^2 at the level it filters.
 BINOMIAL_5 = np.array([1.0, 4.0, 6.0, 4.0, 1.0], dtype=np.float32) / 16.0
+#: :func:`expand`'s polyphase taps (zero insertion, then BINOMIAL_5 x 2): an even output takes
+#: the kernel's even taps, at a[i-1], a[i], a[i+1] ([1, 6, 1] / 8), an odd output its odd
+#: taps, at a[i], a[i+1] ([1, 1] / 2).
+EXPAND_EVEN_TAPS = 2 * BINOMIAL_5[0::2]
+EXPAND_ODD_TAPS = 2 * BINOMIAL_5[1::2]
+# float32 scalars for the compiled loops (the kernels are symmetric)
+_REDUCE_OUTER, _REDUCE_INNER, _REDUCE_CENTRE = BINOMIAL_5[0], BINOMIAL_5[1], BINOMIAL_5[2]
+_EXPAND_SIDE, _EXPAND_CENTRE = EXPAND_EVEN_TAPS[0], EXPAND_EVEN_TAPS[1]
+_EXPAND_HALF = EXPAND_ODD_TAPS[0]
 
 
 def level_scale(level: int) -> int:
@@ -40,7 +49,7 @@ def _reduce_2d(img: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
     h, w = img.shape
     ho, wo = (h + 1) // 2, (w + 1) // 2
     out = np.empty((ho, wo), dtype=np.float32)
-    k0, k1, k2 = np.float32(0.0625), np.float32(0.25), np.float32(0.375)
+    k0, k1, k2 = _REDUCE_OUTER, _REDUCE_INNER, _REDUCE_CENTRE
     for i in numba.prange(ho):
         r = 2 * i
         rm2, rm1 = max(r - 2, 0), max(r - 1, 0)
@@ -71,19 +80,19 @@ def _expand_2d(a: np.ndarray, ho: int, wo: int) -> np.ndarray:  # pragma: no cov
         if y % 2 == 0:
             im1, ip1 = max(i - 1, 0), min(i + 1, h - 1)
             for x in range(w):
-                row[x] = np.float32(0.125) * (a[im1, x] + a[ip1, x]) + np.float32(0.75) * a[i, x]
+                row[x] = _EXPAND_SIDE * (a[im1, x] + a[ip1, x]) + _EXPAND_CENTRE * a[i, x]
         else:
             ip1 = min(i + 1, h - 1)
             for x in range(w):
-                row[x] = np.float32(0.5) * (a[i, x] + a[ip1, x])
+                row[x] = _EXPAND_HALF * (a[i, x] + a[ip1, x])
         for x in range(wo):
             j = x // 2
             if x % 2 == 0:
-                out[y, x] = np.float32(0.125) * (row[max(j - 1, 0)] + row[min(j + 1, w - 1)]) + (
-                    np.float32(0.75) * row[j]
+                out[y, x] = _EXPAND_SIDE * (row[max(j - 1, 0)] + row[min(j + 1, w - 1)]) + (
+                    _EXPAND_CENTRE * row[j]
                 )
             else:
-                out[y, x] = np.float32(0.5) * (row[j] + row[min(j + 1, w - 1)])
+                out[y, x] = _EXPAND_HALF * (row[j] + row[min(j + 1, w - 1)])
     return out
 
 
@@ -107,7 +116,8 @@ def reduce(image: np.ndarray) -> np.ndarray:
 def expand(image: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
     """Inverse step of :func:`reduce`: upsample to ``shape`` (the finer level's size).
 
-    Zero insertion and filtering with the binomial kernel x 2, in polyphase form: even outputs
+    Zero insertion and filtering with the binomial kernel x 2, in polyphase form
+    (:data:`EXPAND_EVEN_TAPS`, :data:`EXPAND_ODD_TAPS`): even outputs
     ``(a[i-1] + 6 a[i] + a[i+1]) / 8``, odd outputs ``(a[i] + a[i+1]) / 2``, borders replicated.
     """
     return _per_channel(_expand_2d, image, int(shape[0]), int(shape[1]))

@@ -1,8 +1,12 @@
 """The GPU backend: :class:`GpuEnhancer`, the pipeline's stages as OpenGL 4.5 compute shaders.
 
-It is a :class:`fovexp.Enhancer` (same ``set_image`` / ``enhance`` / ``EnhanceResult``, same
-stage cache: a wheel step recomputes only what the changed parameter invalidates) whose stages
-dispatch the entries of ``shaders/<stage>.glsl`` instead of NumPy/Numba code. Every stage
+It is a :class:`fovexp.Enhancer` (same ``set_image`` / ``enhance`` / ``EnhanceResult``, and a
+stage cache of the same kind: a wheel step recomputes only the stages the changed parameter
+invalidates) whose stages dispatch the entries of ``shaders/<stage>.glsl`` instead of
+NumPy/Numba code. Its stage graph differs in one place: the CPU's six per-impulse stages
+(band, frequency, |L| sample, headroom sample, amplitude, orientation) are one ``imp_params``
+dispatch, so an s_f or s_k step recomputes every per-impulse parameter (one invocation per
+impulse: cheap next to the noise synthesis that follows either way). Every stage
 keeps its result in GPU buffers; only the finished frame (and any map asked for) is read
 back, besides one 4-byte read of the largest sigma when the gaze or the blur-rate changes (it
 sizes the blur stack). What is not per-pixel work stays in Python and is shared with the CPU
@@ -30,7 +34,7 @@ from ..foveation import blur_stack_plan
 from ..geometry import Display, GeometryModel, ViewingGeometry
 from ..orientation import ORIENTATION_LEVEL
 from ..params import ParameterTable, get_preset
-from ..pipeline import MAP_NAMES, Enhancer
+from ..pipeline import MAP_NAMES, Enhancer, EnhanceResult
 from ..pyramids import level_scale
 from .programs import (
     BINDINGS,
@@ -39,6 +43,8 @@ from .programs import (
     LOCAL_1D,
     LOCAL_2D,
     create_context,
+    drop_user,
+    made_current,
     programs_for,
     release_context,
     renderer_name,
@@ -71,6 +77,9 @@ class GpuEnhancer(Enhancer):
     by default a standalone one through EGL. ``profile=True`` waits for the GPU after each
     stage so that ``EnhanceResult.timings_s`` holds each stage's execution time (otherwise
     the times are those of submitting the work; the frame read-back waits for all of it).
+
+    :meth:`close` (or a ``with`` block) releases its GPU buffers, and the context when the
+    enhancer created it; a closed enhancer refuses every call.
     """
 
     backend = "gpu"
@@ -87,15 +96,18 @@ class GpuEnhancer(Enhancer):
             )
         #: release the context in close() (default: when this enhancer created it)
         self._owns_context = ctx is None if owns_context is None else owns_context
-        self.ctx = create_context(ctx)
+        self._closed = False
         self._buffers: dict[str, Any] = {}
+        self._programs = None
+        self.ctx = create_context(ctx)
         try:
             self.renderer = renderer_name(self.ctx)
             self.profile = profile
-            self._programs = programs_for(self.ctx)
+            self._programs = programs_for(self.ctx, self)
             self._max_block_bytes = int(
                 self.ctx.info.get("GL_MAX_SHADER_STORAGE_BLOCK_SIZE") or 2**27)
-            with self.ctx:
+            self._max_groups = self._programs.max_groups_xyz
+            with made_current(self.ctx):
                 # every entry now: a driver that cannot compile one fails here, not mid-session
                 self._programs.compile_all()
             super().__init__(display, preset, geometry, table)
@@ -104,12 +116,34 @@ class GpuEnhancer(Enhancer):
             raise
 
     # Every public method that touches the GPU makes this enhancer's context current for its
-    # duration: several enhancers (contexts) may share a thread.
-    def enhance(self, *args: Any, **kwargs: Any):  # noqa: D102 - Enhancer.enhance
-        with self.ctx:
+    # duration (and then the one current before, if any): several enhancers (contexts) may
+    # share a thread, and a caller's own context stays current across a call.
+    def _check_open(self) -> None:
+        if self._closed:
+            raise FovexpError("this GPU enhancer has been closed")
+
+    def _current(self) -> Any:
+        """A ``with`` block with this enhancer's context current; refused once it is closed."""
+        self._check_open()
+        return made_current(self.ctx)
+
+    def set_image(self, *args: Any, **kwargs: Any) -> None:  # noqa: D102 - Enhancer.set_image
+        self._check_open()
+        super().set_image(*args, **kwargs)
+
+    set_image.__doc__ = Enhancer.set_image.__doc__
+
+    def enhance(self, *args: Any, **kwargs: Any) -> EnhanceResult:  # noqa: D102
+        with self._current():
             return super().enhance(*args, **kwargs)
 
     enhance.__doc__ = Enhancer.enhance.__doc__
+
+    def __enter__(self) -> GpuEnhancer:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
     # ------------------------------------------------------------------------- stage graph
     def _define_stages(self) -> None:
@@ -170,6 +204,12 @@ class GpuEnhancer(Enhancer):
 
     def _run(self, file: str, entry: str, groups: tuple[int, ...], buffers: dict[str, Any],
              **uniforms: Any) -> None:
+        if any(n > top for n, top in zip(groups, self._max_groups, strict=True)):
+            raise FovexpError(
+                f"the image is too large for this GPU: {file} {entry} needs "
+                f"{' x '.join(map(str, groups))} work groups, the driver dispatches at most "
+                f"{' x '.join(map(str, self._max_groups))} ({self.renderer})"
+            )
         prog = self._programs.get(file, entry)
         for name, buf in buffers.items():
             buf.bind_to_storage_buffer(BINDINGS[name])
@@ -196,6 +236,8 @@ class GpuEnhancer(Enhancer):
         return img.shape[0], img.shape[1], (img.shape[2] if img.ndim == 3 else 1)
 
     def _read(self, name: str, count: int, dtype: str = "f4") -> np.ndarray:
+        if count == 0:  # moderngl cannot map 0 bytes
+            return np.empty(0, dtype)
         return np.frombuffer(self._buffers[name].read(size=count * np.dtype(dtype).itemsize),
                              dtype=dtype).copy()
 
@@ -419,9 +461,9 @@ class GpuEnhancer(Enhancer):
         a = self.preset.gabor_a_cpp
         imp = gabor.generate_impulses(w, h, n, a, seed)
         cell = imp.cell_px
-        nx, ny = int(math.ceil(w / cell)) + 2, int(math.ceil(h / cell)) + 2
-        cx = np.clip(np.floor((imp.x_px + 0.5) / cell).astype(np.int64) + 1, 0, nx - 1)
-        cy = np.clip(np.floor((imp.y_px + 0.5) / cell).astype(np.int64) + 1, 0, ny - 1)
+        nx, ny = gabor.cell_counts(w, h, cell)
+        cx = np.clip(gabor.cell_index(imp.x_px, cell), 0, nx - 1)
+        cy = np.clip(gabor.cell_index(imp.y_px, cell), 0, ny - 1)
         cell_id = cy * nx + cx
         order = np.argsort(cell_id, kind="stable")
         starts = np.searchsorted(cell_id[order], np.arange(nx * ny + 1)).astype(np.int32)
@@ -436,14 +478,18 @@ class GpuEnhancer(Enhancer):
     def _gpu_imp_params(self, imp: _GpuImpulses, geom, gaze, max_sigma, blur_rate, s_f, s_k,
                         lap: dict[str, Any], grad: dict[str, Any], head: dict[str, Any]) -> int:
         """Per impulse: band, frequency, amplitude, orientation (pipeline.glsl). The arguments
-        are the stages this one depends on; their data are in the GPU buffers."""
-        h, w, _ = self._hwc()
+        are the stages this one depends on; their data are in the GPU buffers. Dispatched in
+        slices of at most the driver's work-group count (x)."""
         b = self._buffers
-        self._run("pipeline.glsl", "IMPULSES", self._groups_1d(imp.count),
-                  {"IMPULSES": b["IMPULSES"], "QUANTILES": b["QUANTILES"], "SIGMA": b["SIGMA"],
-                   "ABSLAP": b["ABSLAP"], "GRADIENTS": b["GRADIENTS"], "HEADROOM": b["HEADROOM"],
-                   "IMP_PARAMS": b["IMP_PARAMS"]},
-                  n_impulses=imp.count, **self._point_uniforms(lap, grad, head))
+        bufs = {"IMPULSES": b["IMPULSES"], "QUANTILES": b["QUANTILES"], "SIGMA": b["SIGMA"],
+                "ABSLAP": b["ABSLAP"], "GRADIENTS": b["GRADIENTS"], "HEADROOM": b["HEADROOM"],
+                "IMP_PARAMS": b["IMP_PARAMS"]}
+        uniforms = self._point_uniforms(lap, grad, head)
+        per_dispatch = self._max_groups[0] * LOCAL_1D
+        for first in range(0, imp.count, per_dispatch):  # none for no impulses
+            self._run("pipeline.glsl", "IMPULSES",
+                      self._groups_1d(min(per_dispatch, imp.count - first)), bufs,
+                      n_impulses=imp.count, first_impulse=first, **uniforms)
         return imp.count
 
     def _point_uniforms(self, lap, grad, head) -> dict[str, Any]:
@@ -494,9 +540,11 @@ class GpuEnhancer(Enhancer):
         h, w, c = self._hwc()
         return self._read("OUTPUT", h * w * c).reshape(self._image_shape())
 
-    def linear(self, name: str) -> np.ndarray:
-        with self.ctx:
+    def linear(self, name: str) -> np.ndarray:  # noqa: D102 - Enhancer.linear
+        with self._current():
             return self._linear_read(name)
+
+    linear.__doc__ = Enhancer.linear.__doc__
 
     def _linear_read(self, name: str) -> np.ndarray:
         if name not in ("foveated", "contrast"):
@@ -515,13 +563,14 @@ class GpuEnhancer(Enhancer):
         """Per-impulse parameters of the last frame, in the order of the impulses (``x_px``,
         ``y_px``, then ``K``, ``F`` (cycles/px), ``OMEGA`` (rad), ``F_LOW``, ``F_HIGH``, and
         ``AMP``, ``KX``, ``KY`` of the synthesis), for comparison with the CPU backend."""
-        with self.ctx:
+        with self._current():
             return self._impulse_params()
 
     def _impulse_params(self) -> dict[str, np.ndarray]:
         imp: _GpuImpulses = self._c.get("impulses")
         self._c.get("imp_params")
-        rec = self._read("IMP_PARAMS", imp.count * len(IMPULSE_FIELDS)).reshape(imp.count, -1)
+        fields = len(IMPULSE_FIELDS)
+        rec = self._read("IMP_PARAMS", imp.count * fields).reshape(imp.count, fields)
         back = np.empty_like(rec)
         back[imp.order] = rec
         out = {name: back[:, i] for i, name in enumerate(IMPULSE_FIELDS)}
@@ -529,7 +578,7 @@ class GpuEnhancer(Enhancer):
         return out
 
     def _map(self, name: str) -> np.ndarray:
-        with self.ctx:
+        with self._current():
             return self._map_read(name)
 
     def _map_read(self, name: str) -> np.ndarray:
@@ -565,14 +614,28 @@ class GpuEnhancer(Enhancer):
         return self._read("MAPS", 5 * h * w)[fields.index(name) * h * w:][: h * w].reshape(h, w)
 
     def close(self) -> None:
-        """Release the GPU buffers, and the context if this enhancer created it (a given
-        context stays with its owner). Call it on the thread that created the enhancer."""
-        if self._buffers:
-            with self.ctx:
-                for buf in self._buffers.values():
-                    buf.release()
+        """Release the GPU buffers, and the context if this enhancer created it; in a given
+        context (which stays with its owner) also the compiled programs when no other
+        enhancer runs there. Later calls raise :class:`FovexpError`; closing twice is a no-op.
+        Call it on the thread that created the enhancer."""
+        if self._closed:
+            return
+        self._closed = True
+        cache = getattr(self, "_c", None)  # absent when __init__ failed early
+        if cache is not None:  # its stages hold the buffers released below
+            cache._values.clear()
+            cache._inputs.clear()
+        try:
+            if self._buffers or (self._programs is not None and not self._owns_context):
+                with made_current(self.ctx):
+                    for buf in self._buffers.values():
+                        buf.release()
+                    if self._programs is not None and not self._owns_context:
+                        drop_user(self.ctx, self)
+        finally:
             self._buffers.clear()
-        if self._owns_context:
-            release_context(self.ctx)
-            self._owns_context = False
+            self._programs = None
+            if self._owns_context:
+                release_context(self.ctx)
+                self._owns_context = False
 

@@ -4,13 +4,19 @@ Each stage of the method has one GLSL file in ``shaders/`` (``geometry.glsl``,
 ``foveation.glsl``, ... as the Python modules); a file holds the stage's functions and, behind
 ``#ifdef ENTRY_<NAME>``, its compute entry points. A program is one entry of one file, with the
 files it ``#include``s pasted in once each. The constants the shaders use are not written in
-GLSL: the header is generated from the Python modules, so each constant has one definition.
+GLSL: the header is generated from the Python modules, so each constant has one definition
+(derived ones included: the expand taps, the box width per level, arcmin per degree, the
+impulse cells' origin).
 """
 
 from __future__ import annotations
 
 import ctypes
+import functools
 import re
+import weakref
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -19,10 +25,13 @@ import numpy as np
 from ..acuity import THIBOS_ECC_DEG, THIBOS_T_HIGH_CPD, THIBOS_T_LOW_CPD
 from ..amplitude import MAX_LAPLACIAN_LEVEL, RELEASE_AMPLITUDE_GAIN
 from ..colour import LUMA_BT601
+from ..contrast import BOX_WIDTH_PX_PER_LEVEL
 from ..errors import FovexpError
 from ..frequency import CUTOFF_SIGMAS_F, NYQUIST_CPP
+from ..gabor import CELL_BORDER, CELL_ORIGIN_PX
+from ..geometry import ARCMIN_PER_DEG
 from ..orientation import GRADIENT_EPS, ORIENTATION_LEVEL
-from ..pyramids import BINOMIAL_5, KEYS_A
+from ..pyramids import BINOMIAL_5, EXPAND_EVEN_TAPS, EXPAND_ODD_TAPS, KEYS_A
 
 SHADER_DIR = Path(__file__).resolve().parent / "shaders"
 
@@ -45,7 +54,16 @@ GEOMETRY_MODELS: dict[str, int] = {"exact": 0, "linear": 1, "release": 2}
 LOCAL_2D = (16, 16)
 LOCAL_1D = 64
 
-_SOFTWARE_RENDERERS = ("llvmpipe", "softpipe", "swrast", "swiftshader", "lavapipe")
+#: GL_RENDERER substrings (lower case) of renderers that run on the CPU, forward to a host
+#: through a virtual GPU (virgl, VMware SVGA3D) or stand in for a missing driver (Microsoft
+#: Basic Render): none is faster than the CPU backend.
+_SOFTWARE_RENDERERS = (
+    "llvmpipe", "softpipe", "swrast", "swiftshader", "lavapipe", "virgl", "svga3d",
+    "microsoft basic render",
+)
+
+#: GL_MAX_COMPUTE_WORK_GROUP_COUNT that OpenGL 4.3+ guarantees on each axis.
+MIN_WORK_GROUP_COUNT = 65535
 
 
 def _floats(values: np.ndarray) -> str:
@@ -70,6 +88,12 @@ def _header(entry: str) -> str:
         f"const float THIBOS_T_LOW_CPD[THIBOS_N] = float[]({_floats(THIBOS_T_LOW_CPD)});",
         f"const float THIBOS_T_HIGH_CPD[THIBOS_N] = float[]({_floats(THIBOS_T_HIGH_CPD)});",
         f"const float BINOMIAL_5[5] = float[]({_floats(BINOMIAL_5)});",
+        f"const vec3 EXPAND_EVEN_TAPS = vec3({_floats(EXPAND_EVEN_TAPS)});",
+        f"const vec2 EXPAND_ODD_TAPS = vec2({_floats(EXPAND_ODD_TAPS)});",
+        f"const int BOX_WIDTH_PX_PER_LEVEL = {BOX_WIDTH_PX_PER_LEVEL};",
+        f"const float ARCMIN_PER_DEG = {ARCMIN_PER_DEG!r};",
+        f"const float CELL_ORIGIN_PX = {CELL_ORIGIN_PX!r};",
+        f"const int CELL_BORDER = {CELL_BORDER};",
         f"const vec3 LUMA_BT601 = vec3({_floats(LUMA_BT601)});",
         f"const float NYQUIST_CPP = {NYQUIST_CPP!r};",
         f"const float CUTOFF_SIGMAS_F = {CUTOFF_SIGMAS_F!r};",
@@ -131,23 +155,57 @@ def detach_thread() -> None:
     then ``eglReleaseThread``). With libglvnd, a thread that has made an EGL context current
     cannot create a GLX context (a PsychoPy window) until it does; releasing the moderngl
     context alone is not enough (measured under Xvfb: "invalid operation")."""
-    try:
-        egl = ctypes.CDLL("libEGL.so.1")
-    except OSError:
+    egl = _libegl()
+    if egl is None:
         return
-    egl.eglGetCurrentDisplay.restype = ctypes.c_void_p
-    egl.eglMakeCurrent.argtypes = [ctypes.c_void_p] * 4
     display = egl.eglGetCurrentDisplay()
     if display:
         egl.eglMakeCurrent(display, None, None, None)
     egl.eglReleaseThread()
 
 
+_EGL_DRAW, _EGL_READ = 0x3059, 0x305A
+
+
+@functools.cache
+def _libegl() -> Any:
+    """libEGL with the signatures used here, or None where there is none."""
+    try:
+        egl = ctypes.CDLL("libEGL.so.1")
+    except OSError:
+        return None
+    for name in ("eglGetCurrentDisplay", "eglGetCurrentContext", "eglGetCurrentSurface"):
+        getattr(egl, name).restype = ctypes.c_void_p
+    egl.eglGetCurrentSurface.argtypes = [ctypes.c_int32]
+    egl.eglMakeCurrent.argtypes = [ctypes.c_void_p] * 4
+    return egl
+
+
+@contextmanager
+def made_current(ctx: Any) -> Iterator[Any]:
+    """``ctx`` current for the block, and afterwards the EGL context that was current before
+    it, if any. moderngl's EGL backend leaves no context current on leaving ``with ctx:``,
+    which would take the context from under a caller who had one current (an enclosing
+    ``with ctx:``, a renderer's own EGL context). GLX, WGL and CGL restore it themselves."""
+    egl = _libegl()
+    saved = None
+    if egl is not None and egl.eglGetCurrentContext():
+        saved = (egl.eglGetCurrentDisplay(), egl.eglGetCurrentSurface(_EGL_DRAW),
+                 egl.eglGetCurrentSurface(_EGL_READ), egl.eglGetCurrentContext())
+    try:
+        with ctx:
+            yield ctx
+    finally:
+        if saved is not None:
+            egl.eglMakeCurrent(*saved)
+
+
 def release_context(ctx: Any) -> None:
     """Release a context this package created (and its compiled programs), and detach the
     thread from EGL (any enhancer still using the thread makes its own context current again
     on its next call)."""
-    _PROGRAMS.pop(id(ctx), None)
+    if hasattr(ctx, _PROGRAMS_ATTR):
+        delattr(ctx, _PROGRAMS_ATTR)  # its shaders go with the context
     ctx.release()
     detach_thread()
 
@@ -158,9 +216,21 @@ def renderer_name(ctx: Any) -> str:
 
 
 def is_software(ctx: Any) -> bool:
-    """Whether the context renders on the CPU (Mesa llvmpipe and the like)."""
+    """Whether the context renders on the CPU (Mesa llvmpipe and the like) or on a virtual or
+    fallback device (virgl, VMware SVGA3D, Microsoft Basic Render)."""
     name = renderer_name(ctx).lower()
     return any(s in name for s in _SOFTWARE_RENDERERS)
+
+
+def max_work_groups(ctx: Any) -> tuple[int, int, int]:
+    """GL_MAX_COMPUTE_WORK_GROUP_COUNT: the most work groups one dispatch may have along x, y
+    and z (OpenGL's guaranteed minimum where the driver does not report it)."""
+    raw = ctx.info.get("GL_MAX_COMPUTE_WORK_GROUP_COUNT")
+    try:
+        x, y, z = (max(int(v), 1) for v in raw)
+    except (TypeError, ValueError):
+        return (MIN_WORK_GROUP_COUNT,) * 3
+    return x, y, z
 
 
 #: Every compute entry, by file: what Programs.compile_all builds.
@@ -176,10 +246,13 @@ ENTRIES: dict[str, tuple[str, ...]] = {
 
 
 class Programs:
-    """Compiled entry points of one context."""
+    """Compiled entry points of one context, and the dispatch limits of its driver."""
 
     def __init__(self, ctx: Any) -> None:
         self.ctx = ctx
+        self.max_groups_xyz = max_work_groups(ctx)
+        #: the enhancers running in the context (weakly: one dropped unclosed is no user)
+        self.users: weakref.WeakSet[Any] = weakref.WeakSet()
         self._cache: dict[tuple[str, str], Any] = {}
 
     def compile_all(self) -> None:
@@ -199,14 +272,39 @@ class Programs:
                 ) from None
         return self._cache[key]
 
+    def release(self) -> None:
+        """Delete the compiled shaders (the context must be current)."""
+        for prog in self._cache.values():
+            prog.release()
+        self._cache.clear()
 
-#: Programs per context (keyed by the context object; contexts are few and long-lived).
-_PROGRAMS: dict[int, tuple[Any, Programs]] = {}
+
+# The programs are kept on the context object itself, not in a module registry: compiled
+# shaders hold their context, so a registry (even a weak-keyed one) would keep every context
+# alive; on the context they are collected with it.
+_PROGRAMS_ATTR = "_fovexp_programs"
 
 
-def programs_for(ctx: Any) -> Programs:
-    """The compiled programs of ``ctx``, shared by every enhancer that runs in it."""
-    held = _PROGRAMS.get(id(ctx))
-    if held is None or held[0] is not ctx:
-        held = _PROGRAMS[id(ctx)] = (ctx, Programs(ctx))
-    return held[1]
+def programs_for(ctx: Any, user: Any = None) -> Programs:
+    """The compiled programs of ``ctx``, shared by every enhancer that runs in it; ``user``
+    (an enhancer) counts as one of them until :func:`drop_user`."""
+    progs = getattr(ctx, _PROGRAMS_ATTR, None)
+    if progs is None:
+        progs = Programs(ctx)
+        setattr(ctx, _PROGRAMS_ATTR, progs)
+    if user is not None:
+        progs.users.add(user)
+    return progs
+
+
+def drop_user(ctx: Any, user: Any) -> None:
+    """``user`` no longer runs in ``ctx``: when no other enhancer does, delete the compiled
+    programs and forget them (the context itself stays with its owner). ``ctx`` must be
+    current."""
+    progs = getattr(ctx, _PROGRAMS_ATTR, None)
+    if progs is None:
+        return
+    progs.users.discard(user)
+    if not progs.users:
+        delattr(ctx, _PROGRAMS_ATTR)
+        progs.release()

@@ -1,8 +1,8 @@
 // Contrast enhancement: fovexp/contrast.py (Patney et al. 2016 as the release applies it,
-// notes 3.3). Per integer blur level k a box mean of width 4k (MATLAB anchoring) and
-// out_k = avg_k + f_e (1 + k) (in - avg_k); each pixel interpolates between the two levels
-// that bracket its sigma. Box means from a float64 summed-area table of the luminance padded
-// with symmetric borders; the result kept is the change, out - in.
+// notes 3.3). Per integer blur level k a box mean of width box_width_px(k) (MATLAB
+// anchoring) and out_k = avg_k + f_e (1 + k) (in - avg_k); each pixel interpolates between the
+// two levels that bracket its sigma. Box means from a float64 summed-area table of the
+// luminance padded with symmetric borders; the result kept is the change, out - in.
 
 // contrast._symmetric: MATLAB 'symmetric' padding (-1 -> 0, n -> n - 1), repeated past the
 // edges (period 2n) when the pad is wider than the image; GLSL's % is undefined for i < 0
@@ -79,11 +79,13 @@ void main() {
         int k = k0 + j;
         double wgt = double(j == 0 ? 1.0 - t : t);
         if (k == 0) { acc += wgt * double(v); continue; }  // width 0: the pixel itself
-        // width 4 k, MATLAB anchoring: [x - (2k - 1), x + 2k]
-        int ya = p.y + pad_px - 2 * k + 1, xa = p.x + pad_px - 2 * k + 1;
-        int yb = ya + 4 * k, xb = xa + 4 * k;
+        // width n = contrast.box_width_px(k), MATLAB anchoring:
+        // [x - floor((n - 1) / 2), x + ceil((n - 1) / 2)]
+        int n = BOX_WIDTH_PX_PER_LEVEL * k;
+        int ya = p.y + pad_px - (n - 1) / 2, xa = p.x + pad_px - (n - 1) / 2;
+        int yb = ya + n, xb = xa + n;
         double box = sat[yb * wp1 + xb] - sat[ya * wp1 + xb] - sat[yb * wp1 + xa] + sat[ya * wp1 + xa];
-        double avg = box / double(16 * k * k);
+        double avg = box / double(n * n);
         acc += wgt * (avg + double(f_e) * double(1 + k) * (double(v) - avg));
     }
     delta[i] = float(acc - double(v));

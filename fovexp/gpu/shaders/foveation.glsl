@@ -10,7 +10,7 @@ uniform float fovea_deg;
 
 // foveation.sigma_px: blur_rate * max(0, e - fovea) arcmin, in px (geometry.arcmin_to_px)
 float sigma_px(float ecc_deg, float ppd) {
-    return max(ecc_deg - fovea_deg, 0.0) * blur_rate_arcmin_per_deg / 60.0 * ppd;
+    return max(ecc_deg - fovea_deg, 0.0) * blur_rate_arcmin_per_deg / ARCMIN_PER_DEG * ppd;
 }
 
 #ifdef ENTRY_SIGMA

@@ -10,7 +10,7 @@ uniform ivec2 image_hw;
 uniform float gabor_a_cpp;
 uniform float kernel_radius_px;
 uniform float cell_px;
-uniform ivec2 cell_count_xy;    // cells from -1, row by row, as gabor._generate makes them
+uniform ivec2 cell_count_xy;    // gabor.cell_counts: cells from -CELL_BORDER, row by row
 layout(std430, binding = B_IMPULSES) readonly buffer Impulses { vec4 impulses[]; };  // x, y, w, -
 layout(std430, binding = B_CELLS) readonly buffer Cells { int cell_start[]; };
 layout(std430, binding = B_IMP_PARAMS) readonly buffer Params { float imp_params[]; };
@@ -19,7 +19,7 @@ void main() {
     ivec2 p = ivec2(gl_GlobalInvocationID.xy);
     if (p.x >= image_hw.y || p.y >= image_hw.x) return;
     vec2 q = vec2(p);
-    ivec2 c = ivec2(floor((q + 0.5) / cell_px)) + 1;
+    ivec2 c = ivec2(floor((q - CELL_ORIGIN_PX) / cell_px)) + CELL_BORDER;  // gabor.cell_index
     float pa2 = PI * gabor_a_cpp * gabor_a_cpp;
     float r = kernel_radius_px;
     float acc = 0.0;

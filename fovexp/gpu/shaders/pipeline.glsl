@@ -38,11 +38,12 @@ vec2 band_at(vec2 p_px, out float sigma, out float ecc) {
 #ifdef ENTRY_IMPULSES
 LOCAL_1D
 uniform int n_impulses;
+uniform int first_impulse;        // this dispatch's first (a dispatch has at most the driver's groups)
 layout(std430, binding = B_IMPULSES) readonly buffer Impulses { vec4 impulses[]; };    // x, y, w, -
 layout(std430, binding = B_QUANTILES) readonly buffer Quantiles { vec2 quantiles[]; }; // u, 1 - u
 layout(std430, binding = B_IMP_PARAMS) writeonly buffer Params { float imp_params[]; };
 void main() {
-    int i = int(gl_GlobalInvocationID.x);
+    int i = first_impulse + int(gl_GlobalInvocationID.x);
     if (i >= n_impulses) return;
     vec2 p = impulses[i].xy;
     float s, ecc;

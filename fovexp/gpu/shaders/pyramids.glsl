@@ -66,10 +66,10 @@ void expand_taps(int y, int n, out ivec3 idx, out vec3 wts) {
     int i = y / 2;
     if (y % 2 == 0) {
         idx = ivec3(max(i - 1, 0), i, min(i + 1, n - 1));
-        wts = vec3(0.125, 0.75, 0.125);
+        wts = EXPAND_EVEN_TAPS;
     } else {
         idx = ivec3(i, min(i + 1, n - 1), i);
-        wts = vec3(0.5, 0.5, 0.0);
+        wts = vec3(EXPAND_ODD_TAPS, 0.0);
     }
 }
 void main() {
