@@ -28,7 +28,8 @@ def _trials(folder: Path, real_only: bool) -> pd.DataFrame:
     trials = load_results(folder).trials
     if real_only and (trials["tracker"] == SIMULATED_TRACKER).all():
         raise FovexpError(f"{folder} holds only simulated sessions (dry runs); a session with "
-                          "a participant cannot take its parameters from them")
+                          "a participant cannot take its parameters from them (resuming a dry "
+                          "run? add --dry-run)")
     return trials
 
 

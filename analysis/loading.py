@@ -23,7 +23,8 @@ R6 wrong parameter
     experiment adjusts are excluded.
 R7 simulated sessions
     Where an experiment has trials with a participant's own gaze (tracker ``tobii`` or
-    ``mouse``), its trials with simulated gaze (dry runs, demos) are excluded: a dry run left in
+    ``mouse``; mouse pilots are people too) in a session not recorded as incomplete, its trials
+    with simulated gaze (dry runs, demos) are excluded: a dry run left in
     the lab's results folder never enters its calibration. A folder of simulated sessions alone
     (CI, demos) is analysed as it is, with a note saying so.
 R8 mixed protocol versions
@@ -281,7 +282,12 @@ def load_results(
     simulated = trials["tracker"] == SIMULATED_TRACKER
     for exp, grp in list(trials.groupby("experiment", sort=True)):
         sim = simulated & (trials["experiment"] == exp)
-        if sim.any() and not sim[grp.index].all():
+        # a real session recorded as not completed (R9 drops it) does not push the dry runs out
+        real = grp[~simulated[grp.index]]
+        has_real = any(include_incomplete or _session_state(Path(f).parent, str(sess)) is not False
+                       for f, sess in real[["file", "session"]].drop_duplicates().itertuples(
+                           index=False))
+        if sim.any() and has_real:
             trials = _exclude(trials, sim, "R7 simulated sessions",
                               "simulated gaze (a dry run) beside real participants' sessions",
                               exclusions)

@@ -178,6 +178,11 @@ def test_dry_runs_beside_real_sessions(tmp_path: Path) -> None:
     only_dry = load_results(tmp_path)
     assert len(only_dry.trials) == 45 and "R7 simulated sessions" not in rules(only_dry)
     assert any("simulated gaze" in n for n in only_dry.notes)
+    # a participant's aborted session alone does not push the dry runs out (R9 drops it)
+    aborted = [dict(r, tracker="tobii") for r in rows(pid="P09", k=9)][:6]
+    write_trials(tmp_path / "calibration-fe" / "P09", aborted, completed=False)
+    assert sorted(load_results(tmp_path).trials["participant"].unique()) == [
+        "SIM01", "SIM02", "SIM03"]
     for k, pid in enumerate(("P01", "P02"), start=3):
         real = [dict(r, tracker="tobii") for r in rows(pid=pid, k=k)]
         write_trials(tmp_path / "calibration-fe" / pid, real)

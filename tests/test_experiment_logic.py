@@ -81,13 +81,19 @@ def test_adjuster_steps_and_clamps() -> None:
 def test_wheel_notches_sum_fractions() -> None:
     """A high-resolution wheel reports fractions of a notch: they add up to whole notches."""
     assert wheel_notches([(1.0, False), (2.0, False), (-1.0, True)]) == (
-        [Wheel(3), Wheel(-1, fine=True)], 0.0)
+        [Wheel(3), Wheel(-1, fine=True)], (0.0, True))
     wheel, carry = wheel_notches([(0.4, False)] * 3)
-    assert wheel == [Wheel(1)] and carry == pytest.approx(0.2)
+    assert wheel == [Wheel(1)] and carry == (pytest.approx(0.2), False)
     wheel, carry = wheel_notches([(0.4, False), (0.5, False)], carry)  # carried over
-    assert wheel == [Wheel(1)] and carry == pytest.approx(0.1)
+    assert wheel == [Wheel(1)] and carry == (pytest.approx(0.1), False)
     wheel, carry = wheel_notches([(-0.3, False)] * 4, carry)  # back the other way
-    assert wheel == [Wheel(-1)] and carry == pytest.approx(-0.1)  # 0.1 - 1.2 = -1 - 0.1
+    assert wheel == [Wheel(-1)] and carry == (pytest.approx(-0.1), False)  # 0.1 - 1.2 = -1.1
+    # ten tenths are one notch, although their float sum is 0.999...
+    assert wheel_notches([(0.1, False)] * 10)[0] == [Wheel(1)]
+    assert wheel_notches([(0.1, False)] * 20)[0] == [Wheel(2)]
+    # a fine half-turn and a coarse half-turn are not one coarse notch
+    wheel, carry = wheel_notches([(0.6, True), (0.6, False)])
+    assert wheel == [] and carry == (pytest.approx(0.6), False)
 
 
 @given(st.lists(st.tuples(st.integers(-5, 5), st.booleans()), max_size=200))

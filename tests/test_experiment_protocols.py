@@ -137,6 +137,14 @@ def test_dependencies_come_from_the_results_root(ws: Path, tmp_path: Path) -> No
                                                              abs=0.03)
 
 
+def test_results_paths_stay_in_the_results_root(ws: Path) -> None:
+    path = edit(ws, "calibration-sk", **{"parameters.f_e": {"fe_results":
+                                                            "../results/calibration-fe"}})
+    with pytest.raises(FovexpError, match=r"parameters\.f_e\.fe_results: "
+                                          r"'\.\./results/calibration-fe' leaves the results root"):
+        load_protocol(path, results_root=ws / "results")
+
+
 def test_participant_sessions_never_use_dry_runs(ws: Path) -> None:
     """Dependencies holding only dry runs serve dry runs, and stop a real session; beside real
     participants' results, dry runs are left out (analysis rule R7)."""
@@ -192,7 +200,7 @@ def test_participant_ok(pid: str) -> None:
 
 
 @pytest.mark.parametrize("pid", ["", "../x", "P 01", "P01/", "é", "X" * 33, "a.b", "P01\n",
-                                 "con", "NUL", "Com1"])
+                                 "con", "NUL", "Com1", "lpt0"])
 def test_participant_rejected(pid: str) -> None:
     with pytest.raises(FovexpError, match="participant ID"):
         check_participant(pid)

@@ -7,7 +7,9 @@ conditions (images x blur-rates x methods x s_f values) and their repetitions, t
 randomised order, the display profile, and where the parameters that are not adjusted come from
 (a constant, a condition, Table 2, or an earlier experiment's results folder).
 
-Relative paths inside a protocol are relative to the protocol file's folder.
+Relative results folders (``fe_results``, ``sk_line_results``, a ``table`` folder) are taken in
+the results root the session writes to; every other relative path (display, stimuli, a table
+YAML) is relative to the protocol file's folder.
 """
 
 from __future__ import annotations
@@ -266,7 +268,8 @@ class LoadedProtocol:
         self.derived = dict(derived)
         s = self.spec
         lo, hi = s.adjust.range
-        for method, br, sf in itertools.product(s.methods, s.blur_rates or [None],
+        methods = dict.fromkeys([*s.methods, *(s.practice_methods or [])])
+        for method, br, sf in itertools.product(methods, s.blur_rates or [None],
                                                 s.s_f_values or [None]):
             trial = Trial(-1, False, 0, s.images[0], method, br, sf, lo)
             for value in (lo, hi):
@@ -421,6 +424,20 @@ def _interp(where: str, pairs: list[list[float]], needed: list[float]) -> Callab
     return lambda br: float(np.interp(br, xs, ys))
 
 
+def _results_path(where: str, results_root: Path, rel: str) -> Path:
+    """A results folder named in a protocol: relative ones lie inside the results root.
+
+    A relative path climbing out of it (``../results/calibration-fe``, as protocols named them
+    when paths were relative to the protocol file) would read another study's folder under
+    ``--results /data/study``: it is refused, not guessed."""
+    p = Path(rel).expanduser()
+    if not p.is_absolute() and ".." in p.parts:
+        raise FovexpError(f"{where}: {rel!r} leaves the results root {results_root}: name the "
+                          "experiment's folder in it (e.g. calibration-fe, or . for the root) "
+                          "or give an absolute path")
+    return _resolve_path(results_root, rel)
+
+
 @dataclass(frozen=True)
 class _Dependencies:
     """Where a protocol's dependencies are found, and how strictly they are checked."""
@@ -450,7 +467,7 @@ def _snapshot(path: Path, deps: _Dependencies, name: str, src: ParamSource,
                 raise FovexpError(f"{where}.table: parameter table {tpath} does not exist")
             table = ParameterTable.load(tpath)
         else:
-            tpath = _resolve_path(deps.results_root, src.table)
+            tpath = _results_path(f"{where}.table", deps.results_root, src.table)
             lp.dependency_folders[name] = str(tpath)
             _require_results(where + ".table", tpath, deps.check, nested=True)
             from analysis.derive import parameter_table
@@ -469,7 +486,7 @@ def _snapshot(path: Path, deps: _Dependencies, name: str, src: ParamSource,
         rel = getattr(src, key)
         if rel is None:
             continue
-        folder = _resolve_path(deps.results_root, rel)
+        folder = _results_path(f"{where}.{key}", deps.results_root, rel)
         lp.dependency_folders[name] = str(folder)
         _require_results(f"{where}.{key}", folder, deps.check)
         from analysis import derive

@@ -21,27 +21,37 @@ class Wheel:
     fine: bool = False
 
 
+#: What :func:`wheel_notches` carries from one call to the next: the fraction of a notch turned
+#: so far, and whether it was turned with the modifier (fine) held.
+WheelCarry = tuple[float, bool]
+
+
 def wheel_notches(scrolls: list[tuple[float, bool]],
-                  carry: float = 0.0) -> tuple[list[Wheel], float]:
-    """Whole wheel notches from scroll deltas ``(dy, fine)`` in order, and the fraction left over.
+                  carry: WheelCarry = (0.0, False)) -> tuple[list[Wheel], WheelCarry]:
+    """Whole wheel notches from scroll deltas ``(dy, fine)`` in order, and what is left over.
 
     High-resolution wheels and touchpads report fractions of a notch per event; rounding each
     event would lose them all, so they are summed and a notch is emitted each time the sum
-    passes a whole one (``carry`` is the fraction left from the last call). Consecutive notches
-    with the same modifier state are merged.
+    passes a whole one. The fraction is kept per modifier state (a fine half-turn and a coarse
+    half-turn are not one coarse notch). Consecutive notches with the same modifier state are
+    merged.
     """
+    frac, frac_fine = carry
     out: list[Wheel] = []
     for dy, fine in scrolls:
-        carry += dy
-        n = int(carry)  # towards zero: a notch only once a whole one has been turned
-        carry -= n
+        if fine != frac_fine:
+            frac, frac_fine = 0.0, fine
+        frac += dy
+        # towards zero: a notch only once a whole one has been turned (ten 0.1 sum to 0.999...)
+        n = math.trunc(round(frac, 9))
+        frac -= n
         if not n:
             continue
         if out and out[-1].fine == fine:
             out[-1] = Wheel(out[-1].notches + n, fine)
         else:
             out.append(Wheel(n, fine))
-    return [w for w in out if w.notches], carry
+    return [w for w in out if w.notches], (frac, frac_fine)
 
 
 @dataclass(frozen=True)

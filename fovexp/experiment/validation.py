@@ -10,8 +10,8 @@ from fovexp import FovexpError
 from .logformat import PARTICIPANT_PATTERN, PARTICIPANT_RE
 
 #: Names Windows reserves for devices, whatever the case (a lab's share may be on Windows).
-_RESERVED = frozenset({"con", "prn", "aux", "nul", *(f"com{i}" for i in range(1, 10)),
-                       *(f"lpt{i}" for i in range(1, 10))})
+_RESERVED = frozenset({"con", "prn", "aux", "nul", *(f"com{i}" for i in range(10)),
+                       *(f"lpt{i}" for i in range(10))})
 
 
 def check_participant(pid: str) -> str:

@@ -16,7 +16,7 @@ import numpy as np
 
 from fovexp import FovexpError
 
-from .trial import InputEvent, Key, wheel_notches
+from .trial import InputEvent, Key, WheelCarry, wheel_notches
 
 KEYS = ["return", "num_enter", "escape", "space", "q", "r"]
 #: measured refresh may differ from the profile by this fraction (a 120 Hz screen run at 60 Hz
@@ -87,7 +87,7 @@ class PsychoScreen:
         self._keys = pkey.KeyStateHandler()
         self._pkey = pkey
         self._wheel: list[tuple[float, bool]] = []
-        self._wheel_carry = 0.0  # a fraction of a notch turned so far (high-resolution wheels)
+        self._wheel_carry: WheelCarry = (0.0, False)  # a fraction of a notch (hi-res wheels)
         # Our own pyglet handlers: PsychoPy's wheel handler drops scroll events whenever a
         # psychopy.hardware.mouse.Mouse exists, and the modifier must be read at scroll time.
         self.win.winHandle.push_handlers(self._keys, on_mouse_scroll=self._on_scroll)
@@ -135,7 +135,10 @@ class PsychoScreen:
         return np.ascontiguousarray(np.asarray(img, dtype=np.float32)[::-1])
 
     def set_reference(self, left: np.ndarray) -> None:
+        """A new trial's reference half; wheel turns from before it (a break, the last trial's
+        leftover fraction) do not move its start value."""
         self.left.image = self._tex(left)
+        self._wheel, self._wheel_carry = [], (0.0, False)
 
     def set_test(self, right: np.ndarray) -> None:
         self.right.image = self._tex(right)
