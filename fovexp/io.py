@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 import tempfile
+import warnings
 from pathlib import Path
 
 import imageio.v3 as iio
@@ -32,7 +33,11 @@ def read_image(path: str | Path) -> np.ndarray:
     if not path.is_file():
         raise FovexpError(f"{path}: no such file")
     try:
-        raw = _read_png16(path) if _is_png16(path) else iio.imread(path)
+        with warnings.catch_warnings():
+            # a broken file makes imageio probe every plugin; the legacy ones warn of their own
+            # deprecation, noise beside the one error below
+            warnings.simplefilter("ignore", DeprecationWarning)
+            raw = _read_png16(path) if _is_png16(path) else iio.imread(path)
     except Exception as exc:  # imageio raises many types for bad files
         raise FovexpError(f"{path}: cannot be read as an image ({type(exc).__name__})") from None
     if raw.ndim == 3 and raw.shape[2] == 1:
