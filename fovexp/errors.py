@@ -16,6 +16,9 @@ def validation_error(what: str, exc: Any) -> FovexpError:
     """One line from a pydantic ``ValidationError``: ``what``, the first bad field (dotted
     path), its value and pydantic's reason. Raise it ``from None``."""
     err = exc.errors()[0]
-    where = ".".join(str(p) for p in err["loc"]) or "?"
+    msg = err["msg"].removeprefix("Value error, ")
+    where = ".".join(str(p) for p in err["loc"])
+    if not where:  # a check across fields names its keys in its own message
+        return FovexpError(f"{what}: {msg}")
     value = f"={err['input']!r}" if "input" in err and not isinstance(err["input"], dict) else ""
-    return FovexpError(f"{what}: {where}{value}: {err['msg']}")
+    return FovexpError(f"{what}: {where}{value}: {msg}")

@@ -134,7 +134,14 @@ class StubScreen:
     def measure_display(self):
         return self.refresh_hz, self.size, self.size
 
-    def message(self, text, keys, timeout_s):
+    def message(self, text, keys, timeout_s, each_frame=None):
+        try:
+            return self._message(text, keys, timeout_s)
+        finally:
+            if each_frame is not None:
+                each_frame()  # as the real screen does after its flips
+
+    def _message(self, text, keys, timeout_s):
         self.messages.append(text)
         if self.answer is not None:
             return self.answer(text, keys, timeout_s)

@@ -38,7 +38,7 @@ DISPLAY = load_display("lg-oled55cx")
 
 @pytest.fixture(scope="module")
 def fix() -> FixationGeometry:
-    return FixationGeometry(DISPLAY, "exact")
+    return FixationGeometry(DISPLAY)
 
 
 def point_at(fix: FixationGeometry, ecc: float, angle: float = 0.0) -> tuple[float, float]:
@@ -134,7 +134,21 @@ def test_blanking_log_episodes() -> None:
     b.close(0.2)
     assert [(round(e.start_s, 3), round(e.end_s, 3), e.frames) for e in b.episodes] == [
         (0.02, 0.05, 3), (0.07, 0.08, 1), (0.09, 0.2, 2)]
-    assert b.fraction == pytest.approx(6 / 11)
+    # time-weighted, on the episodes' own time base: (0.03 + 0.01 + 0.11) / 0.2
+    assert b.fraction == pytest.approx(sum(e.end_s - e.start_s for e in b.episodes) / 0.2)
+    assert b.fraction == pytest.approx(0.75)
+    assert (b.frames, b.blanked) == (11, 6)
+
+
+def test_blanked_fraction_counts_how_long_a_black_frame_stayed() -> None:
+    """One black frame followed by a dropped (0.49 s) interval: black for 98 % of the trial, not
+    for 1 of 4 frames."""
+    b = BlankingLog()
+    for t, blank in ((0.0, False), (0.01, True), (0.50, False), (0.51, False)):
+        b.frame(t, blank, "outside" if blank else "")
+    b.close(0.51)
+    assert b.fraction == pytest.approx(0.49 / 0.51)
+    assert b.episodes[0].end_s - b.episodes[0].start_s == pytest.approx(0.49)
 
 
 # -- blanking decision -----------------------------------------------------------------------
@@ -211,6 +225,42 @@ def test_simulated_gaze_is_seeded_and_plausible(fix: FixationGeometry) -> None:
     assert (ecc[valid] > 1.25).mean() > 0.005  # but sometimes looking away
 
 
+def test_simulated_gaze_stream_is_independent_of_validation_and_disconnects(
+        fix: FixationGeometry) -> None:
+    """Sample i depends on the seed and i only: not on a validation's fixations run in between
+    (at whatever time), nor on a lost connection that hid some samples."""
+    clock = [0]
+    ref = SimulatedGaze(fix, seed=9, clock_us=lambda: clock[0])
+    other = SimulatedGaze(fix, seed=9, clock_us=lambda: clock[0])
+    ref.start()
+    other.start()
+    got_ref, got_other = [], []
+    for step in range(1, 31):  # 3 s
+        clock[0] = step * 100_000
+        got_ref += ref.poll()
+        if step == 5:
+            other.fixate((0.3, 0.3), 480)  # a validation target, mid-stream
+        if step == 10:
+            other.set_connected(False)
+        if step == 15:
+            other.set_connected(True)
+        got_other += other.poll()
+    assert len(got_ref) == 1801
+    by_time = {s.device_time_us: s for s in got_ref}
+    hidden = [s for s in got_ref if not any(o.device_time_us == s.device_time_us
+                                            for o in got_other)]
+    assert 2 * 600 * 0.1 < len(hidden) <= 600 * 0.6  # the disconnected half second
+    assert got_other and all(by_time[o.device_time_us] == o for o in got_other)
+    # the fixations themselves are seeded, and do not depend on when they were asked for
+    clock[0] = 0
+    a = SimulatedGaze(fix, seed=9, clock_us=lambda: clock[0]).fixate((0.3, 0.3), 100)
+    b = SimulatedGaze(fix, seed=9, clock_us=lambda: clock[0])
+    b.start()
+    clock[0] = 1_000_000
+    b.poll()
+    assert [s[2:] for s in b.fixate((0.3, 0.3), 100)] == [s[2:] for s in a]
+
+
 # -- simulated participant -------------------------------------------------------------------
 
 @pytest.mark.parametrize(("param", "lo", "hi", "step", "fine", "start"), [
@@ -279,6 +329,66 @@ def test_validation_metrics(fix: FixationGeometry) -> None:
     assert res.left.precision_rms_s2s_deg == pytest.approx(0.0, abs=1e-6)
     assert res.right.data_loss == pytest.approx(0.1) and res.left.data_loss == 0
     assert not res.passed and res.to_dict()["accuracy_deg"] == pytest.approx(0.5, abs=0.01)
+    assert "accuracy 0.50 deg" in res.failure
+    assert validation_result(fix, per_target, limit_deg=0.6).passed
+
+
+def test_validation_precision_is_rms_of_sample_to_sample_angles(fix: FixationGeometry) -> None:
+    """Steps of 0.1 and 0.3 deg alternating: RMS-S2S is sqrt((0.1^2 + 0.3^2) / 2) = 0.2236 deg
+    (a mean would give 0.2, a standard deviation 0.1)."""
+    target = (0.5, 0.5)
+    xs = [target[0]]
+    for i in range(60):
+        nxt = point_at_offset(fix, (xs[-1], target[1]), 0.1 if i % 2 == 0 else 0.3)
+        xs.append(nxt[0])
+    samples = [GazeSample(i, i, x, target[1], True, x, target[1], True)
+               for i, x in enumerate(xs)]
+    res = validation_result(fix, [(target, samples)], limit_deg=10.0)
+    assert res.left.precision_rms_s2s_deg == pytest.approx(math.sqrt(0.05), rel=0.01)
+
+
+def test_validation_fails_when_too_many_samples_are_lost(fix: FixationGeometry) -> None:
+    """One valid sample of 480 is on target (accuracy 0), but says nothing: refused."""
+    t = (0.5, 0.5)
+    samples = [GazeSample(i, i, *((0.5, 0.5, True) if i == 0 else (math.nan, math.nan, False)),
+                          0.5, 0.5, True) for i in range(480)]
+    res = validation_result(fix, [(t, samples)], limit_deg=1.0, max_data_loss=0.2)
+    assert res.accuracy_deg == pytest.approx(0.0, abs=1e-9)
+    assert res.data_loss == pytest.approx(479 / 480)
+    assert not res.passed and "data loss 99.8% is above the protocol's limit 20%" in res.failure
+    assert validation_result(fix, [(t, samples)], limit_deg=1.0, max_data_loss=1.0).passed
+
+
+def test_fixation_window_is_physical_whatever_the_enhancers_model(tmp_path: Path) -> None:
+    """The release preset's geometry describes the prototype's screen, not the participant's:
+    the 1.25 deg window is still measured on the display profile (here a protocol with
+    preset release, whose enhancer geometry is 'release')."""
+    import yaml
+
+    from fovexp.experiment.protocol import load_protocol
+    from fovexp.experiment.session import Session, SessionOptions
+    from fovexp.geometry import ViewingGeometry
+
+    from experiment_helpers import make_workspace
+
+    ws = make_workspace(tmp_path / "ws")
+    path = ws / "protocols" / "calibration-fe.yaml"
+    data = yaml.safe_load(path.read_text())
+    data["preset"], data["geometry"] = "release", "release"
+    path.write_text(yaml.safe_dump(data))
+    lp = load_protocol(path)
+    assert lp.spec.geometry_model == "release"
+    s = Session(lp, SessionOptions(participant="X01", results_root=tmp_path / "results"))
+    exact = ViewingGeometry.for_image(DISPLAY, DISPLAY.width_px, DISPLAY.height_px, "exact")
+    pt = point_at_offset(s.fixation, (0.5, 0.5), 1.25)
+    px = exact.gaze_px(pt)
+    want = float(exact.eccentricity_deg(np.array(px[0]), np.array(px[1]),
+                                        exact.gaze_px((0.5, 0.5))))
+    assert want == pytest.approx(1.25, abs=1e-6)
+    release = ViewingGeometry.for_image(DISPLAY, DISPLAY.width_px, DISPLAY.height_px, "release")
+    rpx = release.gaze_px(pt)
+    assert abs(float(release.eccentricity_deg(np.array(rpx[0]), np.array(rpx[1]),
+                                              release.gaze_px((0.5, 0.5)))) - 1.25) > 0.1
 
 
 def point_at_offset(fix: FixationGeometry, target: tuple[float, float], deg: float):

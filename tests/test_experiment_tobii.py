@@ -208,3 +208,108 @@ def test_session_recovers_from_a_stall_longer_than_the_stall_time(tmp_path) -> N
     rows = (tmp_path / "gaze.csv").read_text().splitlines()[1:]
     assert rows and all(r.startswith(",") for r in rows)  # samples between trials
     g.stop()
+
+
+def test_calibration_error_is_a_failure_the_operator_can_retry(tmp_path) -> None:
+    """The real SDK refuses a calibration (here: the stand-in is no EyeTracker): the adapter
+    reports a failed calibration with the SDK's reason instead of crashing, and the session
+    offers R (recalibrate) / Q; Q stops with a message naming the failure."""
+    from fovexp.experiment.protocol import load_protocol
+    from fovexp.experiment.session import Session, SessionOptions
+
+    from experiment_helpers import StubScreen
+
+    g = TobiiGaze(frequency_hz=600, tracker=StandInTracker())
+    cal = g.calibrate([(0.5, 0.5)], lambda x, y: None)
+    assert cal["failed"] and "ValueError" in cal["reason"] and "EyeTracker" in cal["reason"]
+
+    lp = load_protocol(REPO / "protocols" / "calibration-fe.yaml")
+    s = Session(lp, SessionOptions(participant="C01", results_root=tmp_path, tracker="tobii",
+                                   limit_trials=1, practice_trials=0, skip_display_check=True,
+                                   window_size=(320, 180)))
+    prompts: list[str] = []
+
+    def answer(text, keys, timeout_s):
+        if keys == ["r", "q"]:
+            prompts.append(text)
+            return "r" if len(prompts) == 1 else "q"  # one retry, then quit
+        return keys[0] if keys else None
+
+    with pytest.raises(FovexpError, match="calibration failed"):
+        s.run(screen_factory=lambda **kw: StubScreen(answer=answer, **kw),
+              gaze=TobiiGaze(frequency_hz=600, tracker=StandInTracker()))
+    assert len(prompts) == 2 and all("R: recalibrate" in p for p in prompts)
+    import json
+
+    info = json.loads((s.folder / f"session-{s.session_id}.json").read_text())
+    assert [q["calibration"]["failed"] for q in info["tracker_quality"]] == [True, True]
+    assert info["state"] == "failed"
+
+
+def test_every_sample_delivered_before_stop_reaches_the_gaze_log(tmp_path) -> None:
+    """The tracker streams 600 Hz from its own thread through a whole session, the closing
+    "Thank you" screen included: every sample the SDK delivered before the adapter unsubscribed
+    is in the gaze log (the buffer is emptied into it when the session ends), in order."""
+    import csv
+
+    from fovexp.experiment.protocol import load_protocol
+    from fovexp.experiment.session import Session, SessionOptions
+    from fovexp.experiment.trial import Key
+
+    from experiment_helpers import StubScreen
+
+    class LockedStandIn(StandInTracker):
+        """Delivery and unsubscription exclude each other, so 'delivered before stop' is exact."""
+
+        def __init__(self) -> None:
+            super().__init__()
+            self.lock = threading.Lock()
+            self.delivered = 0
+
+        def unsubscribe_from(self, kind, cb=None):
+            with self.lock:
+                super().unsubscribe_from(kind, cb)
+
+        def feed(self) -> None:
+            t0 = tr.get_system_time_stamp()
+            while not self.stop.is_set():
+                with self.lock:
+                    cb = self.subs.get(tr.EYETRACKER_GAZE_DATA)
+                    for _ in range(6 if cb else 0):
+                        i = self.delivered
+                        cb({"device_time_stamp": int(i * 1e6 / 600),
+                            "system_time_stamp": t0 + int(i * 1e6 / 600),
+                            "left_gaze_point_on_display_area": (0.5, 0.5),
+                            "left_gaze_point_validity": 1,
+                            "right_gaze_point_on_display_area": (0.5, 0.5),
+                            "right_gaze_point_validity": 1})
+                        self.delivered += 1
+                time.sleep(0.01)
+
+    dev = LockedStandIn()
+    g = TobiiGaze(frequency_hz=600, tracker=dev)
+    g.validated = False  # no calibration: the stand-in cannot do one (see the test above)
+    lp = load_protocol(REPO / "protocols" / "calibration-fe.yaml")
+    s = Session(lp, SessionOptions(participant="G01", results_root=tmp_path, tracker="tobii",
+                                   limit_trials=1, practice_trials=0, skip_display_check=True,
+                                   window_size=(320, 180)))
+
+    def answer(text, keys, timeout_s):  # every message stays up a while (samples keep coming)
+        time.sleep(0.3)
+        return keys[0] if keys else None
+
+    th = threading.Thread(target=dev.feed)
+    th.start()
+    try:
+        assert s.run(screen_factory=lambda **kw: StubScreen(
+            answer=answer, inputs={3: [Key("return")]}, **kw), gaze=g) == 0
+    finally:
+        dev.stop.set()
+        th.join()
+    assert not g._subscribed and dev.delivered > 200
+    with open(s.folder / f"gaze-{s.session_id}.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert [int(r["device_time_us"]) for r in rows] == [
+        int(i * 1e6 / 600) for i in range(dev.delivered)]
+    # the closing screen's samples belong to no trial
+    assert rows[-1]["trial_index"] == "" and any(r["trial_index"] == "0" for r in rows)

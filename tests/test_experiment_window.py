@@ -184,9 +184,22 @@ def test_tracker_disconnect_blanks_pauses_and_loses_nothing(tmp_path: Path,
     with open(s.folder / f"frames-{s.session_id}.csv") as fh:
         frames = [f for f in csv.DictReader(fh) if int(f["trial_index"]) == 1]
     assert sum(f["frame"] == "0" for f in frames) == 2
+    # the two attempts are told apart, the interrupted one's frames kept
+    first = [f for f in frames if f["attempt"] == "0"]
+    second = [f for f in frames if f["attempt"] == "1"]
+    assert first and second and len(first) + len(second) == len(frames)
     t = np.array([float(f["flip_time_s"]) for f in frames])
     assert np.diff(t).max() >= 0.55
     assert all(math.isfinite(v) for v in t)
+    # the gaze of the interrupted attempt is logged too; none while disconnected (0.6 s)
+    with open(s.folder / f"gaze-{s.session_id}.csv") as fh:
+        gaze_rows = list(csv.DictReader(fh))
+    t_us = np.array([int(r["system_time_us"]) for r in gaze_rows])
+    assert np.all(np.diff(t_us) > 0)
+    assert np.diff(t_us).max() >= 0.55e6
+    cut = int(np.argmax(np.diff(t_us)))  # the disconnection
+    assert any(r["trial_index"] == "1" for r in gaze_rows[:cut + 1])  # attempt 0's samples
+    assert any(r["trial_index"] == "1" for r in gaze_rows[cut + 1:])  # attempt 1's
 
 
 def test_display_check_stops_the_session(tmp_path: Path, xvfb_display) -> None:  # noqa: F811

@@ -93,12 +93,16 @@ def monotonic_us() -> int:
 
 class FixationGeometry:
     """Degrees between a gaze point and the fixation cross (screen centre), on the display's full
-    pixel grid with the protocol's geometry model."""
+    pixel grid.
 
-    def __init__(self, display: Any, model: str = "exact") -> None:
-        self.geometry = ViewingGeometry.for_image(
-            display, display.width_px, display.height_px, model  # type: ignore[arg-type]
-        )
+    Always the exact geometry of the display profile, whatever model the protocol gives the
+    enhancer: the 1.25 deg window is a physical angle at the participant's eye (a "release" model
+    would measure it on the released prototype's screen, a "linear" one with a constant px/deg).
+    """
+
+    def __init__(self, display: Any) -> None:
+        self.geometry = ViewingGeometry.for_image(display, display.width_px, display.height_px,
+                                                  "exact")
         self.cross_px = self.geometry.gaze_px((0.5, 0.5))
         cx = np.array(self.cross_px[0])
         cy = np.array(self.cross_px[1])
@@ -214,7 +218,9 @@ class ClockedGaze:
     """The lifecycle shared by sources whose samples lie on a fixed ``rate_hz`` grid from
     :meth:`start` (their values depend only on the sample index, not on when the frame loop
     polls), with a connection that can be cut (:meth:`set_connected`): samples due while
-    disconnected are lost, as with a tracker. Subclasses give :meth:`_sample`."""
+    disconnected are lost, as with a tracker (they are still generated, then dropped, so that
+    sample ``i`` is the same whether or not the connection was cut before it). Subclasses give
+    :meth:`_sample`."""
 
     name = "clocked"
     #: calibrated and validated at the session's start (the mouse and scripted paths are not)
@@ -264,19 +270,18 @@ class ClockedGaze:
             self.start()
         assert self._t0 is not None
         upto = int((self._clock() - self._t0) * self.rate_hz / 1e6)
-        if not self._connected:
-            self._n = upto + 1
-            return []
         out = [self._sample(i) for i in range(self._n, upto + 1)]
         self._n = max(self._n, upto + 1)
-        return out
+        return out if self._connected else []
 
 
 class SimulatedGaze(ClockedGaze):
     """Fixation on the cross with jitter, drift, microsaccades, saccades away, blinks and dropouts.
 
     Samples lie on a fixed ``rate_hz`` grid from :meth:`start`; their values depend only on the
-    seed and the sample index, not on when the frame loop polls.
+    seed and the sample index, not on when the frame loop polls. The fixations of calibration
+    and validation (:meth:`fixate`) draw from a generator of their own, so they neither shift
+    the stream nor depend on how much of it was due when they ran.
     """
 
     name = "simulated"
@@ -288,6 +293,7 @@ class SimulatedGaze(ClockedGaze):
         super().__init__(self.p.rate_hz, clock_us)
         self.fixation = fixation
         self.rng = np.random.default_rng(seed)
+        self._fix_rng = np.random.default_rng([seed, 1])
         self.seed = seed
         self._drift = np.zeros(2)
         self._away: tuple[np.ndarray, int] | None = None  # (offset, samples left)
@@ -334,11 +340,12 @@ class SimulatedGaze(ClockedGaze):
         during calibration and validation."""
         out = []
         t0 = self._clock()
+        rng = self._fix_rng
         for i in range(n):
             eyes = []
             for _ in range(2):
-                dx, dy = self.p.jitter_deg * 3 * self.rng.standard_normal(2)
-                ok = self.rng.uniform() >= 0.01
+                dx, dy = self.p.jitter_deg * 3 * rng.standard_normal(2)
+                ok = rng.uniform() >= 0.01
                 x, y = self.fixation.offset_to_norm(float(dx), float(dy), origin=target)
                 eyes.append((x if ok else math.nan, y if ok else math.nan, ok))
             t = self._time_us(i)

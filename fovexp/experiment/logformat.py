@@ -61,11 +61,11 @@ GAZE_COLUMNS: tuple[str, ...] = (
 #: ``frames-<session>.csv``: one row per stimulus frame; ``value`` is the adjusted value of the
 #: frame actually on screen.
 FRAME_COLUMNS: tuple[str, ...] = (
-    "trial_index", "frame", "flip_time_s", "interval_s", "dropped", "blanked", "value",
+    "trial_index", "attempt", "frame", "flip_time_s", "interval_s", "dropped", "blanked", "value",
 )
 #: ``blanking-<session>.csv``: one row per blanking episode.
 BLANKING_COLUMNS: tuple[str, ...] = (
-    "trial_index", "start_s", "end_s", "frames", "reason",
+    "trial_index", "attempt", "start_s", "end_s", "frames", "reason",
 )
 
 

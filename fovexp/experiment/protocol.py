@@ -29,6 +29,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 from fovexp import PARAMETER_RANGES, FovexpError, make_params, validation_error
 
 from .gaze import BLANKING_RADIUS_DEG, GAZE_TIMEOUT_S, TRACKER_RATE_HZ
+from .quality import MAX_DATA_LOSS
 from .stimuli import StimulusSet
 
 Parameter = Literal["f_e", "s_k", "s_f", "blur_rate"]
@@ -134,6 +135,8 @@ class TrackerSpec(_Strict):
     sampling_hz: float = Field(default=TRACKER_RATE_HZ, gt=0, le=2000)
     #: refuse to start when a validation's accuracy (median error, worse eye) exceeds this (deg)
     max_accuracy_deg: float = Field(default=1.0, gt=0, le=10)
+    #: ... or when either eye lost more than this fraction of the validation's samples
+    max_data_loss: float = Field(default=MAX_DATA_LOSS, ge=0, le=1)
     calibration_points: Literal[5, 9] = 9
     validation_points: int = Field(default=5, ge=1, le=13)
 

@@ -3,7 +3,9 @@
 Accuracy is the median angular error between the gaze and the target; precision is the RMS of
 the angles between successive samples (RMS-S2S); data loss is the fraction of invalid samples.
 The experiment refuses to start when the worse eye's accuracy exceeds the protocol's limit, so
-that the 1.25 deg fixation window of paper section 6.1 is meaningful.
+that the 1.25 deg fixation window of paper section 6.1 is meaningful, or when either eye lost
+more than the protocol's fraction of samples (a median over a handful of valid samples says
+nothing).
 """
 
 from __future__ import annotations
@@ -16,6 +18,9 @@ from typing import Any
 import numpy as np
 
 from .gaze import FixationGeometry, GazeSample
+
+#: Default limit on a validation's data loss per eye (fraction of invalid samples).
+MAX_DATA_LOSS = 0.2
 
 
 @dataclass
@@ -32,6 +37,12 @@ class ValidationResult:
     right: EyeQuality
     targets: list[tuple[float, float]]
     limit_deg: float
+    max_data_loss: float = MAX_DATA_LOSS
+
+    @property
+    def data_loss(self) -> float:
+        """The worse eye's data loss."""
+        return max(self.left.data_loss, self.right.data_loss)
 
     @property
     def accuracy_deg(self) -> float:
@@ -41,12 +52,24 @@ class ValidationResult:
 
     @property
     def passed(self) -> bool:
-        return self.accuracy_deg <= self.limit_deg
+        return self.failure is None
+
+    @property
+    def failure(self) -> str | None:
+        """Why the validation failed, or None when it passed."""
+        if not self.accuracy_deg <= self.limit_deg:
+            return (f"accuracy {self.accuracy_deg:.2f} deg is worse than the protocol's limit "
+                    f"{self.limit_deg:g} deg")
+        if self.data_loss > self.max_data_loss:
+            return (f"data loss {100 * self.data_loss:.1f}% is above the protocol's limit "
+                    f"{100 * self.max_data_loss:g}%")
+        return None
 
     def to_dict(self) -> dict[str, Any]:
         return {"left": asdict(self.left), "right": asdict(self.right),
                 "targets": [list(t) for t in self.targets], "limit_deg": self.limit_deg,
-                "accuracy_deg": self.accuracy_deg, "passed": self.passed}
+                "max_data_loss": self.max_data_loss, "accuracy_deg": self.accuracy_deg,
+                "data_loss": self.data_loss, "passed": self.passed, "failure": self.failure}
 
     def summary(self) -> str:
         def eye(q: EyeQuality) -> str:
@@ -88,13 +111,15 @@ def eye_quality(fix: FixationGeometry, per_target: Sequence[tuple[tuple[float, f
 
 def validation_result(fix: FixationGeometry,
                       per_target: Sequence[tuple[tuple[float, float], Sequence[GazeSample]]],
-                      limit_deg: float) -> ValidationResult:
+                      limit_deg: float,
+                      max_data_loss: float = MAX_DATA_LOSS) -> ValidationResult:
     """Quality per eye over the samples collected at each validation target."""
     return ValidationResult(
         left=eye_quality(fix, per_target, "left"),
         right=eye_quality(fix, per_target, "right"),
         targets=[t for t, _ in per_target],
         limit_deg=limit_deg,
+        max_data_loss=max_data_loss,
     )
 
 

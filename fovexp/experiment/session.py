@@ -17,6 +17,7 @@ import platform
 import signal
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
@@ -65,7 +66,8 @@ class Screen(Protocol):
     refresh_hz: float
 
     def measure_display(self) -> tuple[float | None, tuple[int, int], tuple[int, int]]: ...
-    def message(self, text: str, keys: list[str] | None, timeout_s: float | None) -> str | None: ...
+    def message(self, text: str, keys: list[str] | None, timeout_s: float | None,
+                each_frame: Callable[[], None] | None = None) -> str | None: ...
     def show_point(self, x: float, y: float) -> None: ...
     def set_reference(self, left: np.ndarray) -> None: ...
     def set_test(self, right: np.ndarray) -> None: ...
@@ -175,7 +177,7 @@ class Session:
         self.display = load_display(protocol.display_name)
         self.folder = Path(opts.results_root) / protocol.experiment / self.participant
         self.folder.mkdir(parents=True, exist_ok=True)
-        self.fixation = FixationGeometry(self.display, protocol.spec.geometry_model)
+        self.fixation = FixationGeometry(self.display)
         self._prepare_session()
         self.gaze: Any = None
         self.screen: Any = None
@@ -395,8 +397,15 @@ class Session:
                               f"{self._session_path()})") from None
         finally:
             self._restore_signals(old_handlers)
+            # The tracker stops first, then what its buffer still holds (the last screen's
+            # samples) goes into the gaze log before the final flush.
+            for step in (self.gaze.stop, self._drain_gaze):
+                try:
+                    step()
+                except Exception:  # closing after an error must not hide the error
+                    pass
             flusher.stop()
-            for closer in (getattr(self.renderer, "close", None), self.gaze.stop,
+            for closer in (getattr(self.renderer, "close", None),
                            getattr(self.screen, "close", None)):
                 if closer is not None:
                     try:
@@ -460,14 +469,21 @@ class Session:
         self._write_info()
 
     def _message(self, text: str, keys: list[str], timeout_s: float | None = None) -> str | None:
+        """A message screen; the gaze stream keeps going into the gaze log meanwhile (a long
+        break would otherwise overflow the tracker's buffer)."""
         if self.opts.dry_run:
-            return self.screen.message(text, keys, self.opts.dry_message_s)
-        return self.screen.message(text, keys, timeout_s)
+            timeout_s = self.opts.dry_message_s
+        return self.screen.message(text, keys, timeout_s, self._drain_gaze)
+
+    def _drain_gaze(self) -> None:
+        """Samples that arrived outside a trial's frame loop, into the gaze log (trial empty)."""
+        self.gaze_log.extend(self._gaze_rows(None, self.gaze.poll()))
 
     # -- tracker calibration and validation ------------------------------------------------------
     def _tracker_setup(self) -> None:
         """Calibrate (Tobii) and validate; refuse to start when accuracy is worse than the
-        protocol's limit (``tracker.max_accuracy_deg``)."""
+        protocol's limit (``tracker.max_accuracy_deg``) or too many samples were lost
+        (``tracker.max_data_loss``). A failed calibration or validation offers a new one."""
         spec = self.protocol.spec.tracker
         if not getattr(self.gaze, "validated", True):  # the mouse (and test scripts)
             self.info["tracker_quality"].append({"time": now_iso(), "skipped": self.gaze.name})
@@ -480,27 +496,35 @@ class Session:
                 cal = self.gaze.calibrate(target_points(spec.calibration_points),
                                           self._show_calibration_point)
             else:
-                cal = {"status": "simulated"}
+                cal = {"status": "simulated", "failed": False}
+            if cal.get("failed"):
+                self.info["tracker_quality"].append({"time": now_iso(), "calibration": cal})
+                self._write_info()
+                self._retry_or_stop(f"eye-tracker calibration failed ({cal.get('reason')})")
+                continue
             per_target = []
             for x, y in target_points(spec.validation_points):
                 self.screen.show_point(x, y)
                 per_target.append(((x, y), self._collect(x, y)))
-            res = validation_result(self.fixation, per_target, spec.max_accuracy_deg)
+            res = validation_result(self.fixation, per_target, spec.max_accuracy_deg,
+                                    spec.max_data_loss)
             self.info["tracker_quality"].append(
                 {"time": now_iso(), "calibration": cal, "validation": res.to_dict()})
             self._write_info()
-            if res.passed:
+            if res.failure is None:
                 self._message(f"Eye tracker OK. {res.summary()}", ["space"], 1.0)
                 return
-            key = self._message(
-                f"Eye-tracker accuracy {res.accuracy_deg:.2f} deg is worse than the protocol's "
-                f"limit {spec.max_accuracy_deg} deg.\n{res.summary()}\n\n"
-                "R: recalibrate    Q: quit", ["r", "q"])
-            if key != "r":
-                self._event("validation_failed", accuracy_deg=res.accuracy_deg)
-                raise FovexpError(
-                    f"eye-tracker validation failed: accuracy {res.accuracy_deg:.2f} deg > limit "
-                    f"{spec.max_accuracy_deg} deg ({res.summary()})")
+            self._retry_or_stop(f"eye-tracker validation failed: {res.failure}",
+                                res.summary(), accuracy_deg=res.accuracy_deg,
+                                data_loss=res.data_loss)
+
+    def _retry_or_stop(self, why: str, detail: str = "", **event: Any) -> None:
+        """R recalibrates (returns); anything else stops the session with ``why``."""
+        key = self._message(f"{why[0].upper()}{why[1:]}.\n{detail}\n\nR: recalibrate    Q: quit",
+                            ["r", "q"])
+        if key != "r":
+            self._event("tracker_setup_failed", reason=why, **event)
+            raise FovexpError(f"{why} ({detail})" if detail else why)
 
     def _show_calibration_point(self, x: float, y: float) -> None:
         self.screen.show_point(x, y)
@@ -543,17 +567,19 @@ class Session:
                 if practice_announced:
                     self._message("Practice finished. The experiment starts now.\n\n"
                                   "Press Space.", ["space"])
+            attempt = 0  # a pause or a lost tracker restarts the trial: the next attempt
             while True:
-                outcome = self._run_trial(trial)
+                outcome = self._run_trial(trial, attempt)
                 if outcome == "done":
                     break
+                attempt += 1
                 if outcome == "pause":
                     self._event("paused", trial_index=trial.index)
                     # Waits for the operator even in a dry run (no auto-continue).
                     key = self.screen.message(
                         "Paused.\n\nSpace: continue (this trial starts again)\n"
                         "Q: quit - progress is saved; continue later with --resume",
-                        ["space", "q"], None)
+                        ["space", "q"], None, self._drain_gaze)
                     if key == "q":
                         self._event("aborted", trial_index=trial.index)
                         raise Aborted()
@@ -574,10 +600,10 @@ class Session:
         while not self.gaze.connected:
             # The stream is drained here too: a stalled tracker counts as back only when its
             # samples arrive again (and they belong in the gaze log, between trials).
-            self.gaze_log.extend(self._gaze_rows(None, self.gaze.poll()))
+            self._drain_gaze()
             for ev in self.gaze.poll_events():
                 self._event(ev.kind, **ev.detail)
-            key = self.screen.message(text, ["q"], 0.1)
+            key = self.screen.message(text, ["q"], 0.1, self._drain_gaze)
             if key == "q":
                 self._event("aborted", trial_index=trial.index)
                 raise Aborted()
@@ -591,12 +617,15 @@ class Session:
         img = load_stimulus(self.protocol.image_paths[trial.image], size)
         return split_screen(img)
 
-    def _run_trial(self, trial: Trial) -> str:
-        """One trial; returns ``done``, ``pause`` or ``disconnected``.
+    def _run_trial(self, trial: Trial, attempt: int = 0) -> str:
+        """One attempt at a trial; returns ``done``, ``pause`` or ``disconnected``.
 
         What is logged is what was on screen: each frame's value is that of the render shown
         in it, and Enter pressed while a newer render is pending is accepted on the first frame
-        that shows it (``final_value`` is the value the participant saw when confirming).
+        that shows it (``final_value`` is the value the participant saw when confirming). Every
+        frame goes to the frame log as it is shown and every attempt's blanking episodes to the
+        blanking log, however the attempt ends (an interrupted one included), tagged with
+        ``attempt``.
         """
         spec = self.protocol.spec
         adj = spec.adjust
@@ -615,7 +644,7 @@ class Session:
                 break
             except TimeoutError:
                 self.screen.draw(blank=True)
-                self.gaze_log.extend(self._gaze_rows(None, self.gaze.poll()))
+                self._drain_gaze()
         self.screen.set_test(right)
         st.show(float(getattr(shown_params, adj.parameter)))
         monitor = BlankingMonitor(self.fixation, spec.fixation.radius_deg,
@@ -629,63 +658,56 @@ class Session:
         monitor.update(early, self.gaze.now_us())
         self.gaze_log.extend(self._gaze_rows(None, early))
         decision = None
-        frame_rows = []
         confirmed = False  # Enter pressed; waiting for the pending render to be shown
         drawn_serial = -1  # the render in the last frame drawn
-        while True:
-            for ev in self.gaze.poll_events():
-                self._event(ev.kind, trial_index=trial.index, **ev.detail)
-            if not self.gaze.connected:
-                # The interrupted attempt's frames stay in the frame log; the trial restarts.
-                self._flush_frames(frame_rows)
-                return "disconnected"
-            samples = self.gaze.poll()
-            decision = monitor.update(samples, self.gaze.now_us())
-            self.gaze_log.extend(self._gaze_rows(trial.index, samples))
-            events = self.screen.poll_input()
-            if confirmed:
-                # After Enter only a pause counts; the wheel no longer changes the value.
-                events = [e for e in events if isinstance(e, Key) and e.name == "escape"]
-            elif self.sim is not None and st.t_start is not None:
-                t_trial = time.monotonic() - st.t_start
-                events = events + self.sim.poll(t_trial, st.value, not decision.blank)
-            outcome = st.handle(events)
-            if outcome == "pause":
-                self._flush_frames(frame_rows)
-                return "pause"
-            if outcome == "confirm":
-                confirmed = True
-                st.confirm(time.monotonic())
-            if outcome == "changed":
-                latest = self.renderer.request(self._params(trial, st.value))
-            got = self.renderer.poll()
-            if got is not None:
-                shown_serial, shown_params, right, _ = got
-                self.screen.set_test(right)
-                st.show(float(getattr(shown_params, adj.parameter)))
-            if confirmed and drawn_serial >= latest:
-                break  # the last frame drawn showed the confirmed value
-            t = self.screen.draw(blank=decision.blank)
-            drawn_serial = shown_serial
-            dt, dropped = st.flip(t, decision.blank, decision.reason)
-            frame_rows.append((trial.index, st.n_frames - 1, round(t, 6),
-                               None if dt is None else round(dt, 6), dropped, decision.blank,
-                               st.shown_value))
-        st.finish(time.monotonic())
-        self._flush_frames(frame_rows)
-        self.blank_log.extend(
-            (trial.index, round(e.start_s, 6), round(e.end_s, 6) if e.end_s is not None else None,
-             e.frames, e.reason) for e in st.blanking.episodes)
+        try:
+            while True:
+                for ev in self.gaze.poll_events():
+                    self._event(ev.kind, trial_index=trial.index, **ev.detail)
+                if not self.gaze.connected:
+                    return "disconnected"  # the trial restarts once the tracker is back
+                samples = self.gaze.poll()
+                decision = monitor.update(samples, self.gaze.now_us())
+                self.gaze_log.extend(self._gaze_rows(trial.index, samples))
+                events = self.screen.poll_input()
+                if confirmed:
+                    # After Enter only a pause counts; the wheel no longer changes the value.
+                    events = [e for e in events if isinstance(e, Key) and e.name == "escape"]
+                elif self.sim is not None and st.t_start is not None:
+                    t_trial = time.monotonic() - st.t_start
+                    events = events + self.sim.poll(t_trial, st.value, not decision.blank)
+                outcome = st.handle(events)
+                if outcome == "pause":
+                    return "pause"
+                if outcome == "confirm":
+                    confirmed = True
+                    st.confirm(time.monotonic())
+                if outcome == "changed":
+                    latest = self.renderer.request(self._params(trial, st.value))
+                got = self.renderer.poll()
+                if got is not None:
+                    shown_serial, shown_params, right, _ = got
+                    self.screen.set_test(right)
+                    st.show(float(getattr(shown_params, adj.parameter)))
+                if confirmed and drawn_serial >= latest:
+                    break  # the last frame drawn showed the confirmed value
+                t = self.screen.draw(blank=decision.blank)
+                drawn_serial = shown_serial
+                dt, dropped = st.flip(t, decision.blank, decision.reason)
+                self.frame_log.add((trial.index, attempt, st.n_frames - 1, round(t, 6),
+                                    None if dt is None else round(dt, 6), dropped,
+                                    decision.blank, st.shown_value))
+        finally:
+            st.finish(time.monotonic())
+            self.blank_log.extend(
+                (trial.index, attempt, round(e.start_s, 6), round(e.end_s, 6), e.frames,
+                 e.reason) for e in st.blanking.episodes if e.end_s is not None)
         # Side logs first (synced), then the trial row: the row is the commit point.
         for log in (self.gaze_log, self.frame_log, self.blank_log):
             log.flush(sync=True)
         self.trial_log.append(self._row(trial, st))
         self.done.add(trial.index)
         return "done"
-
-    def _flush_frames(self, rows: list[tuple[Any, ...]]) -> None:
-        self.frame_log.extend(rows)
-        rows.clear()
 
     def _gaze_rows(self, trial_index: int | None, samples: list[GazeSample]) -> list[Any]:
         return [sample_row(trial_index, s, self.fixation.eccentricity(s.point)) for s in samples]

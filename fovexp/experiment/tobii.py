@@ -204,16 +204,16 @@ class TobiiGaze:
         for kind, data in self._notes.drain():
             detail = dict(data) if isinstance(data, dict) else {"data": repr(data)}
             ts = int(detail.get("system_time_stamp", self.now_us()))
-            if kind == "connection_lost":
-                self._connected = False
-            elif kind == "connection_restored":
-                self._connected = True
+            if kind in ("connection_lost", "connection_restored"):
+                self._connected = kind == "connection_restored"
+                self._recent_dev.clear()  # the rate is measured again from after the gap
             events.append(SourceEvent(kind, ts, detail))
         now = self.now_us()
         stalled = (self._last_sample_us is not None and self._subscribed
                    and now - self._last_sample_us > self._stall_us)
         if stalled != self._stalled:
             self._stalled = stalled
+            self._recent_dev.clear()
             events.append(SourceEvent("stream_stalled" if stalled else "stream_resumed", now, {}))
         rate = self.measured_rate_hz()
         if rate is not None:
@@ -237,25 +237,34 @@ class TobiiGaze:
         """Screen-based calibration: ``show_point(x, y)`` draws the target and waits for the
         participant to fixate it; the SDK then collects data there.
 
-        Returns a summary; raises FovexpError when the SDK reports failure.
+        Returns a summary whose ``failed`` says whether the SDK could compute a calibration
+        (with ``reason`` when not); an SDK error is a failure too, so the operator can try again.
         """
         tr = self.tr
-        cal = tr.ScreenBasedCalibration(self.tracker)
-        cal.enter_calibration_mode()
+        summary: dict[str, Any] = {"points": [list(p) for p in points]}
         try:
-            for x, y in points:
-                show_point(x, y)
-                if cal.collect_data(x, y) != tr.CALIBRATION_STATUS_SUCCESS:
-                    # The SDK's advice: try a point once more before giving up on it.
-                    cal.collect_data(x, y)
-            result = cal.compute_and_apply()
-        finally:
-            cal.leave_calibration_mode()
-        status = str(result.status)
+            cal = tr.ScreenBasedCalibration(self.tracker)
+            cal.enter_calibration_mode()
+            try:
+                for x, y in points:
+                    show_point(x, y)
+                    if cal.collect_data(x, y) != tr.CALIBRATION_STATUS_SUCCESS:
+                        # The SDK's advice: try a point once more before giving up on it.
+                        cal.collect_data(x, y)
+                result = cal.compute_and_apply()
+            finally:
+                cal.leave_calibration_mode()
+        except FovexpError:
+            raise
+        except Exception as exc:  # the SDK's own error types
+            return {**summary, "status": "error", "failed": True,
+                    "reason": f"{type(exc).__name__}: {exc}"}
         used = len(result.calibration_points)
-        if result.status == tr.CALIBRATION_STATUS_FAILURE:
-            raise FovexpError(f"Tobii calibration failed ({used} of {len(points)} points usable)")
-        return {"status": status, "points_used": used, "points": [list(p) for p in points]}
+        failed = result.status == tr.CALIBRATION_STATUS_FAILURE
+        out = {**summary, "status": str(result.status), "points_used": used, "failed": failed}
+        if failed:
+            out["reason"] = f"{used} of {len(points)} points usable"
+        return out
 
 
 def rate_of(samples: Sequence[GazeSample]) -> float:

@@ -125,13 +125,31 @@ class Episode:
 
 @dataclass
 class BlankingLog:
-    """Blanking episodes (runs of consecutive black frames) of one trial."""
+    """Blanking episodes (runs of consecutive black frames) of one trial, and the time blanked.
+
+    A frame is on screen from its flip to the next flip (the last one until the trial ends), so
+    a black frame followed by a dropped one counts for as long as it really stayed black; the
+    blanked fraction and the episodes' durations are measured on that one time base.
+    """
 
     episodes: list[Episode] = field(default_factory=list)
     frames: int = 0
     blanked: int = 0
+    shown_s: float = 0.0  # time on screen of the frames so far, up to the last flip
+    blanked_s: float = 0.0
+    _last: tuple[float, bool] | None = None  # (flip time, black) of the last frame
+    _closed: bool = False
+
+    def _account(self, t_s: float) -> None:
+        if self._last is not None:
+            dt = max(0.0, t_s - self._last[0])
+            self.shown_s += dt
+            if self._last[1]:
+                self.blanked_s += dt
 
     def frame(self, t_s: float, blank: bool, reason: str) -> None:
+        self._account(t_s)
+        self._last = (t_s, blank)
         self.frames += 1
         cur = self.episodes[-1] if self.episodes and self.episodes[-1].end_s is None else None
         if blank:
@@ -144,11 +162,21 @@ class BlankingLog:
             cur.end_s = t_s
 
     def close(self, t_s: float) -> None:
+        """The trial ended at ``t_s``: the last frame's time counts up to here."""
+        if self._closed:
+            return
+        self._closed = True
+        self._account(t_s)
+        self._last = None
         if self.episodes and self.episodes[-1].end_s is None:
             self.episodes[-1].end_s = t_s
 
     @property
     def fraction(self) -> float:
+        """Fraction of the trial's time the screen was black (by frame count while no time has
+        passed, e.g. a trial of one frame)."""
+        if self.shown_s > 0:
+            return self.blanked_s / self.shown_s
         return self.blanked / self.frames if self.frames else 0.0
 
 
@@ -208,6 +236,8 @@ class TrialState:
             self.t_confirm = t
 
     def finish(self, t: float) -> None:
+        if self.t_end is not None:
+            return
         self.t_end = t
         if self.t_start is not None:
             self.blanking.close(t - self.t_start)

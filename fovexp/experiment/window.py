@@ -10,6 +10,7 @@ participant can find it again), text screens and calibration targets, and reads 
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -175,14 +176,18 @@ class PsychoScreen:
         self.dot_centre.draw()
         self._flip()
 
-    def message(self, text: str, keys: list[str] | None, timeout_s: float | None) -> str | None:
-        """Show ``text`` until one of ``keys`` is pressed (returned) or ``timeout_s`` passes."""
+    def message(self, text: str, keys: list[str] | None, timeout_s: float | None,
+                each_frame: Callable[[], None] | None = None) -> str | None:
+        """Show ``text`` until one of ``keys`` is pressed (returned) or ``timeout_s`` passes;
+        ``each_frame`` is called after every flip (the session empties the gaze buffer)."""
         self._event.clearEvents()
         self.text.text = text
         t0 = time.monotonic()
         while True:
             self.text.draw()
             self._flip()
+            if each_frame is not None:
+                each_frame()
             if keys:
                 got = self._event.getKeys(keyList=keys)
                 if got:
