@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -183,9 +184,24 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def plain_warnings(prog: str) -> None:
+    """Our warnings (a torn log row dropped, ...) as one line for the operator, not Python's
+    two-line ``file:line: UserWarning`` form with a source excerpt."""
+    default = warnings.showwarning
+
+    def show(message, category, filename, lineno, file=None, line=None):  # noqa: ANN001
+        if issubclass(category, UserWarning):
+            print(f"{prog}: warning: {message}", file=sys.stderr)
+        else:
+            default(message, category, filename, lineno, file, line)
+
+    warnings.showwarning = show
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    plain_warnings("fovexp")
     try:
         return int(args.func(args) or 0)
     except FovexpError as exc:

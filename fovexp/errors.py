@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import difflib
 from typing import Any
 
 
@@ -15,8 +16,19 @@ class FovexpError(ValueError):
 def validation_error(what: str, exc: Any) -> FovexpError:
     """One line from a pydantic ``ValidationError``: ``what``, the first bad field (dotted
     path), its value and pydantic's reason. Raise it ``from None``."""
-    err = exc.errors()[0]
+    errs = exc.errors()
+    # an unknown key first: a misspelt required key also shows up as "missing", which names
+    # the right key but not the wrong one
+    extra = [e for e in errs if e["type"] == "extra_forbidden"]
+    err = extra[0] if extra else errs[0]
     msg = err["msg"].removeprefix("Value error, ")
+    if extra:
+        parent = err["loc"][:-1]
+        missing = [str(e["loc"][-1]) for e in errs
+                   if e["type"] == "missing" and e["loc"][:-1] == parent]
+        close = difflib.get_close_matches(str(err["loc"][-1]), missing, n=1)
+        if close:
+            msg += f" (did you mean {close[0]!r}?)"
     where = ".".join(str(p) for p in err["loc"])
     if not where:  # a check across fields names its keys in its own message
         return FovexpError(f"{what}: {msg}")

@@ -25,15 +25,16 @@ normalised screen coordinates ``(x_h, x_v)`` in [0, 1] (paper section 3).
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
 import numba
 import numpy as np
-import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
+from .config import read_yaml
 from .errors import FovexpError, validation_error
 
 GeometryModel = Literal["exact", "linear", "release"]
@@ -89,8 +90,12 @@ RELEASE_DISPLAY = Display(
 
 def display_search_path() -> list[Path]:
     """Folders searched for ``NAME.yaml`` display profiles, in order."""
-    dirs = [Path(p) for p in __import__("os").environ.get(_DISPLAY_DIRS_ENV, "").split(":") if p]
-    return [*dirs, Path.cwd() / "protocols" / "displays", _REPO_DISPLAYS]
+    dirs = [Path(p) for p in os.environ.get(_DISPLAY_DIRS_ENV, "").split(":") if p]
+    out: list[Path] = []
+    for d in [*dirs, Path.cwd() / "protocols" / "displays", _REPO_DISPLAYS]:
+        if d.resolve() not in {o.resolve() for o in out}:  # run from the repo: listed once
+            out.append(d)
+    return out
 
 
 def load_display(name_or_path: str | Path) -> Display:
@@ -109,12 +114,7 @@ def load_display(name_or_path: str | Path) -> Display:
                 f"display profile {str(name_or_path)!r} not found "
                 f"(looked in {', '.join(str(d) for d in display_search_path())})"
             )
-    try:
-        data = yaml.safe_load(path.read_text())
-    except OSError as exc:
-        raise FovexpError(f"cannot read display profile {path}: {exc.strerror}") from None
-    except yaml.YAMLError as exc:
-        raise FovexpError(f"display profile {path} is not valid YAML: {exc}") from None
+    data = read_yaml(path, "display profile")
     if not isinstance(data, dict):
         raise FovexpError(f"display profile {path} must be a mapping of fields")
     try:

@@ -21,6 +21,7 @@ import numpy as np
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
+from .config import read_yaml
 from .errors import FovexpError, validation_error
 from .geometry import GeometryModel
 
@@ -134,13 +135,11 @@ class ParameterTable(BaseModel):
     @classmethod
     def load(cls, path: str | Path) -> ParameterTable:
         path = Path(path)
+        data = read_yaml(path, "parameter table")
+        if not isinstance(data, dict):
+            raise FovexpError(f"parameter table {path} must be a mapping of keys")
         try:
-            data = yaml.safe_load(path.read_text())
-            return cls(**data)
-        except OSError as exc:
-            raise FovexpError(f"cannot read parameter table {path}: {exc.strerror}") from None
-        except (yaml.YAMLError, TypeError) as exc:
-            raise FovexpError(f"parameter table {path} is malformed: {exc}") from None
+            return cls.model_validate(data)
         except ValidationError as exc:
             raise validation_error(f"parameter table {path}", exc) from None
 

@@ -240,3 +240,50 @@ def test_preset_and_geometry_must_agree(ws: Path) -> None:
     assert lp.spec.geometry_model == "release"
     lp = load_protocol(edit(ws, "calibration-fe", geometry="linear"))
     assert (lp.spec.preset, lp.spec.geometry_model) == ("paper", "linear")
+
+
+def test_misspelt_key_is_named_with_the_likely_one(ws: Path) -> None:
+    """A misspelt required key is reported as the unknown key it is (not only as the key that
+    is missing), with the likely intended one; also nested."""
+    src = (ws / "protocols" / "calibration-fe.yaml").read_text()
+    bad = ws / "protocols" / "typo.yaml"
+    bad.write_text(src.replace("\nseed:", "\nseeed:"))
+    with pytest.raises(FovexpError, match=r"typo.yaml: seeed=.*Extra inputs are not permitted "
+                                          r"\(did you mean 'seed'\?\)"):
+        load_protocol(bad)
+    path = edit(ws, "calibration-fe", **{"adjust.step": None, "adjust.stepz": 0.02})
+    with pytest.raises(FovexpError, match=r"adjust\.stepz=0\.02: .*did you mean 'step'"):
+        load_protocol(path)
+
+
+def test_duplicate_key_and_bad_yaml_are_one_line(ws: Path) -> None:
+    src = (ws / "protocols" / "calibration-fe.yaml").read_text()
+    dup = ws / "protocols" / "dup.yaml"
+    dup.write_text(src + "\nseed: 7\n")  # PyYAML alone would keep the last seed silently
+    with pytest.raises(FovexpError, match=r"dup.yaml \(line \d+, column 1\): key 'seed' is "
+                                          r"given twice"):
+        load_protocol(dup)
+    broken = ws / "protocols" / "broken.yaml"
+    broken.write_text("experiment: [\n")
+    with pytest.raises(FovexpError) as err:
+        load_protocol(broken)
+    assert "broken.yaml is not valid YAML (line 2, column 1)" in str(err.value)
+    assert "\n" not in str(err.value)
+
+
+def test_cross_field_errors_name_their_keys_without_noise(ws: Path) -> None:
+    with pytest.raises(FovexpError) as err:
+        load_protocol(edit(ws, "calibration-fe", images=["scene-00", "scene-00"]))
+    assert str(err.value).endswith("edited-calibration-fe.yaml: images: duplicate ids")
+
+
+def test_bad_parameter_table_names_the_protocol_key(ws: Path) -> None:
+    (ws / "protocols" / "bad-table.yaml").write_text("rows:\n  - {blur_rate: 0.3, f_e: 0.1}\n")
+    path = edit(ws, "validation", **{"parameters.f_e": {"table": "bad-table.yaml"},
+                                     "parameters.s_k": {"table": "bad-table.yaml"},
+                                     "parameters.s_f": {"table": "bad-table.yaml"}})
+    with pytest.raises(FovexpError) as err:
+        load_protocol(path)
+    msg = str(err.value)
+    assert msg.startswith(f"protocol {path}: parameters.") and ".table: parameter table" in msg
+    assert "bad-table.yaml" in msg and "Field required" in msg

@@ -11,7 +11,10 @@ from pathlib import Path
 
 import pytest
 
+from fovexp import FovexpError
 from fovexp.experiment.logs import read_trials
+from fovexp.experiment.protocol import load_protocol
+from fovexp.experiment.session import Session, SessionOptions
 
 from experiment_helpers import make_workspace, popen_cli, run_cli, xvfb_display  # noqa: F401
 
@@ -35,6 +38,15 @@ def test_sigkill_then_resume(tmp_path: Path, xvfb_display) -> None:  # noqa: F81
             time.sleep(0.05)
         assert proc.poll() is None, proc.communicate()[1][-2000:]
         assert n >= 3
+        # While it runs, a second run of the same session (another process's lock) is refused:
+        # it would log every trial twice. (In this process: a second CLI would take longer to
+        # start than the first needs to finish.)
+        with pytest.raises(FovexpError, match="in use by another fovexp run"):
+            Session(load_protocol(ws / "protocols" / "calibration-fe.yaml",
+                                  results_root=ws / "results"),
+                    SessionOptions(participant="K01", results_root=ws / "results",
+                                   tracker="simulated", dry_run=True, resume=True))
+        assert proc.poll() is None
         proc.send_signal(signal.SIGKILL)
         proc.wait(timeout=30)
     finally:
@@ -71,8 +83,6 @@ def test_sigkill_then_resume(tmp_path: Path, xvfb_display) -> None:  # noqa: F81
     assert sorted(idx) == list(range(9)) and len(idx) == len(set(idx))
     assert {r["session"] for r in rows} == {info["session"]}
     # The resumed part continues the same seeded order and start values.
-    from fovexp.experiment.protocol import load_protocol
-
     _, plan = load_protocol(ws / "protocols" / "calibration-fe.yaml").plan("K01", 8, 1)
     for r in rows:
         t = plan[r["trial_index"]]

@@ -3,6 +3,8 @@
 import argparse
 import sys
 
+from fovexp.cli import plain_warnings
+
 from .cli import add_run_parser
 
 
@@ -11,6 +13,7 @@ def main(argv: list[str] | None = None) -> int:
     sub = parser.add_subparsers(dest="command", required=True)
     add_run_parser(sub)
     args = parser.parse_args(argv)
+    plain_warnings("fovexp")
     return int(args.func(args))
 
 

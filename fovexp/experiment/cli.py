@@ -75,6 +75,7 @@ def run_command(args: argparse.Namespace) -> int:
     """Validate everything, then run the session; errors print one line and return 2."""
     from .session import EXIT_ERROR, Session, SessionOptions
 
+    session = None
     try:
         from .participant import SimTruth
         from .protocol import load_protocol
@@ -124,6 +125,9 @@ def run_command(args: argparse.Namespace) -> int:
     except Exception as exc:  # never a traceback for the operator (Session.run logs it)
         print(f"fovexp run: error: {type(exc).__name__}: {exc}", file=sys.stderr)
         return EXIT_ERROR
+    finally:
+        if session is not None:  # a session that never started leaves no empty folder
+            session.release()
     messages = {0: "finished", 3: "aborted by the operator; continue with --resume",
                 130: "interrupted; continue with --resume"}
     print(f"fovexp run: session {session.session_id} {messages.get(code, code)}", file=sys.stderr)

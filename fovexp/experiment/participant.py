@@ -17,10 +17,10 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from fovexp import PAPER_TABLE2, FovexpError, ParameterTable, validation_error
+from fovexp import PAPER_TABLE2, ParameterTable, validation_error
+from fovexp.config import read_yaml
 
 from .trial import InputEvent, Key, Wheel
 
@@ -57,14 +57,9 @@ class SimTruth(BaseModel):
     @classmethod
     def load(cls, path: str | Path) -> SimTruth:
         path = Path(path)
+        data = read_yaml(path, "simulated-participant truth") or {}
         try:
-            data = yaml.safe_load(path.read_text()) or {}
             return cls.model_validate(data)
-        except OSError as exc:
-            raise FovexpError(f"cannot read simulated-participant truth {path}: "
-                              f"{exc.strerror}") from None
-        except yaml.YAMLError as exc:
-            raise FovexpError(f"{path} is not valid YAML: {exc}") from None
         except ValidationError as exc:
             raise validation_error(f"simulated-participant truth {path}", exc) from None
 

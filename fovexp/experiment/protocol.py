@@ -23,10 +23,10 @@ from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
-import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from fovexp import PARAMETER_RANGES, FovexpError, make_params, validation_error
+from fovexp.config import parse_yaml
 
 from .gaze import BLANKING_RADIUS_DEG, GAZE_TIMEOUT_S, TRACKER_RATE_HZ
 from .quality import MAX_DATA_LOSS
@@ -380,10 +380,7 @@ def load_protocol(path: str | Path, check_dependencies: bool = True,
     except OSError as exc:
         raise FovexpError(f"cannot read protocol {path}: {exc.strerror}") from None
     text = raw.decode("utf-8", errors="replace")
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        raise FovexpError(f"protocol {path} is not valid YAML: {exc}") from None
+    data = parse_yaml(text, f"protocol {path}")
     if not isinstance(data, dict):
         raise FovexpError(f"protocol {path} must be a mapping of keys")
     try:
@@ -468,7 +465,10 @@ def _snapshot(path: Path, deps: _Dependencies, name: str, src: ParamSource,
             lp.dependency_folders[name] = str(tpath)
             if not tpath.is_file():
                 raise FovexpError(f"{where}.table: parameter table {tpath} does not exist")
-            table = ParameterTable.load(tpath)
+            try:
+                table = ParameterTable.load(tpath)
+            except FovexpError as exc:
+                raise FovexpError(f"{where}.table: {exc}") from None
         else:
             tpath = _results_path(f"{where}.table", deps.results_root, src.table)
             lp.dependency_folders[name] = str(tpath)

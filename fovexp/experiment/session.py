@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
+from filelock import FileLock, Timeout
 
 from fovexp import FovexpError
 
@@ -56,6 +57,8 @@ EXIT_OK = 0
 EXIT_ERROR = 2
 EXIT_ABORTED = 3
 EXIT_INTERRUPTED = 130
+#: held (an OS file lock) in the participant's folder while a run uses it
+LOCK_FILE = ".fovexp-run.lock"
 
 
 class Screen(Protocol):
@@ -133,7 +136,8 @@ def _versions() -> dict[str, str]:
                 m = __import__(mod)
             except Exception:
                 continue
-        out[mod] = str(getattr(m, "__version__", "?"))
+        # pyglet keeps its version in ``version``
+        out[mod] = str(getattr(m, "__version__", getattr(m, "version", "?")))
     return out
 
 
@@ -176,15 +180,60 @@ class Session:
                               "--tracker simulated")
         self.display = load_display(protocol.display_name)
         self.folder = Path(opts.results_root) / protocol.experiment / self.participant
-        self.folder.mkdir(parents=True, exist_ok=True)
-        self.fixation = FixationGeometry(self.display)
-        self._prepare_session()
+        self._lock = self._lock_folder()
+        try:
+            self.fixation = FixationGeometry(self.display)
+            self._prepare_session()
+        except BaseException:
+            self.release()
+            raise
         self.gaze: Any = None
         self.screen: Any = None
         self.renderer: Any = None
         self.sim: SimulatedParticipant | None = None
         self.events: list[dict[str, Any]] = []
         self.refresh_hz: float = float(self.display.refresh_hz)
+
+    # -- the participant's folder: one run at a time ---------------------------------------------
+    def _lock_folder(self) -> FileLock:
+        """Create the folder and hold its lock for this run: a second ``fovexp run`` (say a
+        ``--resume`` while the session still runs) would log every trial twice. The operating
+        system drops the lock when the process dies, so a killed session resumes at once."""
+        folder = self.folder
+        self._created = [p for p in (*reversed(folder.parents), folder) if not p.exists()]
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise FovexpError(f"--results {self.opts.results_root}: cannot create {folder}: "
+                              f"{exc.strerror}") from None
+        lock = FileLock(str(folder / LOCK_FILE), thread_local=False, is_singleton=True)
+        try:
+            lock.acquire(timeout=0)
+        except Timeout:
+            raise FovexpError(
+                f"{folder} is in use by another fovexp run (participant {self.participant}, "
+                f"{self.protocol.experiment}): wait for it to end, or stop it first") from None
+        return lock
+
+    def release(self) -> None:
+        """Let go of the folder's lock; a folder this run created and wrote nothing to (a
+        missing tracker, a failed display check) is removed again."""
+        lock = getattr(self, "_lock", None)
+        if lock is None:
+            return
+        self._lock = None
+        if lock.is_locked:
+            lock.release()
+        if lock.is_locked:  # still held by another Session of this process
+            return
+        if [p for p in self.folder.iterdir() if p.name != LOCK_FILE]:
+            return
+        (self.folder / LOCK_FILE).unlink(missing_ok=True)
+        for p in reversed(self._created):
+            try:
+                p.rmdir()
+            except OSError:  # not empty (another participant's folder appeared): keep it
+                break
 
     # -- plan and resume (no window) -----------------------------------------------------------
     def _prepare_session(self) -> None:
@@ -266,6 +315,7 @@ class Session:
         complete, without opening a window or a tracker."""
         self._write_info(state="completed", completed=True, ended=now_iso(),
                          n_completed=len(self.done))
+        self.release()
 
     def _session_path(self) -> Path:
         return self.folder / f"session-{self.session_id}.json"
@@ -339,18 +389,22 @@ class Session:
             if not self.info.get("completed"):
                 self.finish_without_trials()
             return EXIT_OK
-        self.gaze = gaze if gaze is not None else self.make_gaze()
-        if screen_factory is None:
-            from .window import PsychoScreen
+        try:
+            self.gaze = gaze if gaze is not None else self.make_gaze()
+            if screen_factory is None:
+                from .window import PsychoScreen
 
-            screen_factory = PsychoScreen
-        # The window and its display check come first: a failed check writes nothing.
-        size = self.opts.window_size or (self.display.width_px, self.display.height_px)
-        self.screen = screen_factory(
-            size=size, fullscreen=self.opts.fullscreen and not self.opts.dry_run,
-            cross_px=self._cross_px(size), dry_run=self.opts.dry_run,
-            refresh_hz=self.display.refresh_hz)
-        check = self._check_display()
+                screen_factory = PsychoScreen
+            # The window and its display check come first: a failed check writes nothing.
+            size = self.opts.window_size or (self.display.width_px, self.display.height_px)
+            self.screen = screen_factory(
+                size=size, fullscreen=self.opts.fullscreen and not self.opts.dry_run,
+                cross_px=self._cross_px(size), dry_run=self.opts.dry_run,
+                refresh_hz=self.display.refresh_hz)
+            check = self._check_display()
+        except BaseException:
+            self.release()
+            raise
         if isinstance(self.gaze, MouseGaze):
             self.gaze.position = self.screen.mouse_position
         self._start_info()
@@ -419,6 +473,7 @@ class Session:
             self._write_info(state=state if not (state == "completed" and not complete)
                              else "incomplete", completed=complete, ended=now_iso(),
                              n_completed=len(done), events=self.info.get("events", []), **extra)
+            self.release()
         return code
 
     def _check_display(self) -> dict[str, Any]:

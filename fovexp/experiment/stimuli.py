@@ -11,10 +11,10 @@ import hashlib
 from pathlib import Path
 
 import numpy as np
-import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from fovexp import FovexpError, validation_error
+from fovexp.config import read_yaml
 
 
 class StimulusEntry(BaseModel):
@@ -47,13 +47,7 @@ class StimulusSet:
 
     def __init__(self, manifest_path: Path) -> None:
         self.path = Path(manifest_path)
-        try:
-            data = yaml.safe_load(self.path.read_text())
-        except OSError as exc:
-            raise FovexpError(
-                f"cannot read stimulus manifest {self.path}: {exc.strerror}") from None
-        except yaml.YAMLError as exc:
-            raise FovexpError(f"stimulus manifest {self.path} is not valid YAML: {exc}") from None
+        data = read_yaml(self.path, "stimulus manifest")
         try:
             self.manifest = Manifest.model_validate(data)
         except ValidationError as exc:

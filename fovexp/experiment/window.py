@@ -63,12 +63,16 @@ class PsychoScreen:
 
     def __init__(self, size: tuple[int, int], fullscreen: bool = True, cross_px: float = 20.0,
                  dry_run: bool = False, refresh_hz: float = 60.0) -> None:
-        from psychopy import logging as plog
+        try:  # importing PsychoPy's window module already connects to the X display
+            from psychopy import logging as plog
 
-        plog.console.setLevel(plog.ERROR)
-        from psychopy import event, visual
-        from pyglet.window import key as pkey
-
+            plog.console.setLevel(plog.ERROR)
+            from psychopy import event, visual
+            from pyglet.window import key as pkey
+        except Exception as exc:
+            raise FovexpError(f"cannot open a window ({type(exc).__name__}: {exc}); is DISPLAY "
+                              "set? (a dry run on a server needs Xvfb: xvfb-run -a fovexp run "
+                              "...)") from None
         self._event = event
         self.size = (int(size[0]), int(size[1]))
         self.dry_run = dry_run
