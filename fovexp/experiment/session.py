@@ -590,13 +590,14 @@ class Session:
     def _collect(self, x: float, y: float, settle_s: float = 0.5,
                  collect_s: float = 0.8) -> list[GazeSample]:
         if isinstance(self.gaze, SimulatedGaze):
-            self.gaze.poll()  # discard the stream while the simulated eye "looks" at the dot
+            self._drain_gaze()  # the stream so far; the simulated eye then "looks" at the dot
             return self.gaze.fixate((x, y), int(collect_s * self.gaze.p.rate_hz))
         t0 = time.monotonic()
         out: list[GazeSample] = []
         while time.monotonic() - t0 < settle_s + collect_s:
             self.screen.show_point(x, y)
             s = self.gaze.poll()
+            self.gaze_log.extend(self._gaze_rows(None, s))
             if time.monotonic() - t0 >= settle_s:
                 out.extend(s)
         return out
