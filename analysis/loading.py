@@ -38,6 +38,7 @@ R9 incomplete sessions
 
 from __future__ import annotations
 
+import functools
 import json
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
@@ -230,6 +231,7 @@ def load_results(
     """
     root = Path(root)
     files = find_trial_files(root)
+    session_state = functools.cache(_session_state)  # R7 and R9 ask about the same sessions
     frames: list[pd.DataFrame] = []
     exclusions: list[Exclusion] = []
     notes: list[str] = []
@@ -284,7 +286,7 @@ def load_results(
         sim = simulated & (trials["experiment"] == exp)
         # a real session recorded as not completed (R9 drops it) does not push the dry runs out
         real = grp[~simulated[grp.index]]
-        has_real = any(include_incomplete or _session_state(Path(f).parent, str(sess)) is not False
+        has_real = any(include_incomplete or session_state(Path(f).parent, str(sess)) is not False
                        for f, sess in real[["file", "session"]].drop_duplicates().itertuples(
                            index=False))
         if sim.any() and has_real:
@@ -326,7 +328,7 @@ def load_results(
                                                     file=("file", "first"))
     largest = sizes.groupby(level=["experiment", "protocol_sha256"])["n"].transform("max")
     for (exp, sha, part, sess), row in sizes.iterrows():
-        state = _session_state(Path(row["file"]).parent, str(sess))
+        state = session_state(Path(row["file"]).parent, str(sess))
         if state is True:
             continue
         if state is False:

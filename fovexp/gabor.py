@@ -63,8 +63,10 @@ def kernel_radius_px(gabor_a_cpp: float) -> float:
     return math.sqrt(-math.log(KERNEL_TRUNCATION) / math.pi) / gabor_a_cpp
 
 
+@numba.njit(cache=True)
 def cell_counts(width_px: int, height_px: int, cell_px: float) -> tuple[int, int]:
-    """Cells per row and per column of the grid the impulses are drawn on (borders included)."""
+    """Cells per row and per column of the grid the impulses are drawn on (borders included);
+    compiled, so that :func:`_generate` uses it too."""
     return (int(math.ceil(width_px / cell_px)) + 2 * CELL_BORDER,
             int(math.ceil(height_px / cell_px)) + 2 * CELL_BORDER)
 
@@ -127,8 +129,7 @@ def _uniform(state):  # pragma: no cover - compiled
 def _generate(width, height, cell, mean_count, seed, period):  # pragma: no cover - compiled
     x0 = -CELL_BORDER
     y0 = -CELL_BORDER
-    nx = int(math.ceil(width / cell)) + 2 * CELL_BORDER
-    ny = int(math.ceil(height / cell)) + 2 * CELL_BORDER
+    nx, ny = cell_counts(width, height, cell)
     cap = int(nx * ny * (mean_count + 6.0 * math.sqrt(mean_count) + 10.0))
     xs = np.empty(cap)
     ys = np.empty(cap)

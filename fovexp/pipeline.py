@@ -110,6 +110,14 @@ class _StageCache:
     def cached(self, name: str) -> bool:
         return name in self._values
 
+    def has_input(self, name: str) -> bool:
+        return name in self._inputs
+
+    def clear(self) -> None:
+        """Forget every input and stage value (what the stages hold is released with them)."""
+        self._inputs.clear()
+        self._values.clear()
+
 
 _MISSING = object()
 
@@ -261,7 +269,7 @@ class Enhancer:
         """Process the current frame (or ``image``, set first) for ``gaze`` and ``params``."""
         if image is not None:
             self.set_image(image)
-        if "image" not in self._c._inputs:
+        if not self._c.has_input("image"):
             raise FovexpError("no image: call set_image() first")
         params = (params or EnhanceParams(preset=self.preset.name)).resolved(self.table)
         if params.preset != self.preset.name:

@@ -49,6 +49,15 @@ SIMULATED_TRACKER = "simulated"
 PARTICIPANT_PATTERN = r"[A-Za-z0-9_-]{1,32}"
 #: ``\Z``, not ``$``: ``$`` also matches before a final newline ("P01\n").
 PARTICIPANT_RE = re.compile(rf"\A{PARTICIPANT_PATTERN}\Z")
+#: Names Windows reserves for devices, whatever the case (a lab's share may be on Windows).
+RESERVED_NAMES = frozenset({"con", "prn", "aux", "nul", *(f"com{i}" for i in range(10)),
+                            *(f"lpt{i}" for i in range(10))})
+
+
+def is_participant_id(text: object) -> bool:
+    """The participant-ID rule: the pattern, and not a Windows device name such as ``CON``."""
+    return (isinstance(text, str) and PARTICIPANT_RE.match(text) is not None
+            and text.lower() not in RESERVED_NAMES)
 ISO_RE = re.compile(
     r"^\d{4}-\d{2}-\d{2}[T ]\d{2}:\d{2}(:\d{2}(\.\d+)?)?(Z|[+-]\d{2}(:?\d{2})?)?$"
 )
@@ -113,7 +122,7 @@ def parse_value(column: str, text: str) -> Any:
         if low in ("0", "false"):
             return False
         raise ValueError("is not 0 or 1")
-    if column == "participant" and not PARTICIPANT_RE.match(text):
+    if column == "participant" and not is_participant_id(text):
         raise ValueError(f"is not a valid participant ID ({PARTICIPANT_PATTERN})")
     if column == "method" and text not in METHODS:
         raise ValueError(f"is not a method ({', '.join(sorted(METHODS))})")

@@ -7,17 +7,13 @@ from __future__ import annotations
 
 from fovexp import FovexpError
 
-from .logformat import PARTICIPANT_PATTERN, PARTICIPANT_RE
-
-#: Names Windows reserves for devices, whatever the case (a lab's share may be on Windows).
-_RESERVED = frozenset({"con", "prn", "aux", "nul", *(f"com{i}" for i in range(10)),
-                       *(f"lpt{i}" for i in range(10))})
+from .logformat import PARTICIPANT_PATTERN, is_participant_id
 
 
 def check_participant(pid: str) -> str:
     """A participant ID safe for file names (``[A-Za-z0-9_-]{1,32}``, not a Windows device
     name such as ``CON``)."""
-    if not isinstance(pid, str) or not PARTICIPANT_RE.match(pid) or pid.lower() in _RESERVED:
+    if not is_participant_id(pid):
         raise FovexpError(
             f"participant ID {pid!r} is not valid: use 1-32 letters, digits, '_' or '-', not a "
             f"device name such as CON ({PARTICIPANT_PATTERN}; it becomes a folder name)"

@@ -623,8 +623,7 @@ class GpuEnhancer(Enhancer):
         self._closed = True
         cache = getattr(self, "_c", None)  # absent when __init__ failed early
         if cache is not None:  # its stages hold the buffers released below
-            cache._values.clear()
-            cache._inputs.clear()
+            cache.clear()
         try:
             if self._buffers or (self._programs is not None and not self._owns_context):
                 with made_current(self.ctx):
