@@ -3,8 +3,11 @@
 The public API (docs/API.md); the experiment runner and the analysis use only these names.
 """
 
+from ._version import __version__
+from .backends import BACKENDS, make_enhancer
+from .config import parse_yaml, read_yaml
 from .errors import FovexpError, validation_error
-from .geometry import Display, load_display
+from .geometry import Display, ViewingGeometry, load_display
 from .io import read_image, write_image
 from .params import (
     METHODS,
@@ -14,13 +17,13 @@ from .params import (
     ParameterTable,
     make_params,
 )
-from .pipeline import BACKENDS, MAP_NAMES, Enhancer, EnhanceResult, enhance, make_enhancer
-
-__version__ = "0.1.0"
+from .pipeline import MAP_NAMES, Enhancer, EnhanceResult, enhance
+from .resources import find_protocol
 
 __all__ = [
     "BACKENDS", "MAP_NAMES", "METHODS", "PAPER_TABLE2", "PARAMETER_RANGES", "Display",
-    "EnhanceParams", "EnhanceResult", "Enhancer", "FovexpError", "ParameterTable", "enhance",
-    "load_display", "make_enhancer", "make_params", "read_image", "validation_error",
-    "write_image", "__version__",
+    "EnhanceParams", "EnhanceResult", "Enhancer", "FovexpError", "ParameterTable",
+    "ViewingGeometry", "enhance", "find_protocol", "load_display", "make_enhancer",
+    "make_params", "parse_yaml", "read_image", "read_yaml", "validation_error", "write_image",
+    "__version__",
 ]

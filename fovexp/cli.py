@@ -11,11 +11,12 @@ from pathlib import Path
 import numpy as np
 
 from . import __version__
+from .backends import BACKENDS, make_enhancer
 from .errors import FovexpError
 from .geometry import load_display
 from .io import IMAGE_SUFFIXES, read_image, save_npy, write_image
 from .params import METHODS, PRESETS, ParameterTable, make_params
-from .pipeline import BACKENDS, MAP_NAMES, Enhancer, EnhanceResult, make_enhancer
+from .pipeline import MAP_NAMES, Enhancer, EnhanceResult
 
 
 def _gaze(text: str) -> tuple[float, float]:
@@ -175,8 +176,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"fovexp {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
     add_enhance_parser(sub)
-    from analysis.cli import add_analyze_parser
-
+    from .analysis.cli import add_analyze_parser
     from .experiment.cli import add_run_parser
 
     add_run_parser(sub)

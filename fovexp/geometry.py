@@ -36,6 +36,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from .config import read_yaml
 from .errors import FovexpError, validation_error
+from .resources import shipped_displays
 
 GeometryModel = Literal["exact", "linear", "release"]
 
@@ -50,7 +51,6 @@ RELEASE_DISTANCE_CM = 60.0
 RELEASE_WIDTH_PX = 3840
 
 _DISPLAY_DIRS_ENV = "FOVEXP_DISPLAYS"
-_REPO_DISPLAYS = Path(__file__).resolve().parent.parent / "protocols" / "displays"
 
 
 class Display(BaseModel):
@@ -89,10 +89,11 @@ RELEASE_DISPLAY = Display(
 
 
 def display_search_path() -> list[Path]:
-    """Folders searched for ``NAME.yaml`` display profiles, in order."""
+    """Folders searched for ``NAME.yaml`` display profiles, in order: ``$FOVEXP_DISPLAYS``
+    (colon-separated), ``./protocols/displays``, the shipped profiles."""
     dirs = [Path(p) for p in os.environ.get(_DISPLAY_DIRS_ENV, "").split(":") if p]
     out: list[Path] = []
-    for d in [*dirs, Path.cwd() / "protocols" / "displays", _REPO_DISPLAYS]:
+    for d in [*dirs, Path.cwd() / "protocols" / "displays", shipped_displays()]:
         if d.resolve() not in {o.resolve() for o in out}:  # run from the repo: listed once
             out.append(d)
     return out

@@ -456,40 +456,6 @@ class Enhancer:
         raise FovexpError(f"unknown map {name!r} (choose from {', '.join(MAP_NAMES)})")
 
 
-#: Backends :func:`make_enhancer` accepts.
-BACKENDS: tuple[str, ...] = ("auto", "cpu", "gpu")
-
-
-def make_enhancer(
-    display: Display, preset: str = "paper", geometry: GeometryModel | None = None,
-    table: ParameterTable | None = None, backend: str = "auto",
-) -> Enhancer:
-    """An :class:`Enhancer` on ``backend``: ``"cpu"`` (NumPy/Numba), ``"gpu"`` (OpenGL 4.5
-    compute shaders, :class:`fovexp.gpu.GpuEnhancer`; a clear error when there is no context),
-    or ``"auto"``: the GPU when a hardware OpenGL 4.5 context is available and the preset is
-    ``paper``, else the CPU (a software renderer such as Mesa's llvmpipe is slower than the CPU
-    backend: benchmarks/GPU.md). Create it on the thread that will use it."""
-    if backend not in BACKENDS:
-        raise FovexpError(f"unknown backend {backend!r} (choose from {', '.join(BACKENDS)})")
-    if backend == "cpu" or (backend == "auto" and get_preset(preset).name != "paper"):
-        return Enhancer(display, preset, geometry, table)
-    from .gpu import GpuEnhancer, create_context, is_software, release_context
-
-    if backend == "gpu":  # no context (or no moderngl): a FovexpError that says so
-        return GpuEnhancer(display, preset, geometry, table)
-    try:
-        ctx = create_context()
-    except FovexpError:  # no moderngl, no EGL, no OpenGL 4.5
-        return Enhancer(display, preset, geometry, table)
-    if is_software(ctx):
-        release_context(ctx)
-        return Enhancer(display, preset, geometry, table)
-    try:  # GpuEnhancer compiles every shader: a driver that cannot falls back to the CPU
-        return GpuEnhancer(display, preset, geometry, table, ctx=ctx, owns_context=True)
-    except FovexpError:
-        return Enhancer(display, preset, geometry, table)
-
-
 def enhance(
     image: np.ndarray, display: Display, gaze: tuple[float, float] = (0.5, 0.5),
     params: EnhanceParams | None = None, preset: str | None = None,

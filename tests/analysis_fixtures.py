@@ -15,8 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from analysis.loading import COLUMNS, EXPERIMENT_PARAMETER
-from fovexp.experiment.logformat import format_value
+from fovexp.results.format import format_value
+from fovexp.results.loading import COLUMNS, EXPERIMENT_PARAMETER
 
 BLUR_RATES = (0.11, 0.34, 0.57)
 SK_SF_LEVELS = (1.0, 1.9, 3.61, 6.81)  # paper section 6.2

@@ -1,5 +1,5 @@
 """Shared helpers of the experiment-runner tests: a private Xvfb, a scratch project layout, and
-running ``python -m fovexp.experiment`` in a subprocess."""
+running ``python -m fovexp`` in a subprocess."""
 
 from __future__ import annotations
 
@@ -79,14 +79,14 @@ def make_workspace(root: Path) -> Path:
 def run_cli(args: list[str], cwd: Path, timeout: float = 300) -> subprocess.CompletedProcess:
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join([str(REPO), env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
-    return subprocess.run([PYTHON, "-m", "fovexp.experiment", *args], cwd=cwd, env=env,
+    return subprocess.run([PYTHON, "-m", "fovexp", *args], cwd=cwd, env=env,
                           capture_output=True, text=True, timeout=timeout)
 
 
 def popen_cli(args: list[str], cwd: Path) -> subprocess.Popen:
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join([str(REPO), env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
-    return subprocess.Popen([PYTHON, "-m", "fovexp.experiment", *args], cwd=cwd, env=env,
+    return subprocess.Popen([PYTHON, "-m", "fovexp", *args], cwd=cwd, env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 

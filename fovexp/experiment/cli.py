@@ -12,9 +12,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from fovexp import BACKENDS, FovexpError
-
-from .logformat import SIMULATED_TRACKER, TRACKERS
+from fovexp import BACKENDS, FovexpError, find_protocol
+from fovexp.results.format import SIMULATED_TRACKER, TRACKERS
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -32,7 +31,8 @@ def add_run_parser(subparsers: Any) -> argparse.ArgumentParser:
     p = subparsers.add_parser(
         "run", help="run an experiment protocol with a participant",
         description="Run one of the paper's adjustment experiments (protocols/*.yaml).")
-    p.add_argument("protocol", type=Path, help="protocol YAML, e.g. protocols/calibration-fe.yaml")
+    p.add_argument("protocol", help="protocol YAML, or the name of one in ./protocols or shipped "
+                   "with fovexp (calibration-fe, calibration-sk, calibration-sf, validation)")
     p.add_argument("--participant", required=True, help="participant ID ([A-Za-z0-9_-]{1,32})")
     p.add_argument("--tracker", choices=TRACKERS, default=None,
                    help="gaze source (default: tobii; simulated with --dry-run)")
@@ -93,7 +93,7 @@ def run_command(args: argparse.Namespace) -> int:
         tracker = args.tracker or (SIMULATED_TRACKER if args.dry_run else "tobii")
         truth = SimTruth.load(args.sim_truth) if args.sim_truth else SimTruth()
         # dependencies come from the same results root; a participant's never from dry runs
-        protocol = load_protocol(args.protocol, results_root=args.results,
+        protocol = load_protocol(find_protocol(args.protocol), results_root=args.results,
                                  real_only=tracker != SIMULATED_TRACKER)
         opts = SessionOptions(
             participant=args.participant, results_root=args.results, tracker=tracker,

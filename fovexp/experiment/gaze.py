@@ -23,7 +23,7 @@ from typing import Any, NamedTuple, Protocol
 
 import numpy as np
 
-from fovexp.geometry import ViewingGeometry
+from fovexp import ViewingGeometry
 
 #: Paper section 6.1: gaze farther than this from the cross blanks the next frame (deg).
 BLANKING_RADIUS_DEG = 1.25

@@ -1,7 +1,7 @@
 """Trial, gaze, frame and session logs (format: docs/LOGS.md).
 
 The formats themselves (columns, types, the torn-row reader) are defined once in
-:mod:`fovexp.experiment.logformat`, which the analysis uses too.
+:mod:`fovexp.results.format`, which the analysis uses too.
 
 Crash safety (issue item 7): every trial row is written with one ``write`` call ending in a
 newline, then flushed and fsync'ed, so a SIGKILL leaves at most one torn last line. Readers
@@ -20,8 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from fovexp import FovexpError
-
-from .logformat import (
+from fovexp.results.format import (
     BLANKING_COLUMNS,
     FRAME_COLUMNS,
     GAZE_COLUMNS,
@@ -37,7 +36,7 @@ __all__ = ["BLANKING_COLUMNS", "FRAME_COLUMNS", "GAZE_COLUMNS", "TRIAL_COLUMNS",
 
 def read_trials(path: Path) -> tuple[list[dict[str, Any]], int]:
     """Rows of a ``trials.csv`` and the byte length of its valid part
-    (:func:`fovexp.experiment.logformat.read_trials_file`: a torn last row is dropped with a
+    (:func:`fovexp.results.format.read_trials_file`: a torn last row is dropped with a
     warning naming the file; a bad row elsewhere is an error). The header must be exactly the
     documented one, since rows are appended in that order.
     """

@@ -19,8 +19,7 @@ from typing import Any
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from fovexp import PAPER_TABLE2, ParameterTable, validation_error
-from fovexp.config import read_yaml
+from fovexp import PAPER_TABLE2, ParameterTable, read_yaml, validation_error
 
 from .trial import InputEvent, Key, Wheel
 

@@ -25,8 +25,7 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from fovexp import PARAMETER_RANGES, FovexpError, make_params, validation_error
-from fovexp.config import parse_yaml
+from fovexp import PARAMETER_RANGES, FovexpError, make_params, parse_yaml, validation_error
 
 from .gaze import BLANKING_RADIUS_DEG, GAZE_TIMEOUT_S, TRACKER_RATE_HZ
 from .quality import MAX_DATA_LOSS
@@ -97,7 +96,7 @@ class ParamSource(_Strict):
     ``value``: a constant. ``condition``: the trial's condition (``s_f_values``).
     ``table``: ``paper-table2``, a ParameterTable YAML (``.yaml``/``.yml``, relative to the
     protocol file), or a results folder holding ``calibration-fe/-sk/-sf``
-    (``analysis.derive.parameter_table``; ``.`` is the results root itself), interpolated by
+    (``fovexp.results.derive.parameter_table``; ``.`` is the results root itself), interpolated by
     blur-rate. ``fe_results``: a calibration-fe results folder (``fe_by_blur_rate``).
     ``sk_line_results``: a calibration-sk results folder; s_k = slope * s_f + intercept per
     blur-rate (``sk_line_by_blur_rate``). Relative results folders are taken in the results root
@@ -473,7 +472,7 @@ def _snapshot(path: Path, deps: _Dependencies, name: str, src: ParamSource,
             tpath = _results_path(f"{where}.table", deps.results_root, src.table)
             lp.dependency_folders[name] = str(tpath)
             _require_results(where + ".table", tpath, deps.check, nested=True)
-            from analysis.derive import parameter_table
+            from fovexp.results.derive import parameter_table
             table = _call(where + ".table", lambda f: parameter_table(
                 f, real_only=deps.real_only), tpath)
         return {"kind": "table", "from": src.table, "table": table.model_dump()}
@@ -492,7 +491,7 @@ def _snapshot(path: Path, deps: _Dependencies, name: str, src: ParamSource,
         folder = _results_path(f"{where}.{key}", deps.results_root, rel)
         lp.dependency_folders[name] = str(folder)
         _require_results(f"{where}.{key}", folder, deps.check)
-        from analysis import derive
+        from fovexp.results import derive
         fn = getattr(derive, fn_name)
         values = _call(f"{where}.{key}", lambda f, fn=fn: fn(f, real_only=deps.real_only),
                        folder)

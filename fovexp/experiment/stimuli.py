@@ -13,8 +13,7 @@ from pathlib import Path
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from fovexp import FovexpError, validation_error
-from fovexp.config import read_yaml
+from fovexp import FovexpError, read_yaml, validation_error
 
 
 class StimulusEntry(BaseModel):

@@ -6,8 +6,7 @@ Pydantic validation errors become one line with :func:`fovexp.validation_error`.
 from __future__ import annotations
 
 from fovexp import FovexpError
-
-from .logformat import PARTICIPANT_PATTERN, is_participant_id
+from fovexp.results.format import PARTICIPANT_PATTERN, is_participant_id
 
 
 def check_participant(pid: str) -> str:

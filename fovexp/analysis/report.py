@@ -23,18 +23,11 @@ from pathlib import Path
 import pandas as pd
 
 from fovexp import PAPER_TABLE2, FovexpError
+from fovexp.results.calibration import Calibration, calibrate, fe_summary, sk_lines, sk_summary
+from fovexp.results.loading import RULES, Dataset, load_results
 
 from . import figures as figs
-from .calibration import (
-    Calibration,
-    calibrate,
-    fe_summary,
-    sk_lines,
-    sk_summary,
-    table2_markdown,
-    write_table2,
-)
-from .loading import RULES, Dataset, load_results
+from .tables import table2_markdown, write_table2
 from .validation import ValidationResult, validate
 
 CALIBRATION_EXPERIMENTS = ("calibration-fe", "calibration-sk", "calibration-sf")

@@ -1,5 +1,5 @@
 """``fovexp analyze results/ --out report/`` (paper sections 6.3, 7.1): ``fovexp.cli`` registers
-:func:`add_analyze_parser`; ``python -m analysis`` does the same."""
+:func:`add_analyze_parser`; ``python -m fovexp.analysis`` does the same."""
 
 from __future__ import annotations
 
@@ -75,8 +75,8 @@ def analyze_command(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m analysis``: the same as ``fovexp analyze``."""
-    parser = _configure(argparse.ArgumentParser(prog="python -m analysis",
+    """``python -m fovexp.analysis``: the same as ``fovexp analyze``."""
+    parser = _configure(argparse.ArgumentParser(prog="python -m fovexp.analysis",
                                                 description="fovexp analyze"))
     args = parser.parse_args(argv)
     return analyze_command(args)

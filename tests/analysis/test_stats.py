@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from analysis.stats import linear_fit, mean_sem, paired_ttest, sampling_rate_ratio
 from fovexp import FovexpError
+from fovexp.analysis.stats import paired_ttest, sampling_rate_ratio
+from fovexp.results.stats import linear_fit, mean_sem
 
 # d = a - b = [0.10, 0.15, 0.05, 0.20]: mean 0.125, sum of squared deviations 0.0125,
 # sd = sqrt(0.0125 / 3), se = sd / 2, t = 0.125 / se = sqrt(15), d_z = sqrt(15) / 2.

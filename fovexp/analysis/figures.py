@@ -13,7 +13,8 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from .calibration import Calibration
+from fovexp.results.calibration import Calibration
+
 from .validation import ValidationResult
 
 # The paper's validation plot: contrast blue, ours orange.

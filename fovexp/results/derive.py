@@ -2,11 +2,11 @@
 the previous step's result).
 
 The runner imports these three functions to set up the next calibration experiment and to write
-a lab's Table 2. Each loads a results folder with the analysis' exclusion rules
-(:func:`analysis.loading.load_results`; rule R7 already drops dry runs beside real sessions) and
-raises :class:`~fovexp.FovexpError` on missing or malformed data. With ``real_only`` (a session
-with a participant) a folder holding nothing but simulated sessions (dry runs) is an error: a
-participant's parameters never come from a simulated participant.
+a lab's Table 2. Each loads a results folder with the exclusion rules
+(:func:`fovexp.results.loading.load_results`; rule R7 already drops dry runs beside real
+sessions) and raises :class:`~fovexp.FovexpError` on missing or malformed data. With
+``real_only`` (a session with a participant) a folder holding nothing but simulated sessions
+(dry runs) is an error: a participant's parameters never come from a simulated participant.
 """
 
 from __future__ import annotations
@@ -16,9 +16,9 @@ from pathlib import Path
 import pandas as pd
 
 from fovexp import FovexpError, ParameterTable
-from fovexp.experiment.logformat import SIMULATED_TRACKER
 
 from .calibration import calibrate, fe_summary, sk_lines, sk_summary
+from .format import SIMULATED_TRACKER
 from .loading import load_results
 
 __all__ = ["fe_by_blur_rate", "sk_line_by_blur_rate", "parameter_table"]

@@ -15,10 +15,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from analysis.calibration import calibrate, fe_summary, table2_latex, table2_markdown
-from analysis.derive import fe_by_blur_rate, parameter_table, sk_line_by_blur_rate
-from analysis.loading import load_results
 from fovexp import FovexpError, ParameterTable
+from fovexp.analysis.tables import table2_latex, table2_markdown
+from fovexp.results.calibration import calibrate, fe_summary
+from fovexp.results.derive import fe_by_blur_rate, parameter_table, sk_line_by_blur_rate
+from fovexp.results.loading import load_results
 
 from analysis_fixtures import BLUR_RATES, Truth, write_study
 
@@ -130,7 +131,7 @@ def test_derive_contract(study: Path) -> None:
 
 
 def test_table2_formats_round_trip(study: Path, tmp_path: Path) -> None:
-    from analysis.calibration import write_table2
+    from fovexp.analysis.tables import write_table2
 
     ds = load_results(study)
     c = calibrate(*(ds.experiment(e) for e in CAL))

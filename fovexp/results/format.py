@@ -1,7 +1,7 @@
 """The one definition of the runner's log formats (docs/LOGS.md): columns, types, the
 participant-ID rule, CSV formatting, and the ``trials.csv`` reader that detects a torn last row.
 
-Both the runner (:mod:`fovexp.experiment.logs`) and the analysis (:mod:`analysis.loading`) use
+Both the runner (:mod:`fovexp.experiment.logs`) and the analysis (:mod:`fovexp.analysis`) use
 this module. It imports nothing of the runner but the package itself, and no PsychoPy.
 """
 

@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from analysis.loading import COLUMNS, load_results, read_trials_file
 from fovexp import FovexpError
+from fovexp.results.loading import COLUMNS, load_results, read_trials_file
 
 from analysis_fixtures import SHA, Noise, Truth, session_id, simulate_rows, write_trials
 

@@ -21,8 +21,8 @@ from dataclasses import dataclass, field
 import pandas as pd
 
 from fovexp import FovexpError
+from fovexp.results.calibration import summarize
 
-from .calibration import summarize
 from .stats import paired_ttest, sampling_rate_ratio
 
 TEST_COLUMNS = ["scope", "n", "mean_ours", "mean_contrast", "mean_diff", "sd_diff", "t", "df",

@@ -1,7 +1,6 @@
-"""Descriptive statistics, the paired t-test and the least-squares line (paper sections 6.3, 7.1).
-
-All tests go through :mod:`scipy.stats`; the hand formulas are in the docstrings and checked
-against scipy in tests/test_analysis_stats.py.
+"""The paired t-test of the validation (paper section 7.1) and the sampling-rate ratio of
+section 7.3. The tests go through :mod:`scipy.stats`; the hand formulas are in the docstrings
+and checked against scipy in the tests.
 """
 
 from __future__ import annotations
@@ -14,21 +13,6 @@ import numpy as np
 from scipy import stats
 
 from fovexp import FovexpError
-
-
-def mean_sem(values: Sequence[float] | np.ndarray) -> tuple[float, float, int]:
-    """(mean, standard error of the mean, n); SEM = sd(ddof=1) / sqrt(n), NaN for n < 2.
-
-    The error bars of the paper's calibration and validation plots are SEMs (section 6.2).
-    """
-    x = np.asarray(values, dtype=float)
-    x = x[np.isfinite(x)]
-    n = int(x.size)
-    if n == 0:
-        return math.nan, math.nan, 0
-    mean = float(x.mean())
-    sem = float(stats.sem(x, ddof=1)) if n > 1 else math.nan
-    return mean, sem, n
 
 
 @dataclass(frozen=True)
@@ -87,29 +71,6 @@ def paired_ttest(a: Sequence[float] | np.ndarray, b: Sequence[float] | np.ndarra
         t=float(res.statistic), df=int(res.df), p=float(res.pvalue), d_z=float(d_z),
         ci_low=float(ci.low), ci_high=float(ci.high),
     )
-
-
-@dataclass(frozen=True)
-class Line:
-    """Least-squares line y = slope * x + intercept (paper section 6.2: s_k against s_f)."""
-
-    slope: float
-    intercept: float
-    r2: float
-    n: int
-
-    def __call__(self, x: float | np.ndarray) -> float | np.ndarray:
-        return self.slope * x + self.intercept
-
-
-def linear_fit(x: Sequence[float] | np.ndarray, y: Sequence[float] | np.ndarray) -> Line:
-    """Ordinary least squares via :func:`scipy.stats.linregress`; needs two distinct x."""
-    x = np.asarray(x, dtype=float)
-    y = np.asarray(y, dtype=float)
-    if len(np.unique(x)) < 2:
-        raise FovexpError(f"a line needs at least two distinct x values, got {np.unique(x)}")
-    res = stats.linregress(x, y)
-    return Line(float(res.slope), float(res.intercept), float(res.rvalue**2), int(x.size))
 
 
 def sampling_rate_ratio(blur_rate_new: float, blur_rate_base: float) -> float:

@@ -117,7 +117,7 @@ def test_dry_run_calibration_fe(ws: Path) -> None:
 
 
 def test_dry_run_calibration_sk(ws: Path) -> None:
-    from analysis.derive import fe_by_blur_rate
+    from fovexp.results.derive import fe_by_blur_rate
 
     lp = load_protocol(ws / "protocols" / "calibration-sk.yaml", results_root=ws / "results")
     fe = fe_by_blur_rate(ws / "results" / "calibration-fe")
@@ -140,7 +140,7 @@ def test_dry_run_calibration_sk(ws: Path) -> None:
 
 
 def test_dry_run_calibration_sf(ws: Path) -> None:
-    from analysis.derive import sk_line_by_blur_rate
+    from fovexp.results.derive import sk_line_by_blur_rate
 
     lines = sk_line_by_blur_rate(ws / "results" / "calibration-sk")
     folder = dry(ws, "calibration-sf", "S01", "--practice", "1", "--limit-trials", "5")

@@ -8,8 +8,8 @@ import pandas as pd
 import pytest
 from scipy import stats
 
-from analysis.validation import validate
 from fovexp import FovexpError
+from fovexp.analysis.validation import validate
 
 CONTRAST = {("P1", "s1"): 0.30, ("P1", "s2"): 0.40, ("P2", "s1"): 0.32, ("P2", "s2"): 0.38,
             ("P3", "s1"): 0.28, ("P3", "s2"): 0.44}

@@ -47,16 +47,17 @@ from pathlib import Path
 import pandas as pd
 
 from fovexp import FovexpError
-from fovexp.experiment.logformat import (
+
+from .format import (
     FLOAT_COLUMNS,
     INT_COLUMNS,
     SIMULATED_TRACKER,
     TRIAL_COLUMNS,
 )
-from fovexp.experiment.logformat import read_trials_file as _read_file
+from .format import read_trials_file as _read_file
 
 #: ``trials.csv`` columns in their documented order (docs/LOGS.md); the format is defined once,
-#: in the runner's window-free :mod:`fovexp.experiment.logformat`.
+#: in :mod:`fovexp.results.format`.
 COLUMNS: tuple[str, ...] = TRIAL_COLUMNS
 #: The parameter each of the paper's experiments adjusts (sections 6.2, 7.1).
 EXPERIMENT_PARAMETER: dict[str, str] = {

@@ -458,8 +458,8 @@ def test_corrupt_middle_row_is_an_error(tmp_path: Path) -> None:
 
 def test_one_trials_format_for_runner_and_analysis(tmp_path: Path) -> None:
     """The runner and the analysis read trials.csv with the same definition (logformat)."""
-    from analysis.loading import COLUMNS, read_trials_file
-    from fovexp.experiment import logformat
+    from fovexp.results import format as logformat
+    from fovexp.results.loading import COLUMNS, read_trials_file
 
     assert COLUMNS is logformat.TRIAL_COLUMNS is TRIAL_COLUMNS
     path = tmp_path / "P01" / "trials.csv"

@@ -9,9 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from analysis.cli import add_analyze_parser, analyze_command, main
-from analysis.report import run_analysis
 from fovexp import ParameterTable
+from fovexp.analysis.cli import add_analyze_parser, analyze_command, main
+from fovexp.analysis.report import run_analysis
 
 from analysis_fixtures import Truth, write_study
 

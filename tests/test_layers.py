@@ -1,0 +1,162 @@
+"""The package's layers point one way (docs/API.md): an import graph of ``fovexp`` read with the
+standard library's :mod:`ast` (every ``import`` statement, also those inside functions), then
+checked for cycles and for the rules between its parts."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+try:
+    import tomllib
+except ImportError:  # Python 3.10: pytest's own dependency
+    import tomli as tomllib
+
+ROOT = Path(__file__).resolve().parent.parent
+PACKAGE = ROOT / "fovexp"
+
+
+def module_name(path: Path) -> str:
+    parts = path.relative_to(ROOT).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def modules() -> dict[str, Path]:
+    return {module_name(p): p for p in sorted(PACKAGE.rglob("*.py"))}
+
+
+def imports_of(name: str, path: Path, known: set[str]) -> set[str]:
+    """The ``fovexp`` modules ``name`` imports. ``from a import b`` counts as importing
+    ``a.b`` when that is a module, else ``a``; importing ``a.b`` also runs ``a/__init__``, but
+    that edge is the import system's, not the code's, and is left out (it would make every
+    subpackage "import" its parent)."""
+    is_pkg = path.name == "__init__.py"
+    package = name if is_pkg else name.rpartition(".")[0]
+    out: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            targets = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base_parts = package.split(".")
+                base_parts = base_parts[: len(base_parts) - (node.level - 1)]
+                base = ".".join(base_parts + ([node.module] if node.module else []))
+            else:
+                base = node.module or ""
+            targets = [f"{base}.{a.name}" if f"{base}.{a.name}" in known else base
+                       for a in node.names]
+        else:
+            continue
+        for t in targets:
+            while t and t not in known:  # ``import fovexp.gpu.backend as b`` etc.
+                t = t.rpartition(".")[0]
+            if t and t != name:
+                out.add(t)
+    return out
+
+
+@pytest.fixture(scope="module")
+def graph() -> dict[str, set[str]]:
+    mods = modules()
+    known = set(mods)
+    return {name: imports_of(name, path, known) for name, path in mods.items()}
+
+
+def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """Strongly connected components with more than one module (Tarjan)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on: set[str] = set()
+    out: list[list[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on.add(v)
+        for w in sorted(graph.get(v, ())):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                out.append(sorted(comp))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return out
+
+
+def test_the_walker_sees_a_cycle():
+    """The check itself: a two-module cycle and a self-contained chain."""
+    assert cycles({"a": {"b"}, "b": {"a"}, "c": {"a"}}) == [["a", "b"]]
+    assert cycles({"a": {"b"}, "b": {"c"}, "c": set()}) == []
+
+
+def test_no_import_cycle(graph):
+    assert cycles(graph) == []
+
+
+def _edges(graph, src_prefix: str, dst_prefix: str) -> list[tuple[str, str]]:
+    def under(m: str, p: str) -> bool:
+        return m == p or m.startswith(p + ".")
+
+    return sorted((a, b) for a, deps in graph.items() if under(a, src_prefix)
+                  for b in deps if under(b, dst_prefix))
+
+
+def test_the_pipeline_does_not_know_the_gpu_backend(graph):
+    assert _edges(graph, "fovexp.pipeline", "fovexp.gpu") == []
+
+
+def test_runner_and_analysis_do_not_import_each_other(graph):
+    assert _edges(graph, "fovexp.experiment", "fovexp.analysis") == []
+    assert _edges(graph, "fovexp.analysis", "fovexp.experiment") == []
+    assert _edges(graph, "fovexp.results", "fovexp.experiment") == []
+    assert _edges(graph, "fovexp.results", "fovexp.analysis") == []
+
+
+def test_runner_does_not_import_the_cli(graph):
+    assert _edges(graph, "fovexp.experiment", "fovexp.cli") == []
+
+
+@pytest.mark.parametrize("part", ["fovexp.experiment", "fovexp.analysis", "fovexp.results"])
+def test_runner_and_analysis_use_the_public_api(graph, part):
+    """Of the enhancer they import only the package's public names (``from fovexp import``,
+    docs/API.md), the shared logs layer ``fovexp.results``, and their own modules."""
+    allowed = ("fovexp", "fovexp.results", part)
+    bad = [(a, b) for a, b in _edges(graph, part, "fovexp")
+           if not (b == "fovexp" or any(b == p or b.startswith(p + ".") for p in allowed[1:]))]
+    assert bad == []
+
+
+def test_the_engine_does_not_import_the_runner_or_the_analysis(graph):
+    engine = [m for m in graph if not m.startswith(("fovexp.experiment", "fovexp.analysis",
+                                                    "fovexp.results", "fovexp.cli",
+                                                    "fovexp.__main__", "fovexp.bench"))]
+    bad = [(a, b) for a in engine for b in graph[a]
+           if b.startswith(("fovexp.experiment", "fovexp.analysis", "fovexp.results"))]
+    assert bad == []
+
+
+def test_every_subpackage_is_in_the_wheel():
+    """pyproject.toml lists the packages explicitly (its data folders are mapped into
+    fovexp): a new subpackage left out of the list would be missing from the wheel."""
+    conf = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
+    listed = set(conf["packages"])
+    code = {module_name(p.parent / "__init__.py") for p in PACKAGE.rglob("__init__.py")}
+    assert code <= listed, sorted(code - listed)
+    for pkg, folder in conf["package-dir"].items():
+        assert (ROOT / folder).is_dir(), (pkg, folder)
