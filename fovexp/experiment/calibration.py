@@ -259,7 +259,7 @@ class _Animator:
     def arrived(self, t: float) -> bool:
         """True once the target is at its point (the first call that sees it sets the arrival
         time: the shrinking and the pace count from then)."""
-        if self.t_arrive is None and t - self.t_move >= self.move_s:
+        if self.t_arrive is None and t - self.t_move >= self.move_s - 1e-9:
             self.t_arrive = t
         return self.t_arrive is not None
 
