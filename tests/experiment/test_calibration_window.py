@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from pyglet.window import key as pkey
 
 from fovexp import load_display
 from fovexp.experiment.calibration import (
@@ -113,6 +112,8 @@ def test_result_plot_shows_samples_in_the_eyes_colours(screen) -> None:
 
 
 def test_operator_keys_are_noticed_on_any_screen(screen) -> None:
+    from pyglet.window import key as pkey  # after the window: importing it needs the display
+
     screen.take_operator_keys()
     screen.win.winHandle.dispatch_event("on_key_press", pkey.D, 0)
     screen.win.winHandle.dispatch_event("on_key_press", pkey.X, 0)
