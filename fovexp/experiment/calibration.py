@@ -95,14 +95,37 @@ class CalibrationBackend(Protocol):
     def user_position(self) -> tuple[Vec3 | None, Vec3 | None]: ...
 
 
+#: The track box assumed where a tracker gives no position guide (mm: width, height, depth around
+#: the nominal eye; about a Tobii Pro Spectrum's at 65 cm).
+TRACK_BOX_MM = (340.0, 260.0, 300.0)
+
+
+def guide_from_origins(origins: Sequence[Vec3 | None], area: DisplayArea,
+                       distance_mm: float) -> tuple[Vec3 | None, Vec3 | None]:
+    """Eye positions (the area's frame, mm) as a position guide would give them: normalised in a
+    :data:`TRACK_BOX_MM` box centred on the nominal eye, Tobii's convention (x towards the
+    participant's left, y down, z away from the screen, 0.5 the middle)."""
+    tl, tr, bl = (np.asarray(c, dtype=np.float64) for c in
+                  (area.top_left, area.top_right, area.bottom_left))
+    right = (tr - tl) / np.linalg.norm(tr - tl)
+    up = (tl - bl) / np.linalg.norm(tl - bl)
+    nominal = area.eye_mm(distance_mm)
+    w, h, d = TRACK_BOX_MM
+    out: list[Vec3 | None] = []
+    for o in origins:
+        if o is None:
+            out.append(None)
+            continue
+        rel = np.asarray(o, dtype=np.float64) - nominal
+        out.append((0.5 - float(rel @ right) / w, 0.5 - float(rel @ up) / h,
+                    0.5 + float(rel @ area.normal) / d))
+    return out[0], out[1]
+
+
 class SimulatedCalibration:
     """The simulated tracker's calibration: it resets the simulated gaze's error at targets to
     the parameters' ``target_offset_deg`` (whatever drift was added since); its position guide
-    places the simulated eyes in a track box of :data:`TRACK_BOX_MM` around the nominal eye
-    position (Tobii's convention: x towards the participant's left, y down, z away from the
-    tracker, 0.5 the middle)."""
-
-    TRACK_BOX_MM = (340.0, 260.0, 300.0)
+    comes from the simulated eyes' positions (:func:`guide_from_origins`)."""
 
     def __init__(self, gaze: Any) -> None:
         self.gaze = gaze
@@ -126,13 +149,7 @@ class SimulatedCalibration:
 
     def user_position(self) -> tuple[Vec3 | None, Vec3 | None]:
         g = self.gaze
-        nominal = g.area.eye_mm(10.0 * float(g.fixation.display.distance_cm))
-        w, h, d = self.TRACK_BOX_MM
-        out: list[Vec3 | None] = []
-        for eye in g._eyes_mm:
-            dx, dy, dz = np.asarray(eye) - nominal
-            out.append((0.5 - float(dx) / w, 0.5 - float(dy) / h, 0.5 + float(dz) / d))
-        return out[0], out[1]
+        return guide_from_origins(g._eyes_mm, g.area, 10.0 * float(g.fixation.display.distance_cm))
 
 
 # -- what to draw --------------------------------------------------------------------------------
@@ -363,10 +380,13 @@ class _Base:
             if self._window is not None and self._window[0] <= s.system_time_us < self._window[1]:
                 self._window_samples.append(s)
 
+    def _recent_origins(self) -> list[Vec3 | None]:
+        return [o[1] if o is not None and self.now - o[0] <= ORIGIN_STALE_S else None
+                for o in self._origins]
+
     def eye_distance_mm(self) -> float | None:
         """The eyes' mean distance from the screen plane, from recent gaze origins."""
-        d = [self.area.distance_mm(o[1]) for o in self._origins
-             if o is not None and self.now - o[0] <= ORIGIN_STALE_S]
+        d = [self.area.distance_mm(o) for o in self._recent_origins() if o is not None]
         return float(np.mean(d)) if d else None
 
     def _ask_quit(self, behind: Any) -> None:
@@ -731,6 +751,8 @@ class CalibrationFlow(_Base):
             return _confirm(self._confirm_behind)
         if self.phase == "position":
             guide = self.backend.user_position()
+            if guide == (None, None):  # no position guide: the gaze origins say where the eyes are
+                guide = guide_from_origins(self._recent_origins(), self.area, self.distance_mm)
             return head_box_view(guide, self.eye_distance_mm(), self.distance_mm,
                                  "Space: start the calibration    Q: quit")
         if self.phase == "targets":

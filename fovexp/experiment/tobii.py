@@ -162,13 +162,15 @@ class TobiiGaze:
                                       self._on_restored, as_dictionary=True)
             self.tracker.subscribe_to(tr.EYETRACKER_NOTIFICATION_GAZE_OUTPUT_FREQUENCY_CHANGED,
                                       self._on_frequency, as_dictionary=True)
-            # where the eyes are in the track box: the calibration's head-position screen
-            self.tracker.subscribe_to(tr.EYETRACKER_USER_POSITION_GUIDE, self._on_position,
-                                      as_dictionary=True)
         except FovexpError:
             raise
         except Exception as exc:
             raise FovexpError(f"starting the Tobii gaze stream failed: {exc}") from None
+        try:  # where the eyes are in the track box: the calibration's head-position screen
+            self.tracker.subscribe_to(tr.EYETRACKER_USER_POSITION_GUIDE, self._on_position,
+                                      as_dictionary=True)
+        except Exception:  # a model without the guide: the screen uses the gaze origins
+            pass
         self._subscribed = True
         self._last_sample_us = self.now_us()
 

@@ -158,7 +158,7 @@ def test_head_box_says_where_the_eyes_are() -> None:
 def test_simulated_head_position_and_distance() -> None:
     """The simulated eyes 60 mm farther and 34 mm to the participant's right: the position guide
     says so (Tobii's track box: x towards the participant's left) and the gaze origins put the
-    eyes 775 mm from the screen."""
+    eyes 775 mm from the screen; without a position guide the gaze origins place the eyes."""
     rig = Rig(SimGazeParams(head_offset_mm=(34.0, 0.0, 60.0)))
     flow = rig.flow()
     flow.start(0)
@@ -173,6 +173,22 @@ def test_simulated_head_position_and_distance() -> None:
     left, right = SimulatedCalibration(rig.gaze).user_position()
     assert left == pytest.approx((0.5 + (31.5 - 34) / 340, 0.5, 0.7))
     assert right == pytest.approx((0.5 - (31.5 + 34) / 340, 0.5, 0.7))
+    assert view.eyes[0] == pytest.approx((1 - left[0], 0.5))  # drawn as in a mirror
+
+    class NoGuide(RecordingCalibration):  # a tracker model without the position guide
+        def user_position(self):
+            return None, None
+
+    flow = rig.flow(NoGuide(rig.gaze))
+    flow.start(rig.clock[0])
+    for _ in range(20):
+        rig.clock[0] += int(FRAME_US)
+        flow.feed(rig.gaze.poll())
+        flow.step([], rig.clock[0])
+    fallback = flow.view()
+    flow.close()
+    assert fallback.eyes[0] == pytest.approx(view.eyes[0])  # from the gaze origins instead
+    assert fallback.eyes[1] == pytest.approx(view.eyes[1])
 
 
 def test_calibration_then_validation_on_the_stream() -> None:
