@@ -120,7 +120,7 @@ class StubScreen:
     screen; None on the tracker-lost screen, whose loop polls)."""
 
     def __init__(self, size, fullscreen=False, cross_px=10.0, dry_run=True, refresh_hz=60.0,
-                 inputs=None, answer=None) -> None:
+                 inputs=None, answer=None, cal_answer=None, operator_keys=None) -> None:
         self.size = tuple(size)
         self.refresh_hz = 60.0 if dry_run else float(refresh_hz)
         self.inputs = dict(inputs or {})
@@ -130,6 +130,10 @@ class StubScreen:
         self.frames: list[tuple[bool, object]] = []  # (blank, test half shown)
         self.messages: list[str] = []
         self.closed = False
+        self.cal_answer = cal_answer
+        self.cal_views: list[str] = []
+        self.operator_keys = dict(operator_keys or {})
+        self.operator_calls = 0
 
     def measure_display(self):
         return self.refresh_hz, self.size, self.size
@@ -152,8 +156,28 @@ class StubScreen:
             return "q"  # the tracker failed validation: stop, do not recalibrate forever
         return keys[0] if keys else None
 
-    def show_point(self, x, y) -> None:
-        time.sleep(0.001)
+    def calibration_frame(self, view):
+        """One frame of a calibration screen: its keys come from ``cal_answer(view)`` (default:
+        Space on the head box; on the result screen Space when the validation passed, else Q
+        then Y to confirm; nothing elsewhere)."""
+        time.sleep(1 / 240)
+        self.cal_views.append(type(view).__name__)
+        if self.cal_answer is not None:
+            return list(self.cal_answer(view))
+        from fovexp.experiment.calibration import HeadBoxView, ResultView, TextView
+
+        if isinstance(view, HeadBoxView):
+            return ["space"]
+        if isinstance(view, ResultView):
+            return ["space"] if view.passed else ["q"]
+        if isinstance(view, TextView) and view.prompt.startswith("Y: quit"):
+            return ["y"]
+        return []
+
+    def take_operator_keys(self):
+        """The operator's D/C keys: ``operator_keys`` maps the call number (from 1) to keys."""
+        self.operator_calls += 1
+        return set(self.operator_keys.get(self.operator_calls, ()))
 
     def set_reference(self, left) -> None:
         pass

@@ -23,7 +23,7 @@ from typing import Any, NamedTuple, Protocol
 
 import numpy as np
 
-from fovexp import ViewingGeometry
+from fovexp import FovexpError, ViewingGeometry
 
 #: Paper section 6.1: gaze farther than this from the cross blanks the next frame (deg).
 BLANKING_RADIUS_DEG = 1.25
@@ -35,8 +35,16 @@ TRACKER_RATE_HZ = 600.0
 GAZE_BUFFER_S = 120.0
 
 
+Vec3 = tuple[float, float, float]
+
+
 class GazeSample(NamedTuple):
-    """One tracker sample; positions in normalised display-area coordinates."""
+    """One tracker sample; positions in normalised display-area coordinates.
+
+    ``*_origin_mm`` is the eye's position (the tracker's gaze origin) in the coordinate system of
+    the source's :class:`DisplayArea` (a Tobii's user coordinate system: mm, x right, y up, z
+    towards the user), or None where the source does not measure it or the eye was not found.
+    """
 
     device_time_us: int
     system_time_us: int
@@ -46,6 +54,8 @@ class GazeSample(NamedTuple):
     right_x: float
     right_y: float
     right_valid: bool
+    left_origin_mm: Vec3 | None = None
+    right_origin_mm: Vec3 | None = None
 
     @property
     def valid(self) -> bool:
@@ -101,6 +111,7 @@ class FixationGeometry:
     """
 
     def __init__(self, display: Any) -> None:
+        self.display = display
         self.geometry = ViewingGeometry.for_image(display, display.width_px, display.height_px,
                                                   "exact")
         self.cross_px = self.geometry.gaze_px((0.5, 0.5))
@@ -136,6 +147,132 @@ class FixationGeometry:
         g = self.geometry
         return (origin[0] + dx_deg * self.ppd_centre / g.width_px,
                 origin[1] + dy_deg * self.ppd_centre / g.height_px)
+
+
+@dataclass(frozen=True)
+class DisplayArea:
+    """The screen's active area in a tracker's coordinate system: three corners (mm).
+
+    Normalised display coordinates ``(u, v)`` (origin top-left, x right, y down: Tobii's active
+    display coordinate system, the runner's convention) lie at ``top_left + u (top_right -
+    top_left) + v (bottom_left - top_left)``. A Tobii reports its area with
+    ``get_display_area()`` in its user coordinate system (x right, y up, z towards the user,
+    origin on the tracker), where its gaze origins are too; :meth:`nominal` is the display
+    profile's screen centred on the origin, the frame the simulated eyes are placed in.
+    """
+
+    top_left: Vec3
+    top_right: Vec3
+    bottom_left: Vec3
+    #: ``tracker`` (the tracker's own) or ``profile`` (nominal, from the display profile)
+    source: str = "profile"
+
+    @classmethod
+    def nominal(cls, display: Any) -> DisplayArea:
+        """The profile's screen (``width_cm`` x ``height_cm``) centred on the origin, facing +z."""
+        w, h = 5.0 * float(display.width_cm), 5.0 * float(display.height_cm)  # half, in mm
+        return cls((-w, h, 0.0), (w, h, 0.0), (-w, -h, 0.0), "profile")
+
+    @classmethod
+    def from_sdk(cls, area: Any) -> DisplayArea:
+        """From a ``tobii_research.DisplayArea``."""
+        def vec(c: Any) -> Vec3:
+            x, y, z = (float(v) for v in c)
+            return (x, y, z)
+        return cls(vec(area.top_left), vec(area.top_right), vec(area.bottom_left), "tracker")
+
+    def _axes(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        tl = np.asarray(self.top_left, dtype=np.float64)
+        return (tl, np.asarray(self.top_right, dtype=np.float64) - tl,
+                np.asarray(self.bottom_left, dtype=np.float64) - tl)
+
+    @property
+    def width_mm(self) -> float:
+        return float(np.linalg.norm(self._axes()[1]))
+
+    @property
+    def height_mm(self) -> float:
+        return float(np.linalg.norm(self._axes()[2]))
+
+    @property
+    def centre_mm(self) -> np.ndarray:
+        tl, ux, vy = self._axes()
+        return tl + 0.5 * ux + 0.5 * vy
+
+    @property
+    def normal(self) -> np.ndarray:
+        """Unit normal of the screen, towards the viewer."""
+        _, ux, vy = self._axes()
+        n = np.cross(vy, ux)  # (down) x (right) = towards the viewer
+        return n / np.linalg.norm(n)
+
+    def points_mm(self, u: Any, v: Any) -> np.ndarray:
+        """Normalised display coordinates (arrays of N) -> points on the screen, (N, 3) mm."""
+        tl, ux, vy = self._axes()
+        u = np.asarray(u, dtype=np.float64)[..., None]
+        v = np.asarray(v, dtype=np.float64)[..., None]
+        return tl + u * ux + v * vy
+
+    def eye_mm(self, distance_mm: float) -> np.ndarray:
+        """The nominal eye: ``distance_mm`` in front of the screen centre, on its normal (the
+        position the display profile's viewing distance assumes)."""
+        return self.centre_mm + float(distance_mm) * self.normal
+
+    def distance_mm(self, origin_mm: Any) -> float:
+        """The eye's distance from the screen plane (mm)."""
+        return float(np.dot(np.asarray(origin_mm, dtype=np.float64) - self.centre_mm,
+                            self.normal))
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"top_left": list(self.top_left), "top_right": list(self.top_right),
+                "bottom_left": list(self.bottom_left), "width_mm": round(self.width_mm, 2),
+                "height_mm": round(self.height_mm, 2), "source": self.source}
+
+
+#: Half the typical adult interpupillary distance (63 mm): the simulated eyes' offsets (mm).
+HALF_IPD_MM = 31.5
+#: A tracker's display area may differ from the display profile's physical size by this much
+#: (mm, width and height each). A width off by e mm misplaces normalised gaze by up to e/2 mm
+#: (at the cross when the area's top-left corner is right): 1.5 mm, 0.12 deg at 71.5 cm, a tenth
+#: of the 1.25 deg window; 3 mm still allows for the millimetre to which a tape measure reads
+#: each of the two sizes.
+DISPLAY_AREA_TOLERANCE_MM = 3.0
+
+
+def check_display_area(area: DisplayArea, display: Any,
+                       tolerance_mm: float = DISPLAY_AREA_TOLERANCE_MM) -> dict[str, Any]:
+    """The tracker's display area against the display profile's physical size.
+
+    Normalised gaze coordinates are fractions of the area the tracker was told the screen is:
+    when that is not the screen the profile describes, every angle computed from them is wrong.
+    Returns both sizes (for the session file); raises FovexpError naming both when they differ
+    by more than ``tolerance_mm`` in width or height.
+    """
+    tracker = (area.width_mm, area.height_mm)
+    profile = (10.0 * float(display.width_cm), 10.0 * float(display.height_cm))
+    diff = (tracker[0] - profile[0], tracker[1] - profile[1])
+    info = {"tracker_mm": [round(v, 2) for v in tracker],
+            "profile_mm": [round(v, 2) for v in profile],
+            "difference_mm": [round(v, 2) for v in diff], "tolerance_mm": tolerance_mm,
+            "display_area": area.to_dict()}
+    if max(abs(diff[0]), abs(diff[1])) > tolerance_mm:
+        raise FovexpError(
+            f"the eye tracker's display area is {tracker[0]:.1f} x {tracker[1]:.1f} mm, but "
+            f"display profile {display.name!r} says {profile[0]:.1f} x {profile[1]:.1f} mm "
+            f"(more than {tolerance_mm:g} mm apart): set the display area in Tobii Pro Eye "
+            "Tracker Manager (Display setup) to this screen's active area, or correct "
+            "width_cm/height_cm in the display profile")
+    return info
+
+
+def ray_angles_deg(origins_mm: np.ndarray, a_mm: np.ndarray, b_mm: np.ndarray) -> np.ndarray:
+    """Angle (deg) at each origin between the rays to points ``a`` and ``b`` (arrays of shape
+    (N, 3) or broadcastable): ``atan2(|r_a x r_b|, r_a . r_b)``, accurate at small angles too."""
+    ra = np.asarray(a_mm, dtype=np.float64) - origins_mm
+    rb = np.asarray(b_mm, dtype=np.float64) - origins_mm
+    ra, rb = np.broadcast_arrays(ra, rb)
+    cross = np.linalg.norm(np.cross(ra, rb), axis=-1)
+    return np.degrees(np.arctan2(cross, np.einsum("...i,...i->...", ra, rb)))
 
 
 @dataclass
@@ -212,6 +349,15 @@ class SimGazeParams:
     blink_s: tuple[float, float] = (0.08, 0.25)
     dropout_prob: float = 0.002
     eye_offset_deg: float = 0.05
+    #: looking at a calibration, validation or drift-check target (:meth:`SimulatedGaze.look_at`)
+    target_latency_s: float = 0.15  # the saccade to a new target lands this much later
+    target_jitter_deg: float = 0.09  # per-sample noise around the target, per axis
+    target_loss: float = 0.01  # fraction of samples lost per eye
+    #: systematic error (deg, x right, y down) of the gaze at targets that a calibration leaves
+    target_offset_deg: tuple[float, float] = (0.0, 0.0)
+    #: the head's offset (mm) from the nominal eye position (the profile's distance on the screen
+    #: normal through its centre), in the nominal display area's frame (x right, y up, z out)
+    head_offset_mm: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
 
 class ClockedGaze:
@@ -276,12 +422,17 @@ class ClockedGaze:
 
 
 class SimulatedGaze(ClockedGaze):
-    """Fixation on the cross with jitter, drift, microsaccades, saccades away, blinks and dropouts.
+    """Fixation on the cross with jitter, drift, microsaccades, saccades away, blinks and dropouts;
+    or, after :meth:`look_at`, on a calibration/validation target.
 
     Samples lie on a fixed ``rate_hz`` grid from :meth:`start`; their values depend only on the
-    seed and the sample index, not on when the frame loop polls. The fixations of calibration
-    and validation (:meth:`fixate`) draw from a generator of their own, so they neither shift
-    the stream nor depend on how much of it was due when they ran.
+    seed, the sample index and the target being looked at, not on when the frame loop polls.
+    The fixation stream draws the same random numbers whether or not a target is looked at, and
+    the samples on a target draw from a generator of their own per sample index, so looking at
+    targets shifts neither the stream after it nor depends on when it was asked for. Each
+    sample carries the eyes' positions (gaze origins) in the nominal display area's frame
+    (:meth:`DisplayArea.nominal`), the eyes half an interpupillary distance either side of the
+    nominal eye position.
     """
 
     name = "simulated"
@@ -293,14 +444,47 @@ class SimulatedGaze(ClockedGaze):
         super().__init__(self.p.rate_hz, clock_us)
         self.fixation = fixation
         self.rng = np.random.default_rng(seed)
-        self._fix_rng = np.random.default_rng([seed, 1])
         self.seed = seed
         self._drift = np.zeros(2)
         self._away: tuple[np.ndarray, int] | None = None  # (offset, samples left)
         self._blink_left = 0
+        #: (device time from start, target or None) in time order: what the eye looks at
+        self._targets: list[tuple[int, tuple[float, float] | None]] = []
+        self.area = DisplayArea.nominal(fixation.display)
+        self._eyes_mm = self._eye_positions()
+        #: the systematic error at targets now (deg): ``target_offset_deg`` after a
+        #: calibration (``calibration.SimulatedCalibration``); add to it to simulate drift
+        self.calibration_error_deg: tuple[float, float] = tuple(self.p.target_offset_deg)
+
+    def _eye_positions(self) -> tuple[Vec3, Vec3]:
+        eye = self.area.eye_mm(10.0 * float(self.fixation.display.distance_cm))
+        eye = eye + np.asarray(self.p.head_offset_mm, dtype=np.float64)
+        half = np.array([HALF_IPD_MM, 0.0, 0.0])
+        left, right = eye - half, eye + half
+        return ((float(left[0]), float(left[1]), float(left[2])),
+                (float(right[0]), float(right[1]), float(right[2])))
 
     def info(self) -> dict[str, Any]:
         return {"name": "simulated", "seed": self.seed, "rate_hz": self.p.rate_hz}
+
+    def display_area(self) -> DisplayArea:
+        """The frame the simulated gaze origins are in (the profile's nominal screen)."""
+        return self.area
+
+    def look_at(self, target: tuple[float, float] | None) -> None:
+        """From ``target_latency_s`` from now the eye fixates ``target`` (normalised; None: back
+        to the cross)."""
+        if self._t0 is None:
+            self.start()
+        assert self._t0 is not None
+        t = self._clock() - self._t0 + int(self.p.target_latency_s * 1e6)
+        self._targets.append((t, target))
+
+    def _target_at(self, t_us: int) -> tuple[float, float] | None:
+        for start, target in reversed(self._targets):
+            if start <= t_us:
+                return target
+        return None
 
     def _sample(self, i: int) -> GazeSample:
         p, rng = self.p, self.rng
@@ -332,25 +516,25 @@ class SimulatedGaze(ClockedGaze):
             ok = not blink and rng.uniform() >= p.dropout_prob and 0 <= x <= 1 and 0 <= y <= 1
             eyes.append((x if ok else math.nan, y if ok else math.nan, ok))
         t = self._time_us(i)
+        target = self._target_at(t)
+        if target is not None:
+            eyes = self._on_target(i, target)
         assert self._t0 is not None
-        return GazeSample(t, self._t0 + t, *eyes[0], *eyes[1])
+        origins = [o if e[2] else None for o, e in zip(self._eyes_mm, eyes, strict=True)]
+        return GazeSample(t, self._t0 + t, *eyes[0], *eyes[1], *origins)
 
-    def fixate(self, target: tuple[float, float], n: int) -> list[GazeSample]:
-        """``n`` samples fixating ``target`` (normalised) with jitter: the simulated participant
-        during calibration and validation."""
-        out = []
-        t0 = self._clock()
-        rng = self._fix_rng
-        for i in range(n):
-            eyes = []
-            for _ in range(2):
-                dx, dy = self.p.jitter_deg * 3 * rng.standard_normal(2)
-                ok = rng.uniform() >= 0.01
-                x, y = self.fixation.offset_to_norm(float(dx), float(dy), origin=target)
-                eyes.append((x if ok else math.nan, y if ok else math.nan, ok))
-            t = self._time_us(i)
-            out.append(GazeSample(t, t0 + t, *eyes[0], *eyes[1]))
-        return out
+    def _on_target(self, i: int, target: tuple[float, float]) -> list[tuple[float, float, bool]]:
+        """Sample ``i`` of the eyes fixating ``target``: its own generator per index."""
+        p = self.p
+        rng = np.random.default_rng([self.seed, 1, i])
+        eyes = []
+        for _ in range(2):
+            dx, dy = (np.asarray(self.calibration_error_deg)
+                      + p.target_jitter_deg * rng.standard_normal(2))
+            ok = rng.uniform() >= p.target_loss
+            x, y = self.fixation.offset_to_norm(float(dx), float(dy), origin=target)
+            eyes.append((x if ok else math.nan, y if ok else math.nan, ok))
+        return eyes
 
 
 class MouseGaze:
@@ -398,5 +582,13 @@ def sample_row(trial_index: int | None, s: GazeSample, ecc: float) -> tuple[Any,
     return (trial_index, s.device_time_us, s.system_time_us,
             s.left_x, s.left_y, s.left_valid, s.right_x, s.right_y, s.right_valid,
             pt[0] if pt else None, pt[1] if pt else None, s.valid,
-            None if math.isinf(ecc) else round(ecc, 4))
+            None if math.isinf(ecc) else round(ecc, 4)) + origin_fields(s)
+
+
+def origin_fields(s: GazeSample) -> tuple[float | None, ...]:
+    """The gaze log's origin columns (:data:`fovexp.results.format.GAZE_ORIGIN_COLUMNS`)."""
+    out: list[float | None] = []
+    for o in (s.left_origin_mm, s.right_origin_mm):
+        out += [None] * 3 if o is None else [round(float(v), 2) for v in o]
+    return tuple(out)
 

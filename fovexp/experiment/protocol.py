@@ -28,7 +28,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 from fovexp import PARAMETER_RANGES, FovexpError, make_params, parse_yaml, validation_error
 
 from .gaze import BLANKING_RADIUS_DEG, GAZE_TIMEOUT_S, TRACKER_RATE_HZ
-from .quality import MAX_DATA_LOSS
+from .quality import MAX_ACCURACY_DEG, MAX_DATA_LOSS, QualityLimits, central_accuracy_limit_deg
 from .stimuli import StimulusSet
 
 Parameter = Literal["f_e", "s_k", "s_f", "blur_rate"]
@@ -131,13 +131,22 @@ class FixationSpec(_Strict):
 
 
 class TrackerSpec(_Strict):
+    """Tracker settings and the validation's limits (``fovexp.experiment.quality``)."""
+
     sampling_hz: float = Field(default=TRACKER_RATE_HZ, gt=0, le=2000)
-    #: refuse to start when a validation's accuracy (median error, worse eye) exceeds this (deg)
-    max_accuracy_deg: float = Field(default=1.0, gt=0, le=10)
-    #: ... or when either eye lost more than this fraction of the validation's samples
+    #: refuse to start when the worse eye's accuracy at the central target exceeds this (deg);
+    #: default ``CENTRAL_ACCURACY_FRACTION`` (0.4) x ``fixation.radius_deg``; below the radius
+    max_central_accuracy_deg: float | None = Field(default=None, gt=0, le=10)
+    #: ... or its accuracy averaged over the validation targets (deg)
+    max_accuracy_deg: float = Field(default=MAX_ACCURACY_DEG, gt=0, le=10)
+    #: ... or when either eye lost more than this fraction of the samples expected (rate x time)
     max_data_loss: float = Field(default=MAX_DATA_LOSS, ge=0, le=1)
     calibration_points: Literal[5, 9] = 9
     validation_points: int = Field(default=5, ge=1, le=13)
+    #: a drift check after every this many main trials (0: only when the operator presses D)
+    drift_check_every: int = Field(default=0, ge=0)
+    #: a drift check fails above this offset at the centre (deg); default the central limit
+    max_drift_deg: float | None = Field(default=None, gt=0, le=10)
 
 
 class Protocol(_Strict):
@@ -176,8 +185,32 @@ class Protocol(_Strict):
             return self.geometry
         return "release" if self.preset == "release" else "exact"
 
+    @property
+    def quality_limits(self) -> QualityLimits:
+        """The validation's limits, the central one derived from the fixation window unless
+        given."""
+        t = self.tracker
+        central = t.max_central_accuracy_deg
+        if central is None:
+            central = central_accuracy_limit_deg(self.fixation.radius_deg)
+        return QualityLimits(t.max_accuracy_deg, central, t.max_data_loss)
+
+    @property
+    def drift_limit_deg(self) -> float:
+        """A drift check's limit: ``tracker.max_drift_deg``, else the central accuracy limit."""
+        d = self.tracker.max_drift_deg
+        return self.quality_limits.max_central_accuracy_deg if d is None else d
+
     @model_validator(mode="after")
     def _consistent(self) -> Protocol:
+        radius = self.fixation.radius_deg
+        for key in ("max_central_accuracy_deg", "max_drift_deg"):
+            v = getattr(self.tracker, key)
+            if v is not None and v >= radius:
+                raise ValueError(
+                    f"tracker.{key}: {v:g} deg is not below fixation.radius_deg {radius:g} deg "
+                    "(a tracker that far off at the cross cannot tell gaze inside the window "
+                    "from gaze outside it)")
         p = self.adjust.parameter
         if self.preset == "release" and self.geometry not in (None, "release"):
             # The enhancer's release preset always uses the release's own geometry.

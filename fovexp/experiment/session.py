@@ -27,13 +27,21 @@ from filelock import FileLock, Timeout
 
 from fovexp import FovexpError
 
+from .calibration import (
+    CalibrationFlow,
+    CalibrationTiming,
+    DriftCheck,
+    SimulatedCalibration,
+)
 from .gaze import (
     BlankingMonitor,
+    DisplayArea,
     FixationGeometry,
     GazeSample,
     MouseGaze,
     SimGazeParams,
     SimulatedGaze,
+    check_display_area,
     sample_row,
 )
 from .logs import (
@@ -48,7 +56,7 @@ from .logs import (
 )
 from .participant import SimTruth, SimulatedParticipant
 from .protocol import LoadedProtocol, Trial
-from .quality import target_points, validation_result
+from .quality import target_points
 from .stimuli import load_stimulus, split_screen
 from .trial import InputEvent, Key, TrialState, ValueAdjuster
 from .validation import check_participant
@@ -71,7 +79,8 @@ class Screen(Protocol):
     def measure_display(self) -> tuple[float | None, tuple[int, int], tuple[int, int]]: ...
     def message(self, text: str, keys: list[str] | None, timeout_s: float | None,
                 each_frame: Callable[[], None] | None = None) -> str | None: ...
-    def show_point(self, x: float, y: float) -> None: ...
+    def calibration_frame(self, view: Any) -> list[str]: ...
+    def take_operator_keys(self) -> set[str]: ...
     def set_reference(self, left: np.ndarray) -> None: ...
     def set_test(self, right: np.ndarray) -> None: ...
     def draw(self, blank: bool) -> float: ...
@@ -105,6 +114,8 @@ class SessionOptions:
     sim_gaze: SimGazeParams | None = None
     #: seconds of each instruction/break screen in a dry run (no key presses there)
     dry_message_s: float = 0.2
+    #: the calibration screens' durations (default Titta's; a dry run's are shorter)
+    calibration_timing: CalibrationTiming | None = None
 
 
 class Aborted(Exception):
@@ -391,6 +402,8 @@ class Session:
             return EXIT_OK
         try:
             self.gaze = gaze if gaze is not None else self.make_gaze()
+            # the tracker's display area against the profile: before any window opens
+            self.area, area_info = self._display_area()
             if screen_factory is None:
                 from .window import PsychoScreen
 
@@ -408,7 +421,7 @@ class Session:
         if isinstance(self.gaze, MouseGaze):
             self.gaze.position = self.screen.mouse_position
         self._start_info()
-        self._write_info(display_check=check)
+        self._write_info(display_check=check, display_area=area_info)
         self.trial_log = TrialLog(self.folder / "trials.csv")
         sid = self.session_id
         self.gaze_log = BatchLog(self.folder / f"gaze-{sid}.csv", GAZE_COLUMNS)
@@ -534,73 +547,124 @@ class Session:
         """Samples that arrived outside a trial's frame loop, into the gaze log (trial empty)."""
         self.gaze_log.extend(self._gaze_rows(None, self.gaze.poll()))
 
-    # -- tracker calibration and validation ------------------------------------------------------
-    def _tracker_setup(self) -> None:
-        """Calibrate (Tobii) and validate; refuse to start when accuracy is worse than the
-        protocol's limit (``tracker.max_accuracy_deg``) or too many samples were lost
-        (``tracker.max_data_loss``). A failed calibration or validation offers a new one."""
-        spec = self.protocol.spec.tracker
+    # -- tracker calibration, validation and drift checks ---------------------------------------
+    def _display_area(self) -> tuple[DisplayArea, dict[str, Any]]:
+        """The display area the gaze source's normalised coordinates refer to: a Tobii's own
+        (refused when its size is more than a few mm off the display profile's), else the
+        profile's nominal one. Returns it and what goes into the session file."""
+        get = getattr(self.gaze, "display_area", None)
+        area = get() if get is not None else DisplayArea.nominal(self.display)
+        if area.source != "tracker":
+            return area, {"source": area.source, "display_area": area.to_dict()}
+        try:
+            info = check_display_area(area, self.display)
+        except FovexpError as exc:
+            raise FovexpError(f"{exc} ({self.protocol.display_name})") from None
+        return area, {"source": "tracker", **info}
+
+    def _ppd_px(self) -> float:
+        """Window pixels per degree at the screen centre."""
+        return self.fixation.ppd_centre * self.screen.size[0] / self.display.width_px
+
+    def _cal_timing(self) -> CalibrationTiming:
+        if self.opts.calibration_timing is not None:
+            return self.opts.calibration_timing
+        return CalibrationTiming.dry_run() if self.opts.dry_run else CalibrationTiming()
+
+    def _tracker_setup(self, reason: str = "start") -> None:
+        """Calibrate and validate on the calibration screen (``fovexp.experiment.calibration``:
+        head position, animated targets, per-point results with accept / redo). Every
+        calibration and validation goes into the session file's ``tracker_quality`` (with
+        ``reason``: ``start``, ``operator`` (C between trials) or ``drift``); only a validation
+        within the protocol's limits can be accepted. A failed set-up at the start stops the
+        session with the reason; the operator's Q (confirmed) quits, progress saved."""
+        spec = self.protocol.spec
         if not getattr(self.gaze, "validated", True):  # the mouse (and test scripts)
             self.info["tracker_quality"].append({"time": now_iso(), "skipped": self.gaze.name})
             self._write_info()
             return
-        while True:
-            if hasattr(self.gaze, "calibrate"):  # a real tracker
-                self._message("Eye-tracker calibration: look at each dot until it moves.\n\n"
-                              "Press Space to start.", ["space"])
-                cal = self.gaze.calibrate(target_points(spec.calibration_points),
-                                          self._show_calibration_point)
-            else:
-                cal = {"status": "simulated", "failed": False}
-            if cal.get("failed"):
-                self.info["tracker_quality"].append({"time": now_iso(), "calibration": cal})
-                self._write_info()
-                self._retry_or_stop(f"eye-tracker calibration failed ({cal.get('reason')})")
-                continue
-            per_target = []
-            for x, y in target_points(spec.validation_points):
-                self.screen.show_point(x, y)
-                per_target.append(((x, y), self._collect(x, y)))
-            res = validation_result(self.fixation, per_target, spec.max_accuracy_deg,
-                                    spec.max_data_loss)
-            self.info["tracker_quality"].append(
-                {"time": now_iso(), "calibration": cal, "validation": res.to_dict()})
+        if hasattr(self.gaze, "calibration"):  # a real tracker
+            backend = self.gaze.calibration()
+        else:
+            backend = SimulatedCalibration(self.gaze)
+
+        def record(rec: dict[str, Any], new: bool) -> None:
+            if new:
+                rec["reason"] = reason
+                self.info["tracker_quality"].append(rec)  # the same dict: updates rewrite it
             self._write_info()
-            if res.failure is None:
-                self._message(f"Eye tracker OK. {res.summary()}", ["space"], 1.0)
-                return
-            self._retry_or_stop(f"eye-tracker validation failed: {res.failure}",
-                                res.summary(), accuracy_deg=res.accuracy_deg,
-                                data_loss=res.data_loss)
 
-    def _retry_or_stop(self, why: str, detail: str = "", **event: Any) -> None:
-        """R recalibrates (returns); anything else stops the session with ``why``."""
-        key = self._message(f"{why[0].upper()}{why[1:]}.\n{detail}\n\nR: recalibrate    Q: quit",
-                            ["r", "q"])
-        if key != "r":
-            self._event("tracker_setup_failed", reason=why, **event)
-            raise FovexpError(f"{why} ({detail})" if detail else why)
+        flow = CalibrationFlow(
+            backend, target_points(spec.tracker.calibration_points),
+            target_points(spec.tracker.validation_points), spec.quality_limits, self.area,
+            10.0 * self.display.distance_cm, spec.tracker.sampling_hz, self.screen.size,
+            self._ppd_px(), spec.fixation.radius_deg, timing=self._cal_timing(),
+            look_at=getattr(self.gaze, "look_at", None), on_record=record,
+            auto=self.opts.dry_run, seed=self.seed + len(self.info["tracker_quality"]),
+            now_iso=now_iso)
+        self._run_flow(flow)
+        if flow.outcome == "accepted":
+            self._since_drift = 0
+            return
+        if flow.outcome == "failed" or (reason == "start" and flow.failure):
+            self._event("tracker_setup_failed", reason=flow.failure, stage=reason)
+            raise FovexpError(flow.failure or "eye-tracker set-up failed")
+        self._event("aborted", during=f"eye-tracker calibration ({reason})")
+        raise Aborted()
 
-    def _show_calibration_point(self, x: float, y: float) -> None:
-        self.screen.show_point(x, y)
-        t_end = time.monotonic() + 1.0
-        while time.monotonic() < t_end:
-            self.screen.show_point(x, y)
+    def _run_flow(self, flow: CalibrationFlow | DriftCheck) -> None:
+        """Drive a calibration screen or a drift check: draw its view, read the keys, feed it
+        the gaze (which goes to the gaze log, between trials) until it has an outcome."""
+        flow.start(self.gaze.now_us())
+        try:
+            while not flow.finished:
+                keys = self.screen.calibration_frame(flow.view())
+                for ev in self.gaze.poll_events():
+                    self._event(ev.kind, **ev.detail)
+                samples = self.gaze.poll()
+                self.gaze_log.extend(self._gaze_rows(None, samples))
+                flow.feed(samples)
+                flow.step(keys, self.gaze.now_us())
+        finally:
+            flow.close()
 
-    def _collect(self, x: float, y: float, settle_s: float = 0.5,
-                 collect_s: float = 0.8) -> list[GazeSample]:
-        if isinstance(self.gaze, SimulatedGaze):
-            self._drain_gaze()  # the stream so far; the simulated eye then "looks" at the dot
-            return self.gaze.fixate((x, y), int(collect_s * self.gaze.p.rate_hz))
-        t0 = time.monotonic()
-        out: list[GazeSample] = []
-        while time.monotonic() - t0 < settle_s + collect_s:
-            self.screen.show_point(x, y)
-            s = self.gaze.poll()
-            self.gaze_log.extend(self._gaze_rows(None, s))
-            if time.monotonic() - t0 >= settle_s:
-                out.extend(s)
-        return out
+    def _between_trials_checks(self, trial: Trial) -> None:
+        """After ``trial`` (called from :meth:`_trials`): the operator's C (pressed during the
+        trial or after it) recalibrates; D, or ``tracker.drift_check_every`` main trials since
+        the last check or calibration, runs a drift check (:meth:`_drift_check`). Nothing after
+        the last trial, nor with a source that is not calibrated (the mouse)."""
+        keys = self.screen.take_operator_keys()
+        if not getattr(self.gaze, "validated", True):
+            return
+        if not any(t.index > trial.index for t in self.remaining):
+            return
+        self._since_drift = getattr(self, "_since_drift", 0) + (not trial.practice)
+        every = self.protocol.spec.tracker.drift_check_every
+        if "c" in keys:
+            self._event("recalibration", reason="operator", after_trial=trial.index)
+            self._tracker_setup("operator")
+        elif "d" in keys or (every and self._since_drift >= every):
+            self._drift_check(trial, "operator" if "d" in keys else "scheduled")
+
+    def _drift_check(self, trial: Trial, why: str) -> None:
+        """The central target; the offset of the mean gaze per eye against the protocol's
+        drift limit (``tracker.max_drift_deg``, by default the central accuracy limit); logged
+        as a ``drift_check`` event; a recalibration when the operator (or a dry run) asks."""
+        spec = self.protocol.spec
+        check = DriftCheck(self.area, 10.0 * self.display.distance_cm, spec.tracker.sampling_hz,
+                           self.screen.size, self._ppd_px(), spec.drift_limit_deg,
+                           spec.tracker.max_data_loss, timing=self._cal_timing(),
+                           look_at=getattr(self.gaze, "look_at", None), auto=self.opts.dry_run)
+        self._run_flow(check)
+        self._since_drift = 0
+        self._event("drift_check", why=why, after_trial=trial.index, outcome=check.outcome,
+                    checks=[r.to_dict() for r in check.results])
+        if check.outcome == "recalibrate":
+            self._event("recalibration", reason="drift", after_trial=trial.index)
+            self._tracker_setup("drift")
+        elif check.outcome == "quit":
+            self._event("aborted", during="drift check", after_trial=trial.index)
+            raise Aborted()
 
     # -- instructions, practice, trials, breaks --------------------------------------------------
     def _instructions(self) -> None:
@@ -647,6 +711,7 @@ class Session:
                 if spec.break_every and left and main_done_this_run % spec.break_every == 0:
                     self._message(f"Break. {left} trials to go.\n\nPress Space to continue.",
                                   ["space"])
+            self._between_trials_checks(trial)  # drift check / recalibration (D, C, every N)
 
     def _wait_reconnect(self, trial: Trial) -> None:
         """Tracker lost mid-session: screen blanked, a message, wait; Q quits (saved)."""

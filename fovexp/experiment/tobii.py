@@ -21,12 +21,15 @@ import numpy as np
 
 from fovexp import FovexpError
 
+from .calibration import CalibrationOutcome, PointSamples
 from .gaze import (
     GAZE_BUFFER_S,
     TRACKER_RATE_HZ,
+    DisplayArea,
     GazeSample,
     SampleBuffer,
     SourceEvent,
+    Vec3,
     monotonic_us,
 )
 
@@ -51,18 +54,30 @@ def _num(v: Any) -> float:
     return f
 
 
+def _origin(d: dict[str, Any], eye: str) -> Vec3 | None:
+    """The eye's gaze origin (user coordinate system, mm), or None when not valid."""
+    o = d.get(f"{eye}_gaze_origin_in_user_coordinate_system")
+    if not d.get(f"{eye}_gaze_origin_validity") or o is None:
+        return None
+    x, y, z = (_num(v) for v in tuple(o)[:3])
+    return (x, y, z) if all(math.isfinite(v) for v in (x, y, z)) else None
+
+
 def sample_from_sdk(d: dict[str, Any]) -> GazeSample:
     """A gaze sample from the SDK's dictionary (``subscribe_to(..., as_dictionary=True)``).
 
     ``*_gaze_point_on_display_area`` is already normalised with origin top-left, the runner's
-    convention; validity is per eye (``*_gaze_point_validity``: 1 valid, 0 invalid).
+    convention; validity is per eye (``*_gaze_point_validity``: 1 valid, 0 invalid). The gaze
+    origins (``*_gaze_origin_in_user_coordinate_system``, mm) are kept where valid: the
+    validation measures its angles from them.
     """
     lx, ly = (d.get("left_gaze_point_on_display_area") or (math.nan, math.nan))[:2]
     rx, ry = (d.get("right_gaze_point_on_display_area") or (math.nan, math.nan))[:2]
     lv = bool(d.get("left_gaze_point_validity")) and math.isfinite(_num(lx))
     rv = bool(d.get("right_gaze_point_validity")) and math.isfinite(_num(rx))
     return GazeSample(int(d["device_time_stamp"]), int(d["system_time_stamp"]),
-                      _num(lx), _num(ly), lv, _num(rx), _num(ry), rv)
+                      _num(lx), _num(ly), lv, _num(rx), _num(ry), rv,
+                      _origin(d, "left"), _origin(d, "right"))
 
 
 class TobiiGaze:
@@ -70,13 +85,16 @@ class TobiiGaze:
 
     ``tracker`` may be given (an object with the ``tobii_research.EyeTracker`` interface; tests
     pass a stand-in for the absent hardware); otherwise the first tracker found (or the one whose
-    address or serial number is ``address``) is used.
+    address or serial number is ``address``) is used. Besides the gaze it streams the user
+    position guide (for the calibration's head-position box), reports its display area
+    (:meth:`display_area`) and calibrates through the SDK (:meth:`calibration`).
     """
 
     name = "tobii"
 
     def __init__(self, frequency_hz: float = TRACKER_RATE_HZ, address: str | None = None,
-                 tracker: Any = None, stall_s: float = 0.5, rate_tolerance: float = 0.1) -> None:
+                 tracker: Any = None, stall_s: float = 0.5, rate_tolerance: float = 0.1,
+                 calibration_factory: Any = None) -> None:
         self.tr = import_tobii()
         if tracker is None:
             try:
@@ -105,6 +123,10 @@ class TobiiGaze:
         self._rate_tol = rate_tolerance
         self._recent_dev: list[int] = []
         self._rate_flagged = False
+        self._position: Any = None
+        #: makes the SDK's calibration object (default ``ScreenBasedCalibration``: see
+        #: :class:`TobiiCalibration`)
+        self.calibration_factory = calibration_factory
 
     # -- SDK callbacks: append only ------------------------------------------------------------
     def _on_gaze(self, data: dict[str, Any]) -> None:
@@ -118,6 +140,9 @@ class TobiiGaze:
 
     def _on_frequency(self, data: Any) -> None:
         self._notes.append(("frequency_changed", data))
+
+    def _on_position(self, data: Any) -> None:
+        self._position = data  # only the latest matters (one assignment: atomic)
 
     # -- lifecycle -----------------------------------------------------------------------------
     def start(self) -> None:
@@ -141,6 +166,11 @@ class TobiiGaze:
             raise
         except Exception as exc:
             raise FovexpError(f"starting the Tobii gaze stream failed: {exc}") from None
+        try:  # where the eyes are in the track box: the calibration's head-position screen
+            self.tracker.subscribe_to(tr.EYETRACKER_USER_POSITION_GUIDE, self._on_position,
+                                      as_dictionary=True)
+        except Exception:  # a model without the guide: the screen uses the gaze origins
+            pass
         self._subscribed = True
         self._last_sample_us = self.now_us()
 
@@ -151,7 +181,8 @@ class TobiiGaze:
                          (self.tr.EYETRACKER_NOTIFICATION_CONNECTION_LOST, self._on_lost),
                          (self.tr.EYETRACKER_NOTIFICATION_CONNECTION_RESTORED, self._on_restored),
                          (self.tr.EYETRACKER_NOTIFICATION_GAZE_OUTPUT_FREQUENCY_CHANGED,
-                          self._on_frequency)):
+                          self._on_frequency),
+                         (self.tr.EYETRACKER_USER_POSITION_GUIDE, self._on_position)):
             try:
                 self.tracker.unsubscribe_from(kind, cb)
             except Exception:  # shutting down: a failed unsubscribe must not hide the real error
@@ -232,39 +263,96 @@ class TobiiGaze:
         span = (ts[-1] - ts[0]) / 1e6
         return (len(ts) - 1) / span if span > 0 else None
 
-    # -- calibration ---------------------------------------------------------------------------
-    def calibrate(self, points: Sequence[tuple[float, float]], show_point: Any) -> dict[str, Any]:
-        """Screen-based calibration: ``show_point(x, y)`` draws the target and waits for the
-        participant to fixate it; the SDK then collects data there.
-
-        Returns a summary whose ``failed`` says whether the SDK could compute a calibration
-        (with ``reason`` when not); an SDK error is a failure too, so the operator can try again.
-        """
-        tr = self.tr
-        summary: dict[str, Any] = {"points": [list(p) for p in points]}
+    # -- geometry and calibration -------------------------------------------------------------
+    def display_area(self) -> DisplayArea:
+        """The display area the tracker's normalised gaze refers to (``get_display_area``, set
+        up in Tobii Pro Eye Tracker Manager), in its user coordinate system (mm)."""
         try:
-            cal = tr.ScreenBasedCalibration(self.tracker)
-            cal.enter_calibration_mode()
-            try:
-                for x, y in points:
-                    show_point(x, y)
-                    if cal.collect_data(x, y) != tr.CALIBRATION_STATUS_SUCCESS:
-                        # The SDK's advice: try a point once more before giving up on it.
-                        cal.collect_data(x, y)
-                result = cal.compute_and_apply()
-            finally:
-                cal.leave_calibration_mode()
-        except FovexpError:
-            raise
+            return DisplayArea.from_sdk(self.tracker.get_display_area())
         except Exception as exc:  # the SDK's own error types
-            return {**summary, "status": "error", "failed": True,
-                    "reason": f"{type(exc).__name__}: {exc}"}
-        used = len(result.calibration_points)
+            raise FovexpError(
+                f"reading the Tobii tracker's display area failed ({type(exc).__name__}: {exc}): "
+                "set it up in Tobii Pro Eye Tracker Manager (Display setup)") from None
+
+    def user_position(self) -> tuple[Vec3 | None, Vec3 | None]:
+        """Each eye's position in the track box from the user position guide (normalised, 0.5
+        the middle; z 0 nearest the tracker), or None where the eye is not found."""
+        d = self._position
+        if not isinstance(d, dict):
+            return None, None
+        out: list[Vec3 | None] = []
+        for eye in ("left", "right"):
+            pos = d.get(f"{eye}_user_position")
+            if not d.get(f"{eye}_user_position_validity") or pos is None:
+                out.append(None)
+                continue
+            x, y, z = (_num(v) for v in tuple(pos)[:3])
+            out.append((x, y, z) if all(math.isfinite(v) for v in (x, y, z)) else None)
+        return out[0], out[1]
+
+    def calibration(self) -> TobiiCalibration:
+        """The SDK's screen-based calibration as a :class:`fovexp.experiment.calibration`
+        backend."""
+        return TobiiCalibration(self, self.calibration_factory)
+
+
+class TobiiCalibration:
+    """``tobii_research.ScreenBasedCalibration`` behind the calibration flow's backend interface
+    (:class:`fovexp.experiment.calibration.CalibrationBackend`). Its calls block (collecting a
+    point takes the SDK about a second), so the flow runs them on a worker thread.
+
+    ``factory`` makes the calibration object from the tracker (default the SDK's class, which
+    accepts only a connected ``tobii_research.EyeTracker``; tests without a tracker pass a
+    stand-in for it).
+    """
+
+    def __init__(self, gaze: TobiiGaze, factory: Any = None) -> None:
+        self.gaze = gaze
+        self.tr = gaze.tr
+        self.factory = factory or gaze.tr.ScreenBasedCalibration
+        self.cal: Any = None
+
+    def begin(self) -> None:
+        self.cal = self.factory(self.gaze.tracker)
+        self.cal.enter_calibration_mode()
+
+    def collect(self, x: float, y: float) -> bool:
+        ok = self.cal.collect_data(x, y) == self.tr.CALIBRATION_STATUS_SUCCESS
+        if not ok:  # the SDK's advice: try a point once more before giving up on it
+            ok = self.cal.collect_data(x, y) == self.tr.CALIBRATION_STATUS_SUCCESS
+        return ok
+
+    def discard(self, x: float, y: float) -> None:
+        self.cal.discard_data(x, y)
+
+    def compute(self) -> CalibrationOutcome:
+        tr = self.tr
+        result = self.cal.compute_and_apply()
+        points: dict[tuple[float, float], PointSamples] = {}
+        for cp in result.calibration_points:
+            x, y = (float(v) for v in cp.position_on_display_area)
+            ps = PointSamples()
+            for smp in cp.calibration_samples:
+                for eye, out in ((smp.left_eye, ps.left), (smp.right_eye, ps.right)):
+                    px, py = (float(v) for v in eye.position_on_display_area)
+                    out.append((px, py, eye.validity == tr.VALIDITY_VALID_AND_USED))
+            points[(x, y)] = ps
         failed = result.status == tr.CALIBRATION_STATUS_FAILURE
-        out = {**summary, "status": str(result.status), "points_used": used, "failed": failed}
-        if failed:
-            out["reason"] = f"{used} of {len(points)} points usable"
-        return out
+        return CalibrationOutcome(
+            failed=failed, status=str(result.status), points=points,
+            reason="the tracker could not compute a calibration from these points"
+            if failed else "")
+
+    def end(self) -> None:
+        if self.cal is not None:
+            try:
+                self.cal.leave_calibration_mode()
+            except Exception:  # leaving after an error must not hide the error
+                pass
+            self.cal = None
+
+    def user_position(self) -> tuple[Vec3 | None, Vec3 | None]:
+        return self.gaze.user_position()
 
 
 def rate_of(samples: Sequence[GazeSample]) -> float:

@@ -2,9 +2,10 @@
 
 It draws the split screen of paper section 6.1 (reference half left, processed mirror right,
 fixation cross on the seam), black frames when the gaze check says so (the cross stays, so the
-participant can find it again), text screens and calibration targets, and reads the wheel
-(Shift held: fine step) and the keys. Under Xvfb there is no vsync, so a dry run paces flips to
-``refresh_hz`` itself.
+participant can find it again), text screens and the calibration screens (the views of
+``fovexp.experiment.calibration``: head-position box, animated targets, per-point results), and
+reads the wheel (Shift held: fine step) and the keys. Under Xvfb there is no vsync, so a dry run
+paces flips to ``refresh_hz`` itself.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ import numpy as np
 
 from fovexp import FovexpError
 
+from .calibration import CAL_KEYS, HeadBoxView, ResultView, TargetView, TextView
 from .trial import InputEvent, Key, WheelCarry, wheel_notches
 
 KEYS = ["return", "num_enter", "escape", "space", "q", "r"]
@@ -25,6 +27,12 @@ KEYS = ["return", "num_enter", "escape", "space", "q", "r"]
 REFRESH_TOLERANCE = 0.05
 #: a dry run paces its flips to this rate (Xvfb has no vsync)
 DRY_RUN_REFRESH_HZ = 60.0
+#: the operator's keys between trials, noticed on any screen (a trial's included): D a drift
+#: check, C a recalibration, after the current trial
+OPERATOR_KEYS = ("d", "c")
+#: calibration screens: Titta's mid-grey background; the two eyes' colours on the result plot
+CAL_BACKGROUND = (0.0, 0.0, 0.0)
+EYE_COLOURS = {"left": (-0.9, 0.7, -0.9), "right": (-0.5, 0.1, 1.0)}
 
 
 def check_display(measured_hz: float | None, window_size: tuple[int, int],
@@ -96,6 +104,9 @@ class PsychoScreen:
         # Our own pyglet handlers: PsychoPy's wheel handler drops scroll events whenever a
         # psychopy.hardware.mouse.Mouse exists, and the modifier must be read at scroll time.
         self.win.winHandle.push_handlers(self._keys, on_mouse_scroll=self._on_scroll)
+        # a frame of its own: in the one above it would replace the KeyStateHandler's
+        self._operator_keys: set[str] = set()
+        self.win.winHandle.push_handlers(on_key_press=self._on_key_press)
         self.mouse = event.Mouse(win=self.win, visible=not fullscreen)
         half = (w // 2, h)
         self.left = visual.ImageStim(self.win, image=np.zeros((h, w // 2, 3)), size=half,
@@ -112,10 +123,9 @@ class PsychoScreen:
         ]
         self.text = visual.TextStim(self.win, text="", color=(0.8, 0.8, 0.8), units="pix",
                                     height=max(12, h // 30), wrapWidth=0.8 * w)
-        self.dot = visual.Circle(self.win, radius=max(6, h // 60), fillColor=(1, 1, 1),
-                                 lineColor=None, units="pix")
-        self.dot_centre = visual.Circle(self.win, radius=max(2, h // 250),
-                                        fillColor=(-1, -1, -1), lineColor=None, units="pix")
+        self._visual = visual
+        self._cal: dict[str, Any] | None = None  # the calibration screens' stimuli, made once
+        self._plot: tuple[Any, list[Any]] | None = None  # (the result view drawn, its stimuli)
         self._last_flip: float | None = None
         #: keep a copy of every frame shown in ``last_frame`` (tests; slow)
         self.capture = False
@@ -171,14 +181,178 @@ class PsychoScreen:
             c.draw()
         return self._flip()
 
-    def show_point(self, x: float, y: float) -> None:
+    # -- calibration screens -------------------------------------------------------------
+    def _px(self, x: float, y: float) -> tuple[float, float]:
+        """Normalised (origin top-left, y down) to PsychoPy pixels (origin centre, y up)."""
         w, h = self.size
-        pos = ((x - 0.5) * w, (0.5 - y) * h)
-        self.dot.pos = pos
-        self.dot_centre.pos = pos
-        self.dot.draw()
-        self.dot_centre.draw()
+        return (x - 0.5) * w, (0.5 - y) * h
+
+    def _cal_stims(self) -> dict[str, Any]:
+        if self._cal is None:
+            v, (w, h) = self._visual, self.size
+            grey = CAL_BACKGROUND
+            self._cal = {
+                "bg": v.Rect(self.win, width=w, height=h, fillColor=grey, lineColor=None,
+                             units="pix"),
+                "shade": v.Rect(self.win, width=w, height=h, fillColor=grey, lineColor=None,
+                                opacity=0.85, units="pix"),
+                "disc": v.Circle(self.win, radius=1, fillColor=(-1, -1, -1), lineColor=None,
+                                 units="pix", edges=64),
+                "bar": v.Rect(self.win, width=1, height=1, fillColor=(1, 1, 1), lineColor=None,
+                              units="pix"),
+                "ring": v.Circle(self.win, radius=1, fillColor=None, lineColor=(1, 1, 1),
+                                 lineWidth=max(1.0, h / 540), units="pix", edges=64),
+                "box": v.Rect(self.win, width=1, height=1, fillColor=None, lineColor=(1, 1, 1),
+                              lineWidth=max(1.0, h / 360), units="pix"),
+                "line": v.Line(self.win, start=(0, 0), end=(1, 1), lineColor=(1, 1, 1),
+                               lineWidth=max(1.0, h / 720), units="pix"),
+                "text": v.TextStim(self.win, text="", color=(1, 1, 1), units="pix",
+                                   height=max(10, h // 40), wrapWidth=0.9 * w,
+                                   alignText="center"),
+                "prompt": v.TextStim(self.win, text="", color=(0.7, 0.7, 0.7), units="pix",
+                                     height=max(9, h // 55), wrapWidth=0.95 * w,
+                                     pos=(0, -0.45 * h)),
+            }
+        return self._cal
+
+    def calibration_frame(self, view: Any) -> list[str]:
+        """Draw one frame of a calibration screen's view and flip; returns the keys pressed
+        since the last call (:data:`fovexp.experiment.calibration.CAL_KEYS`)."""
+        self._cal_stims()["bg"].draw()
+        self._draw_view(view)
         self._flip()
+        return list(self._event.getKeys(keyList=CAL_KEYS))
+
+    def _draw_view(self, view: Any) -> None:
+        if isinstance(view, TargetView):
+            self._draw_target(view.pos, view.back_px, view.front_px)
+        elif isinstance(view, HeadBoxView):
+            self._draw_head_box(view)
+        elif isinstance(view, ResultView):
+            self._draw_result(view)
+        elif isinstance(view, TextView):
+            c = self._cal_stims()
+            if view.behind is not None:
+                self._draw_view(view.behind)
+                c["shade"].draw()
+            self._text(view.text, (0, 0.05 * self.size[1]))
+            self._prompt(view.prompt)
+
+    def _text(self, text: str, pos: tuple[float, float]) -> None:
+        t = self._cal_stims()["text"]
+        if t.text != text:
+            t.text = text
+        t.pos = pos
+        t.draw()
+
+    def _prompt(self, text: str) -> None:
+        t = self._cal_stims()["prompt"]
+        if t.text != text:
+            t.text = text
+        t.draw()
+
+    def _draw_target(self, pos: tuple[float, float], back_px: float, front_px: float) -> None:
+        """Thaler et al. 2013's ABC target, centred exactly on ``pos`` (normalised)."""
+        c = self._cal_stims()
+        xy = self._px(*pos)
+        disc, bar = c["disc"], c["bar"]
+        disc.pos, disc.radius, disc.fillColor = xy, back_px / 2, (-1, -1, -1)
+        disc.draw()
+        bar.pos = xy
+        for wh in ((back_px, front_px), (front_px, back_px)):
+            bar.width, bar.height = wh
+            bar.draw()
+        disc.radius = front_px / 2
+        disc.draw()
+
+    def _draw_head_box(self, view: HeadBoxView) -> None:
+        c = self._cal_stims()
+        w, h = self.size
+        bh = 0.45 * h
+        bw = bh * 340 / 260  # the proportions of a Tobii Pro Spectrum's track box
+        box = c["box"]
+        box.width, box.height, box.pos = bw, bh, (0, 0)
+        box.lineColor = (-0.6, 0.8, -0.6) if view.ok else (1.0, -0.2, -0.8)
+        box.draw()
+        found = [e for e in view.eyes if e is not None]
+        if found:
+            mx = sum(e[0] for e in found) / len(found)
+            my = sum(e[1] for e in found) / len(found)
+            ring = c["ring"]
+            ring.pos = ((mx - 0.5) * bw, (0.5 - my) * bh)
+            ring.radius = 0.28 * bh * view.scale
+            ring.lineColor = (1, 1, 1)
+            ring.draw()
+            disc = c["disc"]
+            for eye, e in zip(("left", "right"), view.eyes, strict=True):
+                if e is None:
+                    continue
+                disc.pos = ((e[0] - 0.5) * bw, (0.5 - e[1]) * bh)
+                disc.radius = 0.035 * bh * view.scale
+                disc.fillColor = EYE_COLOURS[eye]
+                disc.draw()
+        self._text(view.text, (0, 0.36 * h))
+        self._prompt(view.prompt)
+
+    def _draw_result(self, view: ResultView) -> None:
+        if self._plot is None or self._plot[0] is not view:
+            self._plot = (view, self._result_stims(view))
+        c = self._cal_stims()
+        for p in view.points:
+            self._draw_target(p.target, view.target_px, max(2.0, view.target_px / 6))
+            if p.target == (0.5, 0.5) and view.mode == "validation":
+                ring = c["ring"]
+                ring.pos, ring.radius = self._px(*p.target), view.window_radius_px
+                ring.lineColor = (1, 1, 1) if p.ok else (1.0, -0.2, -0.8)
+                ring.draw()
+            line = c["line"]
+            for eye, m in p.mean.items():
+                if m is not None:
+                    line.start, line.end = self._px(*p.target), self._px(*m)
+                    line.lineColor = EYE_COLOURS[eye]
+                    line.draw()
+        for stim in self._plot[1]:
+            stim.draw()
+        self._text(view.title + "\n" + view.text, (0, 0.36 * self.size[1]))
+        self._prompt(view.prompt)
+
+    def _result_stims(self, view: ResultView) -> list[Any]:
+        """The samples (one ElementArrayStim per eye: one draw call each) and the labels."""
+        v, h = self._visual, self.size[1]
+        out: list[Any] = []
+        dot = max(2.0, h / 500)
+        for eye in ("left", "right"):
+            xys = [self._px(x, y) for p in view.points for x, y in p.samples.get(eye, [])]
+            means = [self._px(*m) for p in view.points if (m := p.mean.get(eye)) is not None]
+            if xys:
+                out.append(v.ElementArrayStim(
+                    self.win, units="pix", nElements=len(xys), xys=xys, sizes=dot,
+                    colors=EYE_COLOURS[eye], colorSpace="rgb", elementTex=None,
+                    elementMask="circle"))
+            if means:
+                out.append(v.ElementArrayStim(
+                    self.win, units="pix", nElements=len(means), xys=means, sizes=4 * dot,
+                    colors=EYE_COLOURS[eye], colorSpace="rgb", elementTex=None,
+                    elementMask="circle"))
+        for p in view.points:
+            x, y = self._px(*p.target)
+            out.append(v.TextStim(self.win, text=f"{p.number}  {p.label}".strip(),
+                                  color=(1, 1, 1) if p.ok else (1.0, -0.2, -0.8), units="pix",
+                                  height=max(9, h // 60), pos=(x, y - 0.06 * h)))
+        return out
+
+    def take_operator_keys(self) -> set[str]:
+        """The operator's between-trial keys (:data:`OPERATOR_KEYS`) pressed since the last
+        call, on whatever screen was up."""
+        self.win.winHandle.dispatch_events()
+        keys, self._operator_keys = self._operator_keys, set()
+        return keys
+
+    def _on_key_press(self, symbol: int, modifiers: int) -> None:
+        name = self._pkey.symbol_string(symbol).lower()
+        if name in OPERATOR_KEYS:
+            self._operator_keys.add(name)
+        # returning None lets the other handlers (PsychoPy's key buffer) see the key too
 
     def message(self, text: str, keys: list[str] | None, timeout_s: float | None,
                 each_frame: Callable[[], None] | None = None) -> str | None:

@@ -62,10 +62,17 @@ ISO_RE = re.compile(
     r"^\d{4}-\d{2}-\d{2}[T ]\d{2}:\d{2}(:\d{2}(\.\d+)?)?(Z|[+-]\d{2}(:?\d{2})?)?$"
 )
 
+#: The gaze log's last columns: each eye's position (the tracker's gaze origin, mm, in the
+#: frame of the session's ``display_area``), empty where not measured.
+GAZE_ORIGIN_COLUMNS: tuple[str, ...] = (
+    "left_origin_x_mm", "left_origin_y_mm", "left_origin_z_mm",
+    "right_origin_x_mm", "right_origin_y_mm", "right_origin_z_mm",
+)
 #: ``gaze-<session>.csv``: one row per tracker sample; times in microseconds.
 GAZE_COLUMNS: tuple[str, ...] = (
     "trial_index", "device_time_us", "system_time_us", "left_x", "left_y", "left_valid",
     "right_x", "right_y", "right_valid", "x", "y", "valid", "eccentricity_deg",
+    *GAZE_ORIGIN_COLUMNS,
 )
 #: ``frames-<session>.csv``: one row per stimulus frame; ``value`` is the adjusted value of the
 #: frame actually on screen.

@@ -58,14 +58,19 @@ def check_common(folder: Path, n_trials: int, n_practice: int) -> list[dict]:
     assert info["protocol_sha256"] == rows[0]["protocol_sha256"]
     assert info["display"]["name"] == "lg-oled55cx" and info["tracker"]["name"] == "simulated"
     q = info["tracker_quality"][0]["validation"]
-    assert q["passed"] and set(q["left"]) >= {"accuracy_deg", "precision_rms_s2s_deg",
-                                               "data_loss"}
+    assert q["passed"] and set(q["left"]) >= {"accuracy_deg", "central_accuracy_deg",
+                                               "precision_rms_s2s_deg", "data_loss", "targets"}
+    assert info["tracker_quality"][0]["accepted"] and q["origins"] == "measured gaze origin"
+    assert q["central_accuracy_deg"] < q["limits"]["max_central_accuracy_deg"] == 0.5
+    assert info["display_area"]["source"] == "profile"
     for r in rows:
         assert r["tracker"] == "simulated" and r["seed"] == info["seed"]
         assert r["response_time_s"] > 0 and r["wheel_events"] > 0
         assert 0.0 <= r["blanked_fraction"] <= 1.0 and r["dropped_frames"] >= 0
     gaze = read_csv(folder / f"gaze-{sid}.csv")
     assert list(gaze[0]) == list(GAZE_COLUMNS)
+    # the simulated eyes' positions: 71.5 cm in front of the screen
+    assert {g["left_origin_z_mm"] for g in gaze if g["left_valid"] == "1"} == {"715.0"}
     per_trial = {}
     for g in gaze:
         if g["trial_index"]:
@@ -114,6 +119,11 @@ def test_dry_run_calibration_fe(ws: Path) -> None:
         truth = PAPER_TABLE2.at(r["blur_rate"])[0]
         assert abs(r["final_value"] - truth) <= 0.0025 + 1e-9
         assert 0.0 <= r["start_value"] <= 0.4
+    # a drift check after every 10 main trials (the protocol's tracker.drift_check_every)
+    info = json.loads(next(folder.glob("session-*.json")).read_text())
+    drift = [e for e in info["events"] if e["event"] == "drift_check"]
+    assert [(e["why"], e["outcome"]) for e in drift] == [("scheduled", "ok")]
+    assert drift[0]["after_trial"] == 10  # the 10th main trial (index 0 is the practice)
 
 
 def test_dry_run_calibration_sk(ws: Path) -> None:

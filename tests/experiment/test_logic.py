@@ -1,5 +1,5 @@
 """Window-free runner logic: value stepping, the blanking decision, gaze simulation, the
-simulated participant, validation metrics and crash-safe logs."""
+simulated participant and crash-safe logs (validation metrics: test_quality.py)."""
 
 from __future__ import annotations
 
@@ -22,7 +22,6 @@ from fovexp.experiment.gaze import (
 )
 from fovexp.experiment.logs import TRIAL_COLUMNS, BatchLog, TrialLog, read_trials
 from fovexp.experiment.participant import SimTruth, SimulatedParticipant
-from fovexp.experiment.quality import validation_result
 from fovexp.experiment.trial import (
     BlankingLog,
     FrameTimer,
@@ -227,22 +226,29 @@ def test_simulated_gaze_is_seeded_and_plausible(fix: FixationGeometry) -> None:
 
 def test_simulated_gaze_stream_is_independent_of_validation_and_disconnects(
         fix: FixationGeometry) -> None:
-    """Sample i depends on the seed and i only: not on a validation's fixations run in between
-    (at whatever time), nor on a lost connection that hid some samples."""
+    """Sample i depends on the seed, i and the target looked at only: looking at a validation
+    target for a while (at whatever time) changes only the samples while on it, and a lost
+    connection only hides samples; the samples on a target are the same whenever it is
+    looked at."""
     clock = [0]
     ref = SimulatedGaze(fix, seed=9, clock_us=lambda: clock[0])
     other = SimulatedGaze(fix, seed=9, clock_us=lambda: clock[0])
-    ref.start()
-    other.start()
-    got_ref, got_other = [], []
+    early = SimulatedGaze(fix, seed=9, clock_us=lambda: clock[0])
+    for g in (ref, other, early):
+        g.start()
+    early.look_at((0.3, 0.3))  # on the target from 0.15 s on, throughout
+    got_ref, got_other, got_early = [], [], []
     for step in range(1, 31):  # 3 s
         clock[0] = step * 100_000
         got_ref += ref.poll()
+        got_early += early.poll()
         if step == 5:
-            other.fixate((0.3, 0.3), 480)  # a validation target, mid-stream
-        if step == 10:
+            other.look_at((0.3, 0.3))  # a validation target, mid-stream: on it 0.65 ... 0.95 s
+        if step == 8:
+            other.look_at(None)
+        if step == 11:
             other.set_connected(False)
-        if step == 15:
+        if step == 16:
             other.set_connected(True)
         got_other += other.poll()
     assert len(got_ref) == 1801
@@ -250,15 +256,18 @@ def test_simulated_gaze_stream_is_independent_of_validation_and_disconnects(
     hidden = [s for s in got_ref if not any(o.device_time_us == s.device_time_us
                                             for o in got_other)]
     assert 2 * 600 * 0.1 < len(hidden) <= 600 * 0.6  # the disconnected half second
-    assert got_other and all(by_time[o.device_time_us] == o for o in got_other)
-    # the fixations themselves are seeded, and do not depend on when they were asked for
-    clock[0] = 0
-    a = SimulatedGaze(fix, seed=9, clock_us=lambda: clock[0]).fixate((0.3, 0.3), 100)
-    b = SimulatedGaze(fix, seed=9, clock_us=lambda: clock[0])
-    b.start()
-    clock[0] = 1_000_000
-    b.poll()
-    assert [s[2:] for s in b.fixate((0.3, 0.3), 100)] == [s[2:] for s in a]
+    on = [o for o in got_other if 650_000 <= o.device_time_us < 950_000]
+    off = [o for o in got_other if not 650_000 <= o.device_time_us < 950_000]
+    assert len(on) == 180 and off and all(by_time[o.device_time_us] == o for o in off)
+    pts = np.array([o.point for o in on if o.valid])
+    assert np.allclose(pts.mean(axis=0), (0.3, 0.3), atol=0.002)
+    # the samples on the target do not depend on when it was looked at
+    early_by_time = {s.device_time_us: s for s in got_early}
+    assert all(early_by_time[o.device_time_us] == o for o in on)
+    # each sample carries the simulated eyes' positions: 71.5 cm from the screen, 63 mm apart
+    s0 = next(o for o in got_other if o.left_valid and o.right_valid)
+    assert s0.left_origin_mm == pytest.approx((-31.5, 0.0, 715.0))
+    assert s0.right_origin_mm == pytest.approx((31.5, 0.0, 715.0))
 
 
 # -- simulated participant -------------------------------------------------------------------
@@ -308,55 +317,6 @@ def test_sim_truth_yaml(tmp_path: Path) -> None:
     f.write_text("sk_slop: 1\n")
     with pytest.raises(FovexpError, match=r"sk_slop=1: Extra inputs are not permitted"):
         SimTruth.load(f)
-
-
-# -- validation quality ----------------------------------------------------------------------
-
-def test_validation_metrics(fix: FixationGeometry) -> None:
-    targets = [(0.5, 0.5), (0.3, 0.3), (0.7, 0.7)]
-    per_target = []
-    for tx, ty in targets:
-        # Left eye exactly 0.5 deg off to the right of each target, right eye on target;
-        # every 10th sample lost on the right eye.
-        samples = []
-        for i in range(100):
-            lx, ly = point_at_offset(fix, (tx, ty), 0.5)
-            samples.append(GazeSample(i, i, lx, ly, True, tx, ty, i % 10 != 0))
-        per_target.append(((tx, ty), samples))
-    res = validation_result(fix, per_target, limit_deg=0.4)
-    assert res.left.accuracy_deg == pytest.approx(0.5, abs=0.01)
-    assert res.right.accuracy_deg == pytest.approx(0.0, abs=1e-6)
-    assert res.left.precision_rms_s2s_deg == pytest.approx(0.0, abs=1e-6)
-    assert res.right.data_loss == pytest.approx(0.1) and res.left.data_loss == 0
-    assert not res.passed and res.to_dict()["accuracy_deg"] == pytest.approx(0.5, abs=0.01)
-    assert "accuracy 0.50 deg" in res.failure
-    assert validation_result(fix, per_target, limit_deg=0.6).passed
-
-
-def test_validation_precision_is_rms_of_sample_to_sample_angles(fix: FixationGeometry) -> None:
-    """Steps of 0.1 and 0.3 deg alternating: RMS-S2S is sqrt((0.1^2 + 0.3^2) / 2) = 0.2236 deg
-    (a mean would give 0.2, a standard deviation 0.1)."""
-    target = (0.5, 0.5)
-    xs = [target[0]]
-    for i in range(60):
-        nxt = point_at_offset(fix, (xs[-1], target[1]), 0.1 if i % 2 == 0 else 0.3)
-        xs.append(nxt[0])
-    samples = [GazeSample(i, i, x, target[1], True, x, target[1], True)
-               for i, x in enumerate(xs)]
-    res = validation_result(fix, [(target, samples)], limit_deg=10.0)
-    assert res.left.precision_rms_s2s_deg == pytest.approx(math.sqrt(0.05), rel=0.01)
-
-
-def test_validation_fails_when_too_many_samples_are_lost(fix: FixationGeometry) -> None:
-    """One valid sample of 480 is on target (accuracy 0), but says nothing: refused."""
-    t = (0.5, 0.5)
-    samples = [GazeSample(i, i, *((0.5, 0.5, True) if i == 0 else (math.nan, math.nan, False)),
-                          0.5, 0.5, True) for i in range(480)]
-    res = validation_result(fix, [(t, samples)], limit_deg=1.0, max_data_loss=0.2)
-    assert res.accuracy_deg == pytest.approx(0.0, abs=1e-9)
-    assert res.data_loss == pytest.approx(479 / 480)
-    assert not res.passed and "data loss 99.8% is above the protocol's limit 20%" in res.failure
-    assert validation_result(fix, [(t, samples)], limit_deg=1.0, max_data_loss=1.0).passed
 
 
 def test_fixation_window_is_physical_whatever_the_enhancers_model(tmp_path: Path) -> None:
