@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import statistics
 import sys
 import time
@@ -198,9 +199,12 @@ def stage_profiles(display, image: np.ndarray, repeats: int, ctx=None) -> list[d
 
     out = []
     for impulses, simulate in STAGE_CASES:
+        load = os.getloadavg()[0]  # other work on the machine (the shaders' figures on llvmpipe)
         prof = profile_stages(display, image, EnhanceParams(blur_rate=0.34, impulses=impulses),
                               simulate_foveation=simulate, repeats=repeats, ctx=ctx).as_dict()
         prof["impulses"] = impulses
+        prof["machine"] = machine()  # when and where: a profile may be merged into older cases
+        prof["load_average_at_start"] = round(load, 2)
         key = device_for(prof["device"])
         if key is not None and image.shape[:2] == (2160, 3840):
             pred = predictions((key,))[(impulses, simulate)]["devices"][key]
@@ -261,11 +265,16 @@ def _stage_markdown(profiles: list[dict]) -> list[str]:
     if not profiles:
         return [""]
     p0 = profiles[0]
+    m = p0["machine"]
     heads = [f"{p['impulses']} imp., {p['frame'].split(', ', 1)[1]}" for p in profiles]
     lines = [
         "",
         f"## Per stage (median of {p0['repeats']} frames after {p0['warmup']} warm-up frames, "
         "blur-rate 0.34, gaze at the centre)",
+        "",
+        f"Device: {p0['device']}; {m['cpu']}, {m['cores']} cores; measured {m['date']}; "
+        "load average at the start of each profile: "
+        + ", ".join(f"{p['load_average_at_start']:.1f}" for p in profiles) + ".",
         "",
         f"Timing: {p0['timing_method']}. A stage's time is the sum of its dispatches' "
         "(transfers are not dispatches: the upload, the impulses' records and the read-back "
@@ -287,10 +296,10 @@ def _stage_markdown(profiles: list[dict]) -> list[str]:
            if predicted else "; no roofline prediction for this device "
            "(benchmarks/gpu_roofline.py names the RTX 2080 Ti and H100)") + ":",
         "",
-        "| Entry | " + " | ".join(
+        "| Entry | Dispatches | " + " | ".join(
             h + (" (predicted)" if "predicted_ms" in p else "")
             for h, p in zip(heads, profiles, strict=True)) + " |",
-        "|---|" + "---|" * len(profiles),
+        "|---|---|" + "---|" * len(profiles),
     ]
 
     def cell(p: dict, k: str) -> str:
@@ -301,8 +310,9 @@ def _stage_markdown(profiles: list[dict]) -> list[str]:
 
     entries = list(dict.fromkeys(k for p in profiles for k in p["dispatches_ms"]))
     for k in entries:
-        lines.append(f"| {k} | " + " | ".join(cell(p, k) for p in profiles) + " |")
-    lines.append("| **frame** | " + " | ".join(
+        counts = "/".join(str(p["dispatch_counts"].get(k, 0)) for p in profiles)
+        lines.append(f"| {k} | {counts} | " + " | ".join(cell(p, k) for p in profiles) + " |")
+    lines.append("| **frame** | | " + " | ".join(
         f"**{p['frame_ms']:.2f} ms**" + (f" ({p['predicted_total_ms']:.2f})"
                                          if "predicted_total_ms" in p else "")
         for p in profiles) + " |")

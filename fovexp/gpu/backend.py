@@ -89,6 +89,7 @@ class _DispatchTimer:
         self.ctx, self.query, self.method = ctx, query, method
         self.total_s = 0.0
         self.entries_s: dict[str, float] = {}
+        self.counts: dict[str, int] = {}
 
     @classmethod
     def for_context(cls, ctx: Any, programs: Any) -> _DispatchTimer:
@@ -136,6 +137,7 @@ class _DispatchTimer:
             dt = time.perf_counter() - t0
         self.total_s += dt
         self.entries_s[entry] = self.entries_s.get(entry, 0.0) + dt
+        self.counts[entry] = self.counts.get(entry, 0) + 1
 
     def clock(self) -> float:
         return self.total_s
@@ -227,6 +229,7 @@ class GpuEnhancer(Enhancer):
         with self._current():
             if self._timer is not None:
                 self._timer.entries_s.clear()
+                self._timer.counts.clear()
             return super().enhance(*args, **kwargs)
 
     enhance.__doc__ = Enhancer.enhance.__doc__
@@ -265,6 +268,12 @@ class GpuEnhancer(Enhancer):
         over its dispatches since the last :meth:`enhance` began (maps read since included);
         measured as :attr:`timing_method` says. Empty otherwise."""
         return dict(self._timer.entries_s) if self._timer is not None else {}
+
+    @property
+    def dispatch_counts(self) -> dict[str, int]:
+        """``profile="gpu"``: dispatches per compute entry, counted as
+        :attr:`dispatch_timings_s` sums them. Empty otherwise."""
+        return dict(self._timer.counts) if self._timer is not None else {}
 
     def _timed(self, fn):
         if self.profile != "wall":

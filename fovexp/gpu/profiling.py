@@ -39,6 +39,8 @@ class StageProfile:
     dispatches_ms: dict[str, float]
     #: the frame's dispatches in all (median over the repeats of each frame's sum)
     frame_ms: float
+    #: dispatches per compute entry in a frame (each is followed by a memory barrier)
+    dispatch_counts: dict[str, int]
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -72,6 +74,7 @@ def profile_stages(
             if i >= warmup:
                 stage_runs.append({k: v for k, v in res.timings_s.items() if v > 0.0})
                 entry_runs.append(enh.dispatch_timings_s)
+                counts = enh.dispatch_counts
         method, device = str(enh.timing_method), enh.renderer
     h, w = image.shape[:2]
     colour = "RGB" if np.ndim(image) == 3 else "grey"
@@ -81,4 +84,5 @@ def profile_stages(
         params=params.model_dump(), repeats=repeats, warmup=warmup,
         stages_ms=_median_ms(stage_runs), dispatches_ms=_median_ms(entry_runs),
         frame_ms=statistics.median(sum(run.values()) for run in entry_runs) * 1e3,
+        dispatch_counts=counts,
     )
