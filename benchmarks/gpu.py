@@ -85,7 +85,8 @@ def main() -> int:
     ap.add_argument("--stage-repeats", type=int, default=11,
                     help="frames per stage profile (after 2 warm-up frames)")
     ap.add_argument("--stages-only", action="store_true",
-                    help="measure the per-stage tables only (the lab's one command)")
+                    help="measure the per-stage tables only (the lab's one command); the "
+                         "cases of an earlier run in --out on the same device are kept")
     ap.add_argument("--out", type=Path, default=HERE, help="folder for GPU.md and gpu.json")
     ap.add_argument("--markdown-only", action="store_true",
                     help="rewrite GPU.md from the gpu.json in --out (no measuring)")
@@ -105,6 +106,13 @@ def main() -> int:
             h, w = image.shape[:2]
             results = {"device": enh.renderer, "machine": machine(),
                        "frame": f"{source} ({w}x{h})", "cases": {}}
+            old = args.out / "gpu.json"
+            if old.is_file():  # keep the cases measured before on the same device and frame
+                before = json.loads(old.read_text())
+                if (before.get("device"), before.get("frame")) == (enh.renderer,
+                                                                   results["frame"]):
+                    results = before
+                    results.pop("stages_s", None)  # the older per-stage table (glFinish)
         else:
             results = _measure_all(enh, display, image, source, args.repeats)
             print("accuracy vs CPU:", results["accuracy_vs_cpu"])
@@ -224,9 +232,7 @@ def _inputs(p, gaze) -> dict:
 
 def _markdown(r: dict) -> str:
     m = r["machine"]
-    stage_repeats = r["stage_profiles"][0]["repeats"] if r.get("stage_profiles") else None
-    command = ("--stages-only" if not r["cases"] else f"--repeats {r['repeats']}") + (
-        f" --stage-repeats {stage_repeats}" if stage_repeats else "")
+    command = f"--repeats {r['repeats']}" if r["cases"] else "--stages-only"
     lines = [
         "# GPU backend benchmark",
         "",
@@ -274,7 +280,8 @@ def _stage_markdown(profiles: list[dict]) -> list[str]:
         "",
         f"Device: {p0['device']}; {m['cpu']}, {m['cores']} cores; measured {m['date']}; "
         "load average at the start of each profile: "
-        + ", ".join(f"{p['load_average_at_start']:.1f}" for p in profiles) + ".",
+        + ", ".join(f"{p['load_average_at_start']:.1f}" for p in profiles) + ". Command: "
+        f"`.venv/bin/python benchmarks/gpu.py --stages-only --stage-repeats {p0['repeats']}`.",
         "",
         f"Timing: {p0['timing_method']}. A stage's time is the sum of its dispatches' "
         "(transfers are not dispatches: the upload, the impulses' records and the read-back "

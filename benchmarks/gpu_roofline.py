@@ -118,6 +118,16 @@ IMPULSE_BYTES = (2 * 4 + 2 * 2 + 2) * 32 + 16 + 8 + 32
 NOISE_VISIT, NOISE_KERNEL = (6, 0), (12, 2)
 FP64_DIVISION = 10
 
+#: What one invocation of each entry is (its work group's threads)
+INVOCATION_UNITS = {
+    "LINEARIZE": "px", "SIGMA": "px", "REDUCE": "level sample", "STACK_INIT": "px",
+    "BLUR": "level sample, needed groups", "STACK_ACCUMULATE": "px, needed tiles",
+    "LUMINANCE": "px", "ABS_LAPLACIAN": "level sample", "BOX3": "level sample",
+    "SOBEL": "level-3 sample", "SAT_ROWS": "padded row", "SAT_COLS": "padded column",
+    "CONTRAST_CHANGE": "px", "BLOCK_EXTREMES": "8 x 8 block", "EXTREMES_FILTER": "8 x 8 block",
+    "IMPULSES": "impulse", "NOISE": "px", "COMPOSE": "px",
+}
+
 
 @dataclass
 class Cost:
@@ -129,6 +139,17 @@ class Cost:
     flops: float = 0.0
     sfu: float = 0.0
     fp64: float = 0.0
+
+    def per_invocation(self) -> str:
+        """Average bytes and operations of one invocation."""
+        n = max(self.invocations, 1)
+
+        def num(v: float) -> str:
+            return f"{v:,.0f}" if v >= 1000 else f"{v:.3g}"
+
+        parts = [f"{num(self.bytes / n)} B", f"{num(self.flops / n)} FLOP"]
+        parts += [f"{num(v / n)} {k}" for k, v in (("SFU", self.sfu), ("FP64", self.fp64)) if v]
+        return ", ".join(parts)
 
     def seconds(self, dev: Device) -> tuple[float, str]:
         """(predicted s, the bound: memory, fp32, sfu or fp64)."""
@@ -386,15 +407,15 @@ def markdown() -> str:
             f"{facts['open_impulse_fraction'] * 100:.0f} % with an open band, "
             f"{facts['impulses_visited_per_px']} visited per pixel by NOISE):",
             "",
-            f"| Entry (stage) | Dispatches | MB moved | GFLOP FP32 | G SFU | G FP64 | {head} |",
-            "|---|---|---|---|---|---|" + "---|" * len(devs),
+            f"| Entry (stage) | Dispatches | Invocations | Per invocation | MB moved | {head} |",
+            "|---|---|---|---|---|" + "---|" * len(devs),
         ]
         for c in p["costs"]:
             cells = " | ".join(f"{p['devices'][d]['entries'][c.entry][0]:.3f} "
                                f"({p['devices'][d]['entries'][c.entry][1]})" for d in devs)
-            lines.append(f"| {c.entry} ({c.stage}) | {c.dispatches} | {c.bytes / 1e6:.1f} | "
-                         f"{c.flops / 1e9:.3f} | {c.sfu / 1e9:.3f} | {c.fp64 / 1e9:.3f} | "
-                         f"{cells} |")
+            lines.append(f"| {c.entry} ({c.stage}) | {c.dispatches} | {c.invocations:,} "
+                         f"{INVOCATION_UNITS[c.entry]} | {c.per_invocation()} | "
+                         f"{c.bytes / 1e6:.1f} | {cells} |")
         n_disp = sum(c.dispatches for c in p["costs"])
         fov = " | ".join(f"**{p['devices'][d]['total_ms']:.2f}**" for d in devs)
         q = preds[(impulses, False)]
@@ -406,22 +427,21 @@ def markdown() -> str:
             for d in devs)
         n_bare = sum(c.dispatches for c in q["costs"] if c.entry not in contrast)
         lines += [
-            f"| **frame with the foveation simulation** | {n_disp} | | | | | {fov} |",
-            f"| **frame already foveated** (the paper's setting) | {n_q} | | | | | {nofov} |",
-            f"| **the same without the contrast enhancement** | {n_bare} | | | | | {bare} |",
+            f"| **frame with the foveation simulation** | {n_disp} | | | | {fov} |",
+            f"| **frame already foveated** (the paper's setting) | {n_q} | | | | {nofov} |",
+            f"| **the same without the contrast enhancement** | {n_bare} | | | | {bare} |",
             "",
         ]
     lines += [
         "The maps (`EnhanceResult.map`, `--dump-maps`), one MAPS dispatch each, 4K:",
         "",
-        f"| Map | MB | GFLOP FP32 | G SFU | {head} |",
-        "|---|---|---|---|" + "---|" * len(devs),
+        f"| Map | Per pixel | MB moved | {head} |",
+        "|---|---|---|" + "---|" * len(devs),
     ]
     for c in map_costs():
         cells = " | ".join("{:.3f} ({})".format(*(lambda t: (t[0] * 1e3, t[1]))(
             c.seconds(DEVICES[d]))) for d in devs)
-        lines.append(f"| {c.entry} | {c.bytes / 1e6:.1f} | {c.flops / 1e9:.3f} | "
-                     f"{c.sfu / 1e9:.3f} | {cells} |")
+        lines.append(f"| {c.entry} | {c.per_invocation()} | {c.bytes / 1e6:.1f} | {cells} |")
     lines += ["", _paper_comparison(preds), "", "Peak figures assumed:", ""]
     for d in devs:
         dev = DEVICES[d]
