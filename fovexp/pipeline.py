@@ -35,6 +35,11 @@ MAP_NAMES: tuple[str, ...] = (
     "eccentricity_deg", "sigma_px", "f_low_cpp", "f_high_cpp", "amplitude", "orientation_rad",
     "noise", "foveated", "contrast", "output",
 )
+#: The maps that evaluate the per-impulse functions at every pixel (section 4.4's parameters on
+#: the pixel grid), computed when asked for.
+POINT_MAPS: tuple[str, ...] = (
+    "eccentricity_deg", "f_low_cpp", "f_high_cpp", "amplitude", "orientation_rad",
+)
 
 
 def check_image(image: np.ndarray, what: str = "image") -> np.ndarray:
@@ -73,6 +78,9 @@ class _StageCache:
         self._values: dict[str, Any] = {}
         self.timings_s: dict[str, float] = {}
         self._nested_s = 0.0  # time spent in stages pulled by the stage being computed
+        #: what the stages are timed with (seconds); the GPU backend's profiler sets a clock
+        #: that advances by the GPU time of each dispatch
+        self.clock: Callable[[], float] = time.perf_counter
 
     def stage(self, name: str, deps: tuple[str, ...], fn: Callable[..., Any]) -> None:
         self._fns[name] = (deps, fn)
@@ -99,9 +107,9 @@ class _StageCache:
                 (lambda d=d[1:]: self.get(d)) if d.startswith("?") else self.get(d) for d in deps
             ]
             outer, self._nested_s = self._nested_s, 0.0
-            t0 = time.perf_counter()
+            t0 = self.clock()
             self._values[name] = fn(*args)
-            elapsed = time.perf_counter() - t0
+            elapsed = self.clock() - t0
             # a stage's own time excludes the stages it pulled lazily ("?name" dependencies)
             self.timings_s[name] = self.timings_s.get(name, 0.0) + elapsed - self._nested_s
             self._nested_s = outer + elapsed
@@ -414,46 +422,56 @@ class Enhancer:
         noise and before any clipping)."""
         if name not in ("foveated", "contrast"):
             raise FovexpError(f"no linear image {name!r} (choose foveated or contrast)")
+        return self._linear_image(name)
+
+    def _map(self, name: str) -> np.ndarray:
+        """:meth:`EnhanceResult.map`: what each map is, for every backend; the backend reads
+        its data with :meth:`_read_map` (and :meth:`_output`, :meth:`_linear_image`)."""
+        if name not in MAP_NAMES:
+            raise FovexpError(f"unknown map {name!r} (choose from {', '.join(MAP_NAMES)})")
+        if name == "output":
+            return self._output()
+        if name in ("foveated", "contrast"):
+            return self._encode(self._linear_image(name))
+        if name in ("noise", "amplitude") and self._c.get("method") != "ours":
+            return np.zeros(self._c.get("shape"), np.float32)  # no noise: K = 0 everywhere
+        return self._read_map(name)
+
+    # The read hooks: each backend supplies these three.
+    def _linear_image(self, name: str) -> np.ndarray:
+        """The linear ``foveated`` image, or ``contrast`` (foveated + the grey change)."""
         foveated = self._c.get("foveated")
         if name == "foveated":
             return foveated
         delta = self._c.get("contrast")
         return foveated + (delta[..., None] if foveated.ndim == 3 else delta)
 
-    def _map(self, name: str) -> np.ndarray:
+    def _read_map(self, name: str) -> np.ndarray:
+        """Map ``name`` of :data:`POINT_MAPS`, ``sigma_px`` or ``noise`` (the method is
+        ``ours`` for ``noise`` and ``amplitude``), float32 (H, W)."""
         c = self._c
         if name == "eccentricity_deg":
             return c.get("grids")[0]
         if name == "sigma_px":
             return c.get("sigma")
-        if name == "output":
-            return c.get("output")
-        if name in ("foveated", "contrast"):
-            return self._encode(self.linear(name))
         if name == "noise":
-            if c.get("method") != "ours":
-                return np.zeros(c.get("shape"), np.float32)
             return c.get("noise")
         geom = c.get("geometry")
         h, w = geom.shape
         yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
         x, y = xx.ravel(), yy.ravel()
+        if name == "orientation_rad":
+            gx, gy = c.get("gradients")
+            return orientation.orientation_at(gx, gy, x, y).reshape(h, w)
         s, f_lo, f_hi = self._band_at(geom, c.get("gaze"), c.get("sigma_given"), c.get("sigma"),
                                       c.get("blur_rate"), x, y)
         if name == "f_low_cpp":
             return f_lo.reshape(h, w).astype(np.float32)
         if name == "f_high_cpp":
             return f_hi.reshape(h, w).astype(np.float32)
-        if name == "amplitude":
-            if c.get("method") != "ours":
-                return np.zeros((h, w), np.float32)
-            k = self._amplitude(self._laplacian_at(c.get("abs_laplacian"), s, x, y),
-                                self._headroom_at(c.get("headroom"), x, y), c.get("s_k"))
-            return np.where(f_lo < f_hi, k, 0.0).reshape(h, w).astype(np.float32)
-        if name == "orientation_rad":
-            gx, gy = c.get("gradients")
-            return orientation.orientation_at(gx, gy, x, y).reshape(h, w)
-        raise FovexpError(f"unknown map {name!r} (choose from {', '.join(MAP_NAMES)})")
+        k = self._amplitude(self._laplacian_at(c.get("abs_laplacian"), s, x, y),
+                            self._headroom_at(c.get("headroom"), x, y), c.get("s_k"))
+        return np.where(f_lo < f_hi, k, 0.0).reshape(h, w).astype(np.float32)
 
 
 def enhance(

@@ -21,6 +21,7 @@ it: create the enhancer on the thread that renders.
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
 from typing import Any
 
@@ -34,7 +35,7 @@ from ..foveation import blur_stack_plan
 from ..geometry import Display, GeometryModel, ViewingGeometry
 from ..orientation import ORIENTATION_LEVEL
 from ..params import ParameterTable, get_preset
-from ..pipeline import MAP_NAMES, Enhancer, EnhanceResult
+from ..pipeline import POINT_MAPS, Enhancer, EnhanceResult
 from ..pyramids import level_scale
 from .programs import (
     BINDINGS,
@@ -70,13 +71,90 @@ class _GpuImpulses:
     count: int
 
 
+#: GpuEnhancer's ``profile`` values
+PROFILE_MODES: tuple[Any, ...] = (False, True, "wall", "gpu")
+#: the timing methods (GpuEnhancer.timing_method)
+GL_TIMER_PER_DISPATCH = "GL_TIME_ELAPSED per dispatch"
+WALL_PER_DISPATCH = "wall clock per dispatch, glFinish after each"
+WALL_PER_STAGE = "wall clock per stage, glFinish after each"
+
+
+class _DispatchTimer:
+    """``profile="gpu"``: each dispatch timed by a GL timer query (GL_TIME_ELAPSED, from the
+    dispatch's start to its end on the GPU: the GPU waits for nothing else in between), or,
+    where the driver's query is unusable, by the wall clock between a glFinish before and one
+    after. :meth:`clock` is the running sum, which the stage cache times its stages with."""
+
+    def __init__(self, ctx: Any, query: Any, method: str) -> None:
+        self.ctx, self.query, self.method = ctx, query, method
+        self.total_s = 0.0
+        self.entries_s: dict[str, float] = {}
+        self.counts: dict[str, int] = {}
+
+    @classmethod
+    def for_context(cls, ctx: Any, programs: Any) -> _DispatchTimer:
+        """A timer that uses the query where a probe dispatch shows it usable (the context
+        must be current): a 1024 x 1024 RGB colour.glsl LINEARIZE, timed both ways."""
+        n = 1024
+        bufs = [ctx.buffer(reserve=n * n * 3 * _F4) for _ in range(2)]
+        try:
+            query = ctx.query(time=True)
+            prog = programs.get("colour.glsl", "LINEARIZE")
+            for name, buf in zip(("IMAGE", "LINEAR"), bufs, strict=True):
+                buf.bind_to_storage_buffer(BINDINGS[name])
+            prog["image_hwc"].value, prog["gamma"].value = (n, n, 3), 2.2
+            groups = (n // LOCAL_2D[0], n // LOCAL_2D[1], 1)
+            ctx.finish()
+            t0 = time.perf_counter()
+            with query:
+                prog.run(*groups)
+            gpu_s = query.elapsed * 1e-9
+            ctx.finish()
+            wall_s = time.perf_counter() - t0
+        except Exception as exc:  # moderngl.Error: no timer queries on this context
+            return cls(ctx, None, f"{WALL_PER_DISPATCH} (no GL timer query: {exc})")
+        finally:
+            for buf in bufs:
+                buf.release()
+        # a dispatch that kept the CPU waiting 1 ms or more shows at least 1 % of it on the
+        # GPU's clock; llvmpipe reports 1 ns for anything
+        if gpu_s > 0.0 and (gpu_s >= 0.01 * wall_s or wall_s < 1e-3):
+            return cls(ctx, query, GL_TIMER_PER_DISPATCH)
+        return cls(ctx, None, f"{WALL_PER_DISPATCH} (the driver's GL_TIME_ELAPSED gave "
+                              f"{gpu_s * 1e9:.0f} ns for a dispatch that took "
+                              f"{wall_s * 1e3:.1f} ms: unusable)")
+
+    def run(self, prog: Any, groups: tuple[int, ...], entry: str) -> None:
+        if self.query is not None:
+            with self.query:
+                prog.run(*groups)
+            dt = self.query.elapsed * 1e-9  # waits for the dispatch's result
+        else:
+            self.ctx.finish()
+            t0 = time.perf_counter()
+            prog.run(*groups)
+            self.ctx.finish()
+            dt = time.perf_counter() - t0
+        self.total_s += dt
+        self.entries_s[entry] = self.entries_s.get(entry, 0.0) + dt
+        self.counts[entry] = self.counts.get(entry, 0) + 1
+
+    def clock(self) -> float:
+        return self.total_s
+
+
 class GpuEnhancer(Enhancer):
     """:class:`fovexp.Enhancer` on the GPU (OpenGL 4.5 compute shaders through moderngl).
 
     ``ctx``: a moderngl context to run in (e.g. a window's, from ``moderngl.create_context()``);
-    by default a standalone one through EGL. ``profile=True`` waits for the GPU after each
-    stage so that ``EnhanceResult.timings_s`` holds each stage's execution time (otherwise
-    the times are those of submitting the work; the frame read-back waits for all of it).
+    by default a standalone one through EGL. ``profile`` sets what ``EnhanceResult.timings_s``
+    holds (otherwise the times of submitting the work; the frame read-back waits for all of
+    it): ``True`` or ``"wall"``, each stage's wall-clock time with a glFinish after it;
+    ``"gpu"``, each stage's GPU time, the sum of its dispatches' GL timer queries
+    (GL_TIME_ELAPSED, one per dispatch; transfers are not dispatches and count 0), also per
+    compute entry in :attr:`dispatch_timings_s`. Where the driver's timer query is unusable
+    (Mesa llvmpipe reports 1 ns for any dispatch) ``"gpu"`` times each dispatch by the wall
+    clock to a glFinish instead; :attr:`timing_method` says which, and why.
 
     :meth:`close` (or a ``with`` block) releases its GPU buffers, and the context when the
     enhancer created it; a closed enhancer refuses every call.
@@ -86,9 +164,12 @@ class GpuEnhancer(Enhancer):
 
     def __init__(
         self, display: Display, preset: str = "paper", geometry: GeometryModel | None = None,
-        table: ParameterTable | None = None, ctx: Any = None, profile: bool = False,
+        table: ParameterTable | None = None, ctx: Any = None, profile: bool | str = False,
         owns_context: bool | None = None,
     ) -> None:
+        if profile not in PROFILE_MODES:
+            raise FovexpError(f"profile must be one of {', '.join(map(repr, PROFILE_MODES))}, "
+                              f"not {profile!r}")
         if get_preset(preset).name != "paper":
             raise FovexpError(
                 f"the GPU backend implements the paper preset, not {preset!r}: the release "
@@ -99,10 +180,14 @@ class GpuEnhancer(Enhancer):
         self._closed = False
         self._buffers: dict[str, Any] = {}
         self._programs = None
+        #: how EnhanceResult.timings_s is measured (None: submission times, no waiting)
+        self.timing_method: str | None = None
+        self._timer: _DispatchTimer | None = None
         self.ctx = create_context(ctx)
         try:
             self.renderer = renderer_name(self.ctx)
-            self.profile = profile
+            #: None, "wall" (glFinish after each stage) or "gpu" (each dispatch timed)
+            self.profile: str | None = {False: None, True: "wall"}.get(profile, profile)
             self._programs = programs_for(self.ctx, self)
             self._max_block_bytes = int(
                 self.ctx.info.get("GL_MAX_SHADER_STORAGE_BLOCK_SIZE") or 2**27)
@@ -110,7 +195,14 @@ class GpuEnhancer(Enhancer):
             with made_current(self.ctx):
                 # every entry now: a driver that cannot compile one fails here, not mid-session
                 self._programs.compile_all()
+                if self.profile == "gpu":
+                    self._timer = _DispatchTimer.for_context(self.ctx, self._programs)
             super().__init__(display, preset, geometry, table)
+            if self._timer is not None:
+                self._c.clock = self._timer.clock
+                self.timing_method = self._timer.method
+            elif self.profile == "wall":
+                self.timing_method = WALL_PER_STAGE
         except BaseException:
             self.close()
             raise
@@ -135,6 +227,9 @@ class GpuEnhancer(Enhancer):
 
     def enhance(self, *args: Any, **kwargs: Any) -> EnhanceResult:  # noqa: D102
         with self._current():
+            if self._timer is not None:
+                self._timer.entries_s.clear()
+                self._timer.counts.clear()
             return super().enhance(*args, **kwargs)
 
     enhance.__doc__ = Enhancer.enhance.__doc__
@@ -167,8 +262,21 @@ class GpuEnhancer(Enhancer):
         c.stage("noise", ("impulses", "imp_params"), t(self._gpu_noise))
         c.stage("output", ("method", "foveated", "?contrast", "?noise"), t(self._gpu_output))
 
+    @property
+    def dispatch_timings_s(self) -> dict[str, float]:
+        """``profile="gpu"``: seconds per compute entry (``"BLUR"``, ``"NOISE"``, ...), summed
+        over its dispatches since the last :meth:`enhance` began (maps read since included);
+        measured as :attr:`timing_method` says. Empty otherwise."""
+        return dict(self._timer.entries_s) if self._timer is not None else {}
+
+    @property
+    def dispatch_counts(self) -> dict[str, int]:
+        """``profile="gpu"``: dispatches per compute entry, counted as
+        :attr:`dispatch_timings_s` sums them. Empty otherwise."""
+        return dict(self._timer.counts) if self._timer is not None else {}
+
     def _timed(self, fn):
-        if not self.profile:
+        if self.profile != "wall":
             return fn
 
         def run(*args):
@@ -179,14 +287,22 @@ class GpuEnhancer(Enhancer):
         return run
 
     # ------------------------------------------------------------------------- plumbing
-    def _buffer(self, name: str, nbytes: int) -> Any:
-        """The buffer ``name`` of at least ``nbytes`` (reallocated, zeroed, when it grows)."""
+    def _buffer(self, name: str, nbytes: int, sigma_px: float | None = None) -> Any:
+        """The buffer ``name`` of at least ``nbytes`` (reallocated, zeroed, when it grows).
+
+        Every buffer is bound whole, so none may pass the driver's
+        GL_MAX_SHADER_STORAGE_BLOCK_SIZE (128 MiB on llvmpipe and other drivers): one that
+        would is refused by name. ``sigma_px``: the buffer's size grows with the largest blur
+        (the foveation's and the contrast's borders), which the refusal then names."""
         nbytes = max(int(nbytes), 16)
         buf = self._buffers.get(name)
         if buf is None or buf.size < nbytes:
             if nbytes > self._max_block_bytes:
+                what = "the image" if sigma_px is None else (
+                    f"the image with a blur of up to {sigma_px:.0f} px (a lower blur-rate or a "
+                    "gaze nearer the centre needs less)")
                 raise FovexpError(
-                    f"the image is too large for this GPU: buffer {name} needs "
+                    f"{what} is too large for this GPU: buffer {name} needs "
                     f"{nbytes / 2**20:.1f} MiB, the driver binds at most "
                     f"{self._max_block_bytes / 2**20:.1f} MiB ({self.renderer})"
                 )
@@ -220,7 +336,10 @@ class GpuEnhancer(Enhancer):
                 prog[key].write(value.tobytes())
             else:
                 prog[key].value = value
-        prog.run(*groups)
+        if self._timer is None:
+            prog.run(*groups)
+        else:
+            self._timer.run(prog, groups, entry)
         self.ctx.memory_barrier()
 
     @staticmethod
@@ -304,7 +423,7 @@ class GpuEnhancer(Enhancer):
             ph, pw = (ph + 1) // 2, (pw + 1) // 2
             grids.append(_Grid(offset, ph, pw))
             offset += ph * pw * c
-        pyr = self._buffer("FOV_PYR", offset * _F4)
+        pyr = self._buffer("FOV_PYR", offset * _F4, max_sigma)
         for m in range(1, plan.top + 1):
             src, g = (linear, grids[0]) if m == 1 else (pyr, grids[m - 1])
             self._run("pyramids.glsl", "REDUCE", self._groups_2d(grids[m].height, grids[m].width),
@@ -323,8 +442,8 @@ class GpuEnhancer(Enhancer):
                   {"LINEAR": linear, "SIGMA": sigma, "LEVELS": levels, "BRACKET": bracket,
                    "FOVEATED": fov}, image_hwc=(h, w, c), n_levels=int(plan.sigmas_px.size))
         largest = max(grids[int(m)].height * grids[int(m)].width for m in plan.pyramid_level)
-        tmp = self._buffer("BLUR_TMP", largest * c * _F4)
-        out = self._buffer("BLUR_OUT", largest * c * _F4)
+        tmp = self._buffer("BLUR_TMP", largest * c * _F4, max_sigma)
+        out = self._buffer("BLUR_OUT", largest * c * _F4, max_sigma)
         tiles = self._buffers["TILES"]
         tile_grid = self._groups_2d(h, w)[:2]
         sig = plan.sigmas_px.astype(np.float32)
@@ -417,7 +536,7 @@ class GpuEnhancer(Enhancer):
         h, w, _ = self._hwc()
         pad = sat_pad_px(max_sigma)
         hp, wp = h + 2 * pad, w + 2 * pad
-        sat = self._buffer("SAT", (hp + 1) * (wp + 1) * 8)
+        sat = self._buffer("SAT", (hp + 1) * (wp + 1) * 8, max_sigma)
         pyr = self._buffers["LUMA_PYR"]
         self._run("contrast.glsl", "SAT_ROWS", self._groups_1d(hp), {"LUMA_PYR": pyr, "SAT": sat},
                   image_hw=(h, w), pad_px=pad)
@@ -500,7 +619,7 @@ class GpuEnhancer(Enhancer):
             s_f=float(c.get("s_f")), s_k=float(c.get("s_k")),
             noise_norm=gabor.normalisation(int(c.get("n_impulses")), self.preset.gabor_a_cpp),
             attenuation=float(self.preset.attenuation), **self._geometry_uniforms(),
-            **(lap or {}), **grad, **(head or {}),
+            **(lap or {}), **(grad or {}), **(head or {}),
         )
 
     def _gpu_noise(self, imp: _GpuImpulses, _count: int) -> Any:
@@ -542,13 +661,11 @@ class GpuEnhancer(Enhancer):
 
     def linear(self, name: str) -> np.ndarray:  # noqa: D102 - Enhancer.linear
         with self._current():
-            return self._linear_read(name)
+            return super().linear(name)
 
     linear.__doc__ = Enhancer.linear.__doc__
 
-    def _linear_read(self, name: str) -> np.ndarray:
-        if name not in ("foveated", "contrast"):
-            raise FovexpError(f"no linear image {name!r} (choose foveated or contrast)")
+    def _linear_image(self, name: str) -> np.ndarray:
         fov = self._c.get("foveated")
         h, w, c = self._hwc()
         img = np.frombuffer(fov.read(size=h * w * c * _F4), np.float32).reshape(
@@ -579,39 +696,31 @@ class GpuEnhancer(Enhancer):
 
     def _map(self, name: str) -> np.ndarray:
         with self._current():
-            return self._map_read(name)
+            return super()._map(name)
 
-    def _map_read(self, name: str) -> np.ndarray:
+    def _read_map(self, name: str) -> np.ndarray:
+        """Enhancer._read_map: sigma and noise from their buffers; a map of POINT_MAPS by one
+        dispatch of pipeline.glsl MAPS into a buffer of one map (32 MiB at 4K, within the
+        128 MiB that llvmpipe and other drivers bind), for the map asked for only."""
         c = self._c
         h, w, _ = self._hwc()
-        if name == "output":
-            return self._output()
-        if name in ("foveated", "contrast"):
-            return self._encode(self._linear_read(name))
-        if name == "sigma_px":
-            c.get("sigma")
-            return self._read("SIGMA", h * w).reshape(h, w)
-        if name == "noise":
-            if c.get("method") != "ours":
-                return np.zeros((h, w), np.float32)
-            c.get("noise")
-            return self._read("NOISE", h * w).reshape(h, w)
-        fields = ("eccentricity_deg", "f_low_cpp", "f_high_cpp", "amplitude", "orientation_rad")
-        if name not in fields:
-            raise FovexpError(f"unknown map {name!r} (choose from {', '.join(MAP_NAMES)})")
-        with_noise = c.get("method") == "ours"
-        c.get("sigma")
-        grad = c.get("gradients")
-        lap = c.get("abs_laplacian") if with_noise else None
-        head = c.get("headroom") if with_noise else None
-        maps = self._buffer("MAPS", 5 * h * w * _F4)
+        if name in ("sigma_px", "noise"):
+            stage, buffer = {"sigma_px": ("sigma", "SIGMA"), "noise": ("noise", "NOISE")}[name]
+            c.get(stage)
+            return self._read(buffer, h * w).reshape(h, w)
+        c.get("sigma")  # the band reads the sigma map when it is given
         b = self._buffers
-        bufs = {"SIGMA": b["SIGMA"], "GRADIENTS": b["GRADIENTS"], "MAPS": maps}
-        if with_noise:
+        bufs = {"SIGMA": b["SIGMA"], "MAP": self._buffer("MAP", h * w * _F4)}
+        grad = lap = head = None
+        if name == "orientation_rad":
+            grad = c.get("gradients")
+            bufs["GRADIENTS"] = b["GRADIENTS"]
+        elif name == "amplitude":
+            lap, head = c.get("abs_laplacian"), c.get("headroom")
             bufs.update(ABSLAP=b["ABSLAP"], HEADROOM=b["HEADROOM"])
         self._run("pipeline.glsl", "MAPS", self._groups_2d(h, w), bufs,
-                  with_noise=int(with_noise), **self._point_uniforms(lap, grad, head))
-        return self._read("MAPS", 5 * h * w)[fields.index(name) * h * w:][: h * w].reshape(h, w)
+                  map_field=POINT_MAPS.index(name), **self._point_uniforms(lap, grad, head))
+        return self._read("MAP", h * w).reshape(h, w)
 
     def close(self) -> None:
         """Release the GPU buffers, and the context if this enhancer created it; in a given

@@ -31,6 +31,7 @@ from ..frequency import CUTOFF_SIGMAS_F, NYQUIST_CPP
 from ..gabor import CELL_BORDER, CELL_ORIGIN_PX
 from ..geometry import ARCMIN_PER_DEG
 from ..orientation import GRADIENT_EPS, ORIENTATION_LEVEL
+from ..pipeline import POINT_MAPS
 from ..pyramids import BINOMIAL_5, EXPAND_EVEN_TAPS, EXPAND_ODD_TAPS, KEYS_A
 
 SHADER_DIR = Path(__file__).resolve().parent / "shaders"
@@ -40,7 +41,7 @@ BINDINGS: dict[str, int] = {name: i for i, name in enumerate((
     "IMAGE", "LINEAR", "SIGMA", "SIGMA_MAX", "BLUR_SRC", "BLUR_DST", "KERNELS", "LEVELS",
     "BRACKET", "FOVEATED", "REDUCE_SRC", "REDUCE_DST", "LUMA_PYR", "LAP_TMP", "ABSLAP",
     "GRADIENTS", "SAT", "CONTRAST", "EXTREMES", "HEADROOM", "IMPULSES", "QUANTILES", "CELLS",
-    "IMP_PARAMS", "NOISE", "OUTPUT", "MAPS", "TILES",
+    "IMP_PARAMS", "NOISE", "OUTPUT", "MAP", "TILES",
 ))}
 
 #: Fields of the per-impulse record the impulse stage writes and the synthesis reads.
@@ -82,6 +83,7 @@ def _header(entry: str) -> str:
         f"#define IMP_STRIDE {len(IMPULSE_FIELDS)}",
         *(f"#define IMP_{name} {i}" for i, name in enumerate(IMPULSE_FIELDS)),
         *(f"#define GEOM_{name.upper()} {i}" for name, i in GEOMETRY_MODELS.items()),
+        *(f"#define MAP_{name.upper()} {i}" for i, name in enumerate(POINT_MAPS)),
         "const float PI = 3.14159265358979;",
         f"const int THIBOS_N = {THIBOS_ECC_DEG.size};",
         f"const float THIBOS_ECC_DEG[THIBOS_N] = float[]({_floats(THIBOS_ECC_DEG)});",

@@ -71,24 +71,28 @@ void main() {
 #endif
 
 #ifdef ENTRY_MAPS
-// the same functions on the pixel grid: eccentricity, F_L, F_H, K (0 where the band is
-// closed or the method has no noise), omega
+// one of the same functions on the pixel grid (Enhancer._read_map), the map map_field of
+// pipeline.POINT_MAPS: eccentricity, F_L, F_H, K (0 where the band is closed), omega. One
+// map per dispatch: the buffer bound holds one map, and only the map asked for is computed.
 LOCAL_2D
-uniform int with_noise;
-layout(std430, binding = B_MAPS) writeonly buffer Maps { float maps[]; };
+uniform int map_field;
+layout(std430, binding = B_MAP) writeonly buffer Map { float map_values[]; };
 void main() {
     ivec2 p = ivec2(gl_GlobalInvocationID.xy);
     if (p.x >= image_wh.x || p.y >= image_wh.y) return;
     vec2 q = vec2(p);
-    float s, ecc;
-    vec2 band = band_at(q, s, ecc);
-    float k = with_noise == 1 && band.x < band.y
-        ? amplitude_k(s_k, laplacian_amplitude_at(laplacian_level(s), q), headroom_limit_at(q)) : 0.0;
-    int n = image_wh.x * image_wh.y, i = p.y * image_wh.x + p.x;
-    maps[i] = ecc;
-    maps[n + i] = band.x;
-    maps[2 * n + i] = band.y;
-    maps[3 * n + i] = k;
-    maps[4 * n + i] = orientation_at(q);
+    float v;
+    if (map_field == MAP_ORIENTATION_RAD) {
+        v = orientation_at(q);
+    } else {
+        float s, ecc;
+        vec2 band = band_at(q, s, ecc);
+        if (map_field == MAP_ECCENTRICITY_DEG) v = ecc;
+        else if (map_field == MAP_F_LOW_CPP) v = band.x;
+        else if (map_field == MAP_F_HIGH_CPP) v = band.y;
+        else v = band.x < band.y  // MAP_AMPLITUDE
+            ? amplitude_k(s_k, laplacian_amplitude_at(laplacian_level(s), q), headroom_limit_at(q)) : 0.0;
+    }
+    map_values[p.y * image_wh.x + p.x] = v;
 }
 #endif
