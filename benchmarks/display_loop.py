@@ -62,7 +62,7 @@ def _stats_ms(values_s: list[float]) -> dict[str, float]:
 def run_loop(screen, backend: str, parameter: str, seconds: float, seed: int = 1) -> dict:
     """The session's frame loop for ``seconds`` with wheel steps every 100 ms."""
     from fovexp import load_display, make_params
-    from fovexp.experiment.frameloop import TrialIO, TrialLoop
+    from fovexp.experiment.frameloop import TrialIO, TrialLoop, display_thread_first
     from fovexp.experiment.gaze import BlankingMonitor, FixationGeometry, SimulatedGaze
     from fovexp.experiment.render import TestRenderer
     from fovexp.experiment.trial import TrialState, ValueAdjuster, Wheel
@@ -107,7 +107,8 @@ def run_loop(screen, backend: str, parameter: str, seconds: float, seed: int = 1
                                 event=lambda kind, detail: None))
     loop.show_first()
     t0 = time.monotonic()
-    loop.run(max_s=seconds)
+    with display_thread_first():  # as Session.run
+        loop.run(max_s=seconds)
     elapsed = time.monotonic() - t0
     renderer.close()
     up = [t for t in timings if t.upload_s is not None]
@@ -123,6 +124,16 @@ def run_loop(screen, backend: str, parameter: str, seconds: float, seed: int = 1
                     "upload": _stats_ms([t.work_s for t in up])},
         "gaze_to_flip_call_ms": {"no_upload": _stats_ms([t.gaze_to_flip_call_s for t in no]),
                                  "upload": _stats_ms([t.gaze_to_flip_call_s for t in up])},
+        "work_cpu_ms": {"no_upload": _stats_ms([t.work_cpu_s for t in no]),
+                        "upload": _stats_ms([t.work_cpu_s for t in up])},
+        "work_without_source_poll_ms": {
+            "no_upload": _stats_ms([t.work_s - t.gaze_poll_s for t in no]),
+            "upload": _stats_ms([t.work_s - t.gaze_poll_s for t in up])},
+        "source_poll_ms": _stats_ms([t.gaze_poll_s for t in timings]),
+        "samples_per_frame": {"p50": _pct([t.samples for t in timings], 50),
+                              "max": max((t.samples for t in timings), default=0)},
+        "source_poll_us_per_sample": 1e6 * sum(t.gaze_poll_s for t in timings)
+        / max(1, sum(t.samples for t in timings)),
         "upload_ms": _stats_ms([t.upload_s for t in up]),
         "flip_call_ms": _stats_ms([t.flip_s for t in timings]),
         "late_flips": late, "late_fraction": late / max(1, len(intervals)),

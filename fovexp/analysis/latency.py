@@ -29,9 +29,9 @@ from fovexp.results.loading import Dataset
 #: where a session file does not give the protocol's.
 DEFAULT_RADIUS_DEG = 1.25
 DEFAULT_GAZE_TIMEOUT_S = 0.05
-#: A decision may precede its flip by the drawing and the wait for the vertical blank: up to
-#: this many refresh periods count as "recent" beyond the gaze timeout.
-DECISION_TO_FLIP_PERIODS = 2.0
+#: An attempt's first frame (no previous flip in the log) may show a sample older than the
+#: gaze timeout by up to this many refresh periods: the drawing and the wait for the blank.
+FIRST_FRAME_PERIODS = 2.0
 
 COLUMNS = ("experiment", "participant", "session", "tracker", "frames", "with_gaze",
            "median_ms", "p95_ms", "max_ms", "dropped_pct", "rule_violations")
@@ -81,7 +81,7 @@ def session_latency(data: Dataset) -> tuple[pd.DataFrame, dict[str, np.ndarray],
                          "(written before the latency columns)")
             continue
         radius, timeout, hz = _session_settings(folder, sid)
-        bad = unblanked_violations(frames, radius, timeout, DECISION_TO_FLIP_PERIODS / hz)
+        bad = unblanked_violations(frames, radius, timeout, FIRST_FRAME_PERIODS / hz)
         rows.append({"experiment": exp, "participant": pid, "session": sid,
                      "tracker": ", ".join(sorted(set(grp["tracker"].astype(str)))),
                      "frames": summary["frames"], "with_gaze": summary["with_gaze"],

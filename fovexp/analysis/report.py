@@ -29,7 +29,7 @@ from fovexp.results.calibration import Calibration, calibrate, fe_summary, sk_li
 from fovexp.results.loading import RULES, Dataset, load_results
 
 from . import figures as figs
-from .latency import DECISION_TO_FLIP_PERIODS, session_latency
+from .latency import session_latency
 from .tables import table2_markdown, write_table2
 from .validation import ValidationResult, validate
 
@@ -173,9 +173,9 @@ def _latency_section(ana: Analysis, tables: Path, fig_dir: Path, figures: bool) 
              "Per session, from its frame log: the time from the newest gaze sample a frame's "
              "blanking decision used to the frame's flip, on the tracker's clock (median, 95th "
              "percentile, maximum), the dropped frames, and the frames drawn with the stimulus "
-             "although the gaze was invalid, outside the blanking radius or older than the "
-             f"gaze timeout plus {DECISION_TO_FLIP_PERIODS:g} refresh periods at the flip "
-             "(`rule_violations`: 0 in a valid session).\n"]
+             "although the newest sample was invalid, outside the blanking radius, or older "
+             "than the gaze timeout when the frame was decided (after the previous flip; "
+             "`rule_violations`: 0 in a valid session).\n"]
     if len(table):
         parts.append(_md_table(table, 2))
         if figures and lat:

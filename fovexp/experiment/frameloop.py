@@ -25,23 +25,49 @@ to callbacks that only buffer them (the session's logs are written by their own 
 from __future__ import annotations
 
 import math
+import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
 
 from .gaze import BlankDecision, BlankingMonitor, GazeSample
 from .trial import InputEvent, TrialState
 
+#: While a session runs, a thread that wants the GIL waits at most about this long for another
+#: to give it up (Python's default is 5 ms, most of a 120 Hz frame; sys.setswitchinterval).
+SWITCH_INTERVAL_S = 0.0005
+
+
+@contextmanager
+def display_thread_first() -> Iterator[None]:
+    """Python's thread switch interval at :data:`SWITCH_INTERVAL_S` for the block: the display
+    thread waits at most that long for the GIL when the render, flusher or writer thread holds
+    it between their GIL-free parts (NumPy, Numba ``nogil`` kernels, file writes)."""
+    old = sys.getswitchinterval()
+    sys.setswitchinterval(min(old, SWITCH_INTERVAL_S))
+    try:
+        yield
+    finally:
+        sys.setswitchinterval(old)
+
 
 @dataclass(frozen=True)
 class FrameTiming:
     """The display thread's own time on one frame (``benchmarks/display_loop.py``)."""
 
-    #: from the frame's first step to the flip call
+    #: from the frame's first step to the flip call (wall clock)
     work_s: float
+    #: the display thread's CPU time over the same span (less than ``work_s`` when it waited:
+    #: for the GIL, or for a core on a busy machine)
+    work_cpu_s: float
     #: from the start of the gaze poll to the flip call
     gaze_to_flip_call_s: float
+    #: the gaze source's poll alone (a simulated source generates its samples in it)
+    gaze_poll_s: float
+    #: samples that poll returned
+    samples: int
     #: the test half's upload (or texture switch) in this frame; None without one
     upload_s: float | None
     #: the flip call itself (swap; with vsync or pacing, the wait for the vertical blank)
@@ -129,6 +155,7 @@ class TrialLoop:
     def _frame(self) -> str | None:
         st, screen, gaze = self.st, self.screen, self.gaze
         t0 = time.perf_counter()
+        c0 = time.thread_time()
         # 1. tracker status
         for ev in gaze.poll_events():
             self.io.event(ev.kind, {"trial_index": self.trial_index, **ev.detail})
@@ -161,11 +188,13 @@ class TrialLoop:
         # 4. gaze, as late as possible
         t_gaze = time.perf_counter()
         samples = gaze.poll()
+        t_polled = time.perf_counter()
         decision = self.monitor.update(samples, gaze.now_us())
         self.io.gaze(self.trial_index, self.attempt, samples)
         # 5. draw and flip
         screen.prepare(decision.blank)
         t_call = time.perf_counter()
+        c_call = time.thread_time()
         t_flip = screen.flip()
         flip_us = gaze.now_us() - round((time.monotonic() - t_flip) * 1e6)
         t_done = time.perf_counter()
@@ -177,7 +206,8 @@ class TrialLoop:
                        None if dt is None else round(dt, 6), dropped, decision.blank,
                        st.shown_value, sample_us, ecc, flip_us))
         if self.timings is not None:
-            self.timings.append(FrameTiming(t_call - t0, t_call - t_gaze, upload_s,
+            self.timings.append(FrameTiming(t_call - t0, c_call - c0, t_call - t_gaze,
+                                            t_polled - t_gaze, len(samples), upload_s,
                                             t_done - t_call))
         return None
 
@@ -196,4 +226,4 @@ class TrialLoop:
         return int(s.system_time_us), (None if math.isinf(ecc) else round(float(ecc), 4))
 
 
-__all__ = ["FrameTiming", "TrialIO", "TrialLoop"]
+__all__ = ["SWITCH_INTERVAL_S", "FrameTiming", "TrialIO", "TrialLoop", "display_thread_first"]

@@ -103,12 +103,16 @@ class BatchLog:
     """A CSV written in batches from a memory buffer (gaze samples, frames, blanking episodes).
 
     ``add`` only appends to a list under a lock; ``flush`` writes what has accumulated. On
-    resume an existing file's torn tail is cut off first.
+    resume an existing file's torn tail is cut off first. ``formatter`` turns what was added
+    into a row when it is written, on the flushing thread (the gaze log's eccentricities are
+    computed there, not in the frame loop).
     """
 
-    def __init__(self, path: Path, columns: Sequence[str]) -> None:
+    def __init__(self, path: Path, columns: Sequence[str],
+                 formatter: Callable[[Any], Sequence[Any]] | None = None) -> None:
         self.path = Path(path)
         self.columns = tuple(columns)
+        self._formatter = formatter
         self._lock = threading.Lock()
         self._write_lock = threading.Lock()  # one writer at a time, in the order rows came
         self._pending: list[Sequence[Any]] = []
@@ -136,7 +140,8 @@ class BatchLog:
                 rows, self._pending = self._pending, []
             if not rows and not sync:
                 return 0
-            text = "".join(format_line(r) for r in rows)
+            fmt = self._formatter
+            text = "".join(format_line(fmt(r) if fmt is not None else r) for r in rows)
             with open(self.path, "a", encoding="utf-8", newline="") as fh:
                 fh.write(text)
                 fh.flush()

@@ -29,6 +29,7 @@ why ``auto`` fell back to the CPU when it did.
 
 from __future__ import annotations
 
+import os
 import threading
 import time
 from dataclasses import dataclass
@@ -41,6 +42,19 @@ from fovexp import FovexpError
 
 #: The gaze point of the enhancer: the fixation cross at the screen centre (normalised).
 SCREEN_CENTRE = (0.5, 0.5)
+#: The render thread's nice value above the process's (Linux: per thread; Numba's worker
+#: threads, started from it, inherit it): when the machine is short of cores, the scheduler
+#: runs the display thread first.
+RENDER_NICE = 10
+
+
+def _lower_priority() -> None:
+    """This thread at :data:`RENDER_NICE` more than the process (where the OS allows)."""
+    try:
+        tid = threading.get_native_id()
+        os.setpriority(os.PRIO_PROCESS, tid, os.getpriority(os.PRIO_PROCESS, tid) + RENDER_NICE)
+    except (AttributeError, OSError):  # not Linux, or not allowed: the default priority
+        pass
 
 
 @numba.njit(cache=True, nogil=True)
@@ -274,6 +288,7 @@ class TestRenderer:
         return Rendered(0, res.params, time.perf_counter() - t0, rgba8=rgba)
 
     def _run(self) -> None:
+        _lower_priority()
         try:
             self._start_enhancer()
         except Exception as exc:  # e.g. --backend gpu with no OpenGL 4.5: reported, then stop

@@ -35,7 +35,7 @@ from filelock import FileLock, Timeout
 
 from fovexp import FovexpError
 
-from .frameloop import TrialIO, TrialLoop
+from .frameloop import TrialIO, TrialLoop, display_thread_first
 from .gaze import (
     BlankingMonitor,
     FixationGeometry,
@@ -483,7 +483,8 @@ class Session:
         self._write_info(display_check={**check, "screen": self.opts.screen})
         self.trial_log = TrialLog(self.folder / "trials.csv")
         sid = self.session_id
-        self.gaze_log = BatchLog(self.folder / f"gaze-{sid}.csv", GAZE_COLUMNS)
+        self.gaze_log = BatchLog(self.folder / f"gaze-{sid}.csv", GAZE_COLUMNS,
+                                 formatter=self._gaze_row)
         self.frame_log = BatchLog(self.folder / f"frames-{sid}.csv", FRAME_COLUMNS)
         self.blank_log = BatchLog(self.folder / f"blanking-{sid}.csv", BLANKING_COLUMNS)
         flusher = PeriodicFlusher([self.gaze_log, self.frame_log, self.blank_log]).start()
@@ -508,7 +509,8 @@ class Session:
             self._check_render_budget()
             self._tracker_setup()
             self._instructions()
-            self._trials()
+            with display_thread_first():
+                self._trials()
             state, code = "completed", EXIT_OK
             self._message("Thank you - this part is finished.", ["space", "return"], 3.0)
         except Aborted:
@@ -697,7 +699,7 @@ class Session:
 
     def _drain_gaze(self) -> None:
         """Samples that arrived outside a trial's frame loop, into the gaze log (trial empty)."""
-        self.gaze_log.extend(self._gaze_rows(None, None, self.gaze.poll()))
+        self.gaze_log.extend(self._gaze_rows(None, self.gaze.poll()))
 
     # -- tracker calibration and validation ------------------------------------------------------
     def _tracker_setup(self) -> None:
@@ -762,7 +764,7 @@ class Session:
         while time.monotonic() - t0 < settle_s + collect_s:
             self.screen.show_point(x, y)
             s = self.gaze.poll()
-            self.gaze_log.extend(self._gaze_rows(None, None, s))
+            self.gaze_log.extend(self._gaze_rows(None, s))
             if time.monotonic() - t0 >= settle_s:
                 out.extend(s)
         return out
@@ -896,7 +898,7 @@ class Session:
             trial_index=trial.index, attempt=attempt, participant=participant,
             io=TrialIO(frame=frame_row,
                        gaze=lambda i, a, samples: self.gaze_log.extend(
-                           self._gaze_rows(i, a, samples)),
+                           self._gaze_rows(i, samples, a)),
                        event=lambda kind, detail: self._event(kind, **detail)))
         self._last_state, self._last_latency_ms = st, latency_ms
         try:
@@ -916,14 +918,18 @@ class Session:
         self.done.add(trial.index)
         return "done"
 
-    def _gaze_rows(self, trial_index: int | None, attempt: int | None,
-                   samples: list[GazeSample]) -> list[Any]:
+    def _gaze_rows(self, trial_index: int | None, samples: list[GazeSample],
+                   attempt: int | None = None) -> list[Any]:
+        """What the gaze log gets for ``samples`` (its rows are made by :meth:`_gaze_row`
+        when written, on the flusher thread); ``attempt`` only within a trial."""
+        a = attempt if trial_index is not None else None
+        return [(trial_index, a, s) for s in samples]
+
+    def _gaze_row(self, item: tuple[int | None, int | None, GazeSample]) -> tuple[Any, ...]:
+        trial_index, attempt, s = item
         # sample_row's first field is the trial; the attempt follows it (docs/LOGS.md)
-        out = []
-        for s in samples:
-            row = sample_row(trial_index, s, self.fixation.eccentricity(s.point))
-            out.append((row[0], attempt if trial_index is not None else None, *row[1:]))
-        return out
+        row = sample_row(trial_index, s, self.fixation.eccentricity(s.point))
+        return (row[0], attempt, *row[1:])
 
     def _row(self, trial: Trial, st: TrialState) -> dict[str, Any]:
         spec = self.protocol.spec

@@ -46,7 +46,7 @@ def read_frame_log(path: str | Path) -> pd.DataFrame:
     out = pd.DataFrame(index=frame.index)
     for col in FRAME_COLUMNS:
         raw = frame[col] if col in frame else pd.Series("", index=frame.index)
-        num = pd.to_numeric(raw.replace("", np.nan), errors="coerce")
+        num = pd.to_numeric(raw, errors="coerce")  # empty fields: missing
         out[col] = num.round().astype("Int64") if col in FRAME_INT_COLUMNS else num
     return out
 
@@ -74,17 +74,27 @@ def latency_summary(frames: pd.DataFrame) -> dict[str, float]:
 
 
 def unblanked_violations(frames: pd.DataFrame, radius_deg: float, gaze_timeout_s: float,
-                         decision_to_flip_s: float) -> pd.DataFrame:
-    """Frames drawn with the stimulus (``blanked`` 0) that the blanking rule forbids: no valid
-    gaze sample (``gaze_ecc_deg`` empty), a sample farther than ``radius_deg`` from the cross,
-    or one older at the flip than ``gaze_timeout_s`` (the runner's limit, checked when it
-    decides) plus ``decision_to_flip_s`` (the longest the decision may precede the flip: the
-    drawing and the wait for the vertical blank). Empty when the log keeps the rule."""
-    shown = frames[frames["blanked"] == 0]
-    age_s = gaze_to_flip_ms(shown) / 1e3
-    bad = (shown["gaze_ecc_deg"].isna() | (shown["gaze_ecc_deg"] > radius_deg)
-           | age_s.isna() | (age_s > gaze_timeout_s + decision_to_flip_s))
-    return shown[bad]
+                         first_frame_slack_s: float) -> pd.DataFrame:
+    """Frames drawn with the stimulus (``blanked`` 0) that the blanking rule forbids: without a
+    valid gaze sample (``gaze_ecc_deg`` empty), with one farther than ``radius_deg`` from the
+    cross, or with one that was not recent when the frame was decided.
+
+    "Recent" is checked exactly from the log: a frame is decided after the previous frame's
+    flip, when its newest sample may be at most ``gaze_timeout_s`` old, so that sample cannot
+    be older than the previous flip minus ``gaze_timeout_s``. An attempt's first frame has no
+    previous flip in the log; its sample may be at most ``gaze_timeout_s`` plus
+    ``first_frame_slack_s`` (drawing and waiting for the vertical blank) older than its own
+    flip. Empty when the log keeps the rule."""
+    f = frames.sort_values(["trial_index", "attempt", "frame"])
+    prev_flip = f.groupby(["trial_index", "attempt"])["flip_system_time_us"].shift(1)
+    timeout_us = 1e6 * gaze_timeout_s
+    oldest_us = (prev_flip - timeout_us).where(
+        prev_flip.notna(), f["flip_system_time_us"] - timeout_us - 1e6 * first_frame_slack_s)
+    shown = f["blanked"] == 0
+    gaze_us = f["gaze_system_time_us"]
+    bad = shown & (f["gaze_ecc_deg"].isna() | (f["gaze_ecc_deg"] > radius_deg)
+                   | gaze_us.isna() | (gaze_us.astype(float) < oldest_us.astype(float)))
+    return f[bad.fillna(True)]
 
 
 __all__ = ["FRAME_INT_COLUMNS", "gaze_to_flip_ms", "latency_summary", "read_frame_log",

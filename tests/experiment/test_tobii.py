@@ -181,7 +181,7 @@ def test_session_recovers_from_a_stall_longer_than_the_stall_time(tmp_path) -> N
         return "q" if time.monotonic() - t0 > 5 else None
 
     s.gaze, s.screen = g, StubScreen((480, 270), answer=answer)
-    s.gaze_log = BatchLog(tmp_path / "gaze.csv", GAZE_COLUMNS)
+    s.gaze_log = BatchLog(tmp_path / "gaze.csv", GAZE_COLUMNS, formatter=s._gaze_row)
     dev.stream(60, 600.0)
     g.poll()
     time.sleep(0.4)  # the stream stalls for 4x the stall time
