@@ -24,7 +24,9 @@ to callbacks that only buffer them (the session's logs are written by their own 
 
 from __future__ import annotations
 
+import gc
 import math
+import os
 import sys
 import time
 from collections.abc import Callable, Iterator
@@ -40,17 +42,35 @@ from .trial import InputEvent, TrialState
 SWITCH_INTERVAL_S = 0.0005
 
 
+def _round_robin(on: bool) -> bool:
+    """The calling thread under the real-time round-robin policy at its lowest priority (on),
+    or back to the normal policy: what PsychoPy's ``core.rush`` does on Linux. Returns whether
+    the system allowed it (it needs CAP_SYS_NICE or an rtprio limit; elsewhere: False)."""
+    try:
+        policy = os.SCHED_RR if on else os.SCHED_OTHER
+        os.sched_setscheduler(0, policy, os.sched_param(os.sched_get_priority_min(policy)))
+        return True
+    except (AttributeError, OSError):
+        return False
+
+
 @contextmanager
-def display_thread_first() -> Iterator[None]:
-    """Python's thread switch interval at :data:`SWITCH_INTERVAL_S` for the block: the display
-    thread waits at most that long for the GIL when the render, flusher or writer thread holds
-    it between their GIL-free parts (NumPy, Numba ``nogil`` kernels, file writes)."""
+def display_thread_first() -> Iterator[dict[str, Any]]:
+    """For the block, the calling (display) thread goes first: the interpreter's switch
+    interval at :data:`SWITCH_INTERVAL_S`, so it waits at most about that long for the GIL when
+    the render, flusher or writer thread holds it between their GIL-free parts; and, where the
+    system allows it, the real-time round-robin policy, so that it is not kept waiting for a
+    core by threads of normal priority (it sleeps or waits for the vertical blank every frame,
+    so it takes no core from them for long). Yields what was set (the session records it)."""
     old = sys.getswitchinterval()
     sys.setswitchinterval(min(old, SWITCH_INTERVAL_S))
+    realtime = _round_robin(True)
     try:
-        yield
+        yield {"switch_interval_s": sys.getswitchinterval(), "realtime_round_robin": realtime}
     finally:
         sys.setswitchinterval(old)
+        if realtime:
+            _round_robin(False)
 
 
 @dataclass(frozen=True)
@@ -136,6 +156,10 @@ class TrialLoop:
         st = self.st
         t_end = None if max_s is None else time.monotonic() + max_s
         outcome = "timeout"
+        # No cyclic garbage collection during the frames (a full one can take tens of ms);
+        # it runs again from the black frame on, between trials.
+        collecting = gc.isenabled()
+        gc.disable()
         try:
             while t_end is None or time.monotonic() < t_end:
                 stop = self._frame()
@@ -150,6 +174,8 @@ class TrialLoop:
             except Exception:  # leaving on an error: that error is the one to report
                 t = time.monotonic()
             st.finish(t)
+            if collecting:
+                gc.enable()
         return outcome
 
     def _frame(self) -> str | None:

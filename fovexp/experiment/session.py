@@ -509,7 +509,9 @@ class Session:
             self._check_render_budget()
             self._tracker_setup()
             self._instructions()
-            with display_thread_first():
+            with display_thread_first() as priority:
+                with self._info_lock:
+                    self.info["runs"][-1]["display_thread"] = priority
                 self._trials()
             state, code = "completed", EXIT_OK
             self._message("Thank you - this part is finished.", ["space", "return"], 3.0)

@@ -178,6 +178,11 @@ class PsychoScreen:
                  dry_run: bool = False, refresh_hz: float = 60.0, screen: int = 0,
                  pace_hz: float | None = None) -> None:
         try:  # importing PsychoPy's window module already connects to the X display
+            import pyglet
+
+            # no glGetError after every GL call (pyglet's default; PsychoPy's modules set
+            # this too, but only take effect when imported before pyglet.gl)
+            pyglet.options["debug_gl"] = False
             from psychopy import logging as plog
 
             plog.console.setLevel(plog.ERROR)
