@@ -171,6 +171,8 @@ class TrialLoop:
             # counted until then.
             try:
                 t = self.screen.draw(blank=True)
+                # the samples up to this closing frame belong to the attempt (the gaze log)
+                self.io.gaze(self.trial_index, self.attempt, self.gaze.poll())
             except Exception:  # leaving on an error: that error is the one to report
                 t = time.monotonic()
             st.finish(t)
