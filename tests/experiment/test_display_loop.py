@@ -133,8 +133,10 @@ def test_blanking_rule_holds_in_the_frame_log(tmp_path: Path, xvfb_display) -> N
     # invalid newest sample: black, and its eccentricity empty
     invalid = frames["gaze_ecc_deg"].isna() & frames["gaze_system_time_us"].notna()
     assert invalid.any() and blanked[invalid].all()
-    # the stream paused: frames whose newest sample is stale are black
-    stale = age_ms > 50 + 2e3 * period_s
+    # the stream paused: frames decided when their newest sample was older than the timeout
+    # (a frame is decided after the previous flip) are black
+    prev_flip = frames.groupby(["trial_index", "attempt"])["flip_system_time_us"].shift(1)
+    stale = (frames["gaze_system_time_us"] < prev_flip - 50_000).fillna(False)
     assert stale.any() and blanked[stale].all()
     # inside, near the radius: shown
     near = (frames["gaze_ecc_deg"] > 1.0) & (frames["gaze_ecc_deg"] <= 1.25) & (age_ms < 40)
