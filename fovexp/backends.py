@@ -5,6 +5,8 @@ CPU (NumPy/Numba, :mod:`fovexp.pipeline`) or on the GPU (OpenGL 4.5 compute shad
 
 from __future__ import annotations
 
+from typing import Any
+
 from .errors import FovexpError
 from .geometry import Display, GeometryModel
 from .params import ParameterTable, get_preset
@@ -14,31 +16,59 @@ from .pipeline import Enhancer
 BACKENDS: tuple[str, ...] = ("auto", "cpu", "gpu")
 
 
+def _cpu(display: Display, preset: str, geometry: GeometryModel | None,
+         table: ParameterTable | None, why: str | None) -> Enhancer:
+    """The CPU enhancer; ``why`` (``auto`` fell back to it) becomes its ``fallback_reason``."""
+    enh = Enhancer(display, preset, geometry, table)
+    enh.fallback_reason = why  # type: ignore[attr-defined]
+    return enh
+
+
+def _gpu(enh: Enhancer) -> Enhancer:
+    enh.fallback_reason = None  # type: ignore[attr-defined]
+    return enh
+
+
 def make_enhancer(
     display: Display, preset: str = "paper", geometry: GeometryModel | None = None,
-    table: ParameterTable | None = None, backend: str = "auto",
+    table: ParameterTable | None = None, backend: str = "auto", ctx: Any = None,
 ) -> Enhancer:
     """An :class:`Enhancer` on ``backend``: ``"cpu"`` (NumPy/Numba), ``"gpu"`` (OpenGL 4.5
     compute shaders, :class:`fovexp.gpu.GpuEnhancer`; a clear error when there is no context),
     or ``"auto"``: the GPU when a hardware OpenGL 4.5 context is available and the preset is
     ``paper``, else the CPU (a software renderer such as Mesa's llvmpipe is slower than the CPU
-    backend: benchmarks/GPU.md). Create it on the thread that will use it."""
+    backend: benchmarks/GPU.md). Create it on the thread that will use it.
+
+    ``ctx``: a moderngl context for the GPU backend to run in (e.g. one sharing objects with a
+    window's, so that its output can be drawn without a read-back); by default a standalone one
+    through EGL. ``auto`` then judges that context (hardware or software).
+
+    The enhancer's ``fallback_reason`` says why ``auto`` chose the CPU (None when it did not
+    fall back: the GPU was chosen, or the CPU was asked for), so a caller can show it.
+    """
     if backend not in BACKENDS:
         raise FovexpError(f"unknown backend {backend!r} (choose from {', '.join(BACKENDS)})")
-    if backend == "cpu" or (backend == "auto" and get_preset(preset).name != "paper"):
-        return Enhancer(display, preset, geometry, table)
-    from .gpu import GpuEnhancer, create_context, is_software, release_context
+    if backend == "cpu":
+        return _cpu(display, preset, geometry, table, None)
+    if backend == "auto" and get_preset(preset).name != "paper":
+        return _cpu(display, preset, geometry, table,
+                    f"the {preset!r} preset runs on the CPU backend only")
+    from .gpu import GpuEnhancer, create_context, is_software, release_context, renderer_name
 
     if backend == "gpu":  # no context (or no moderngl): a FovexpError that says so
-        return GpuEnhancer(display, preset, geometry, table)
+        return _gpu(GpuEnhancer(display, preset, geometry, table, ctx=ctx))
     try:
-        ctx = create_context()
-    except FovexpError:  # no moderngl, no EGL, no OpenGL 4.5
-        return Enhancer(display, preset, geometry, table)
-    if is_software(ctx):
-        release_context(ctx)
-        return Enhancer(display, preset, geometry, table)
+        gl = create_context(ctx)
+    except FovexpError as exc:  # no moderngl, no EGL, no OpenGL 4.5
+        return _cpu(display, preset, geometry, table, f"no GPU: {exc}")
+    if is_software(gl):
+        name = renderer_name(gl)
+        if ctx is None:
+            release_context(gl)
+        return _cpu(display, preset, geometry, table,
+                    f"the OpenGL renderer is software ({name}), slower than the CPU backend")
     try:  # GpuEnhancer compiles every shader: a driver that cannot falls back to the CPU
-        return GpuEnhancer(display, preset, geometry, table, ctx=ctx, owns_context=True)
-    except FovexpError:
-        return Enhancer(display, preset, geometry, table)
+        return _gpu(GpuEnhancer(display, preset, geometry, table, ctx=gl,
+                                owns_context=ctx is None))
+    except FovexpError as exc:
+        return _cpu(display, preset, geometry, table, f"the GPU backend failed: {exc}")

@@ -33,7 +33,7 @@ def linearize(encoded: np.ndarray, gamma: float, transfer: str = "power") -> np.
     return np.power(out, np.float32(gamma), out=out)
 
 
-@numba.njit(parallel=True, cache=True, fastmath=True)
+@numba.njit(parallel=True, cache=True, fastmath=True, nogil=True)
 def _add_grey_clip(img, a, b, out):  # pragma: no cover - compiled
     """out = clip(img + a + b, 0, 1), a and b grey (H, W) added to every channel."""
     h, w, c = img.shape

@@ -120,8 +120,9 @@ class StubScreen:
     screen; None on the tracker-lost screen, whose loop polls)."""
 
     def __init__(self, size, fullscreen=False, cross_px=10.0, dry_run=True, refresh_hz=60.0,
-                 inputs=None, answer=None, cal_answer=None, operator_keys=None) -> None:
+                 screen=0, inputs=None, answer=None, cal_answer=None, operator_keys=None) -> None:
         self.size = tuple(size)
+        self.screen = screen
         self.refresh_hz = 60.0 if dry_run else float(refresh_hz)
         self.inputs = dict(inputs or {})
         self.answer = answer
@@ -149,7 +150,7 @@ class StubScreen:
         self.messages.append(text)
         if self.answer is not None:
             return self.answer(text, keys, timeout_s)
-        if keys == ["q"]:
+        if keys == ["q", "escape"]:  # the tracker-lost screen polls
             time.sleep(timeout_s or 0.0)
             return None
         if keys and "r" in keys:
@@ -183,12 +184,20 @@ class StubScreen:
         pass
 
     def set_test(self, right) -> None:
-        self.test = right
+        """``right``: a render (:class:`fovexp.experiment.render.Rendered`) or an image."""
+        self.test = getattr(right, "rgba8", right)
+
+    def prepare(self, blank: bool) -> None:
+        self._blank = blank
+
+    def flip(self) -> float:
+        time.sleep(1 / 240)
+        self.frames.append((self._blank, self.test))
+        return time.monotonic()
 
     def draw(self, blank: bool) -> float:
-        time.sleep(1 / 240)
-        self.frames.append((blank, self.test))
-        return time.monotonic()
+        self.prepare(blank)
+        return self.flip()
 
     def poll_input(self):
         self.polls += 1

@@ -98,3 +98,17 @@ def sampling_figure(result: ValidationResult, stem: Path) -> list[Path]:
     ax.set_title(f"{result.experiment}: ours vs contrast (section 7.3)")
     fig.tight_layout()
     return _save(fig, stem)
+
+
+def latency_figure(latency_ms: dict[str, np.ndarray], stem: Path) -> list[Path]:
+    """Box plots of the gaze-to-flip latency per session (whiskers: 5th and 95th percentiles;
+    :mod:`fovexp.analysis.latency`)."""
+    names = list(latency_ms)
+    fig = Figure(figsize=(max(5.0, 0.6 * len(names) + 2), 3.8))
+    ax = fig.subplots()
+    ax.boxplot([latency_ms[n] for n in names], whis=(5, 95), showfliers=False)
+    ax.set_xticks(range(1, len(names) + 1))
+    ax.set_xticklabels(names, rotation=60, ha="right", fontsize=7)
+    ax.set_ylabel("gaze-to-flip latency (ms)")
+    ax.set_title("Newest gaze sample to flip, per session")
+    return _save(fig, stem)

@@ -9,7 +9,9 @@ Output folder layout::
     tables/calibration-fe.csv, calibration-sk.csv, calibration-sk-lines.csv, calibration-sf.csv
     tables/<experiment>-summary.csv, -overall.csv, -tests.csv, -sampling.csv
     tables/exclusions.csv
+    tables/latency.csv             gaze-to-flip latency and the blanking rule per session
     figures/calibration.{png,pdf}, <experiment>.{png,pdf}, <experiment>-sampling.{png,pdf}
+    figures/latency.{png,pdf}
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ from fovexp.results.calibration import Calibration, calibrate, fe_summary, sk_li
 from fovexp.results.loading import RULES, Dataset, load_results
 
 from . import figures as figs
+from .latency import session_latency
 from .tables import table2_markdown, write_table2
 from .validation import ValidationResult, validate
 
@@ -142,6 +145,8 @@ def run_analysis(
                 ana.files += figs.sampling_figure(res, fig_dir / f"{exp}-sampling")
         sections.append(_validation_md(res, figures))
 
+    sections.append(_latency_section(ana, tables, fig_dir, figures))
+
     other = [e for e in data.experiments
              if e not in CALIBRATION_EXPERIMENTS and e not in validation_exps]
     if other:
@@ -157,6 +162,29 @@ def run_analysis(
     ana.report.write_text(text)
     ana.files.append(ana.report)
     return ana
+
+
+def _latency_section(ana: Analysis, tables: Path, fig_dir: Path, figures: bool) -> str:
+    """The gaze-to-flip latency per session (frame logs; :mod:`fovexp.analysis.latency`)."""
+    table, lat, notes = session_latency(ana.data)
+    table.to_csv(tables / "latency.csv", index=False, float_format="%.6g")
+    ana.files.append(tables / "latency.csv")
+    parts = ["## Gaze-to-flip latency and blanking (section 6.1)\n",
+             "Per session, from its frame log: the time from the newest gaze sample a frame's "
+             "blanking decision used to the frame's flip, on the tracker's clock (median, 95th "
+             "percentile, maximum), the dropped frames, and the frames drawn with the stimulus "
+             "although the newest sample was invalid, outside the blanking radius, or older "
+             "than the gaze timeout when the frame was decided (after the previous flip; "
+             "`rule_violations`: 0 in a valid session).\n"]
+    if len(table):
+        parts.append(_md_table(table, 2))
+        if figures and lat:
+            ana.files += figs.latency_figure(lat, fig_dir / "latency")
+            parts.append("![Gaze-to-flip latency](figures/latency.png)\n")
+    else:
+        parts.append("No frame log with gaze samples.\n")
+    parts += [f"Note: {n}\n" for n in notes]
+    return "\n".join(parts)
 
 
 def _lines_frame_from(lines: Mapping) -> pd.DataFrame:

@@ -53,12 +53,22 @@ def add_run_parser(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument("--backend", choices=BACKENDS, default="auto",
                    help="enhancer backend: cpu, gpu (OpenGL 4.5 compute shaders), or auto: "
                         "a hardware GPU if there is one, else the CPU")
+    p.add_argument("--screen", type=int, default=0, metavar="N",
+                   help="the monitor to open the window on (multi-monitor rigs; default 0)")
     p.add_argument("--skip-display-check", action="store_true",
                    help="do not stop when the refresh rate or window size differ from the profile")
     p.add_argument("--limit-trials", type=int, default=None, metavar="N",
                    help="only the first N main trials of the randomised order (tests, pilots)")
     p.add_argument("--practice", type=int, default=None, metavar="N",
                    help="practice trials (default: the protocol's)")
+    f = p.add_argument_group(
+        "participant form (asked at the console at a participant's first session; every "
+        "field optional; never in a dry run)")
+    f.add_argument("--age", default=None, help="age in years")
+    f.add_argument("--sex", default=None, help="female, male, other or undisclosed")
+    f.add_argument("--vision", default=None,
+                   help="vision correction: none, glasses, contact lenses or other")
+    f.add_argument("--no-form", action="store_true", help="do not ask the form (recorded)")
     g = p.add_argument_group("simulated participant (--dry-run)")
     g.add_argument("--sim-truth", type=Path, default=None,
                    help="YAML ground truth (table, sk_slope, validation_blur_rate, noise_sd)")
@@ -69,6 +79,44 @@ def add_run_parser(subparsers: Any) -> argparse.ArgumentParser:
     g.add_argument("--sim-seed", type=int, default=None, help="seed of the simulated participant")
     p.set_defaults(func=run_command)
     return p
+
+
+def participant_form(args: argparse.Namespace, results_root: Path,
+                     interactive: bool) -> tuple[dict[str, Any] | None, str | None]:
+    """The participant form's answers and, when it was not asked, why (docs/EXPERIMENT.md):
+    from the flags; else from this participant's earlier session in the results root (any
+    experiment); else asked at the console when there is one. Never in a dry run or on
+    resume (the session file has it)."""
+    from .operator import FORM_FIELDS, ask_form, parse_form
+
+    if args.dry_run:
+        return None, "dry run"
+    if args.resume:
+        return None, "resume"  # the session keeps what its first start recorded
+    given = {"age": args.age, "sex": args.sex, "vision_correction": args.vision}
+    if any(v is not None for v in given.values()):
+        return {**parse_form(given), "source": "command line"}, None
+    if args.no_form:
+        return None, "--no-form"
+    import json
+
+    for path in sorted(Path(results_root).glob(f"*/{args.participant}/session-*.json")):
+        try:
+            info = json.loads(path.read_text()).get("participant_info") or {}
+        except (OSError, ValueError):
+            continue
+        if any(k in info for k in FORM_FIELDS):
+            return ({**{k: info.get(k) for k in FORM_FIELDS},
+                     "source": f"earlier session {path}"}, None)
+    if not interactive:
+        return None, "no terminal to ask at"
+    print(f"Participant {args.participant}: first session. Optional details (Enter skips):",
+          file=sys.stderr)
+    try:
+        answers = ask_form(input, lambda t: print(t, file=sys.stderr))
+    except EOFError:  # Ctrl-D: the rest is skipped
+        return None, "form closed at the console"
+    return {**answers, "source": "form"}, None
 
 
 def run_command(args: argparse.Namespace) -> int:
@@ -91,6 +139,11 @@ def run_command(args: argparse.Namespace) -> int:
         if args.resume and args.new_session:
             raise FovexpError("--resume and --new-session exclude each other")
         tracker = args.tracker or (SIMULATED_TRACKER if args.dry_run else "tobii")
+        if args.screen < 0:
+            raise FovexpError("--screen must be 0 or more")
+        from .operator import parse_form
+
+        parse_form({"age": args.age, "sex": args.sex, "vision_correction": args.vision})
         truth = SimTruth.load(args.sim_truth) if args.sim_truth else SimTruth()
         # dependencies come from the same results root; a participant's never from dry runs
         protocol = load_protocol(find_protocol(args.protocol), results_root=args.results,
@@ -102,7 +155,7 @@ def run_command(args: argparse.Namespace) -> int:
             window_size=args.window or ((480, 270) if args.dry_run else None),
             fullscreen=not (args.windowed or args.dry_run),
             skip_display_check=args.skip_display_check, tracker_address=args.tracker_address,
-            backend=args.backend,
+            backend=args.backend, screen=args.screen,
             sim_truth=truth, sim_speed=args.sim_speed, sim_noise_scale=args.sim_noise_scale,
             sim_seed=args.sim_seed,
         )
@@ -115,6 +168,9 @@ def run_command(args: argparse.Namespace) -> int:
             return 0
         # A tracker that is absent fails here, before any window opens.
         gaze = session.make_gaze()
+        # The form last: nothing above can still refuse the session after it was filled in.
+        opts.participant_info, opts.participant_info_note = participant_form(
+            args, args.results, sys.stdin.isatty())
         print(f"fovexp run: {protocol.experiment}, participant {args.participant}, session "
               f"{session.session_id}, {len(session.remaining)} of {len(session.trials)} trials "
               f"to run -> {session.folder}", file=sys.stderr)

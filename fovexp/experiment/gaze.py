@@ -576,10 +576,11 @@ class MouseGaze:
         return [GazeSample(t, t, pt[0], pt[1], True, pt[0], pt[1], True)]
 
 
-def sample_row(trial_index: int | None, s: GazeSample, ecc: float) -> tuple[Any, ...]:
-    """A ``gaze-<session>.csv`` row (see :data:`fovexp.experiment.logs.GAZE_COLUMNS`)."""
+def sample_row(trial_index: int | None, attempt: int | None, s: GazeSample,
+               ecc: float) -> tuple[Any, ...]:
+    """A ``gaze-<session>.csv`` row (:data:`fovexp.results.format.GAZE_COLUMNS`)."""
     pt = s.point
-    return (trial_index, s.device_time_us, s.system_time_us,
+    return (trial_index, attempt, s.device_time_us, s.system_time_us,
             s.left_x, s.left_y, s.left_valid, s.right_x, s.right_y, s.right_valid,
             pt[0] if pt else None, pt[1] if pt else None, s.valid,
             None if math.isinf(ecc) else round(ecc, 4)) + origin_fields(s)

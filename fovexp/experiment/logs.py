@@ -15,7 +15,7 @@ from __future__ import annotations
 import json
 import os
 import threading
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -31,8 +31,8 @@ from fovexp.results.format import (
 )
 
 __all__ = ["BLANKING_COLUMNS", "FRAME_COLUMNS", "GAZE_COLUMNS", "TRIAL_COLUMNS", "BatchLog",
-           "PeriodicFlusher", "TrialLog", "format_line", "format_value", "read_trials",
-           "repair_tail", "write_json_atomic"]
+           "JsonWriter", "PeriodicFlusher", "TrialLog", "format_line", "format_value",
+           "read_trials", "repair_tail", "write_json_atomic"]
 
 def read_trials(path: Path) -> tuple[list[dict[str, Any]], int]:
     """Rows of a ``trials.csv`` and the byte length of its valid part
@@ -103,12 +103,16 @@ class BatchLog:
     """A CSV written in batches from a memory buffer (gaze samples, frames, blanking episodes).
 
     ``add`` only appends to a list under a lock; ``flush`` writes what has accumulated. On
-    resume an existing file's torn tail is cut off first.
+    resume an existing file's torn tail is cut off first. ``formatter`` turns what was added
+    into a row when it is written, on the flushing thread (the gaze log's eccentricities are
+    computed there, not in the frame loop).
     """
 
-    def __init__(self, path: Path, columns: Sequence[str]) -> None:
+    def __init__(self, path: Path, columns: Sequence[str],
+                 formatter: Callable[[Any], Sequence[Any]] | None = None) -> None:
         self.path = Path(path)
         self.columns = tuple(columns)
+        self._formatter = formatter
         self._lock = threading.Lock()
         self._write_lock = threading.Lock()  # one writer at a time, in the order rows came
         self._pending: list[Sequence[Any]] = []
@@ -136,7 +140,8 @@ class BatchLog:
                 rows, self._pending = self._pending, []
             if not rows and not sync:
                 return 0
-            text = "".join(format_line(r) for r in rows)
+            fmt = self._formatter
+            text = "".join(format_line(fmt(r) if fmt is not None else r) for r in rows)
             with open(self.path, "a", encoding="utf-8", newline="") as fh:
                 fh.write(text)
                 fh.flush()
@@ -172,13 +177,19 @@ class PeriodicFlusher:
             log.flush(sync=True)
 
 
-def write_json_atomic(path: Path, data: dict[str, Any]) -> None:
-    """Write JSON via a temporary file and ``os.replace``: a reader sees old or new, never half."""
+def json_text(data: dict[str, Any]) -> str:
+    """The session file's text (indented JSON; values JSON lacks, such as paths, as text)."""
+    return json.dumps(data, indent=2, sort_keys=False, default=str) + "\n"
+
+
+def write_json_atomic(path: Path, data: dict[str, Any] | str) -> None:
+    """Write JSON (a dict, or :func:`json_text` already made) via a temporary file and
+    ``os.replace``, fsync'ed: a reader sees old or new, never half."""
     path = Path(path)
+    text = data if isinstance(data, str) else json_text(data)
     tmp = path.with_name(path.name + ".tmp")
     with open(tmp, "w", encoding="utf-8") as fh:
-        json.dump(data, fh, indent=2, sort_keys=False, default=str)
-        fh.write("\n")
+        fh.write(text)
         fh.flush()
         os.fsync(fh.fileno())
     os.replace(tmp, path)
@@ -187,3 +198,52 @@ def write_json_atomic(path: Path, data: dict[str, Any]) -> None:
         os.fsync(dfd)
     finally:
         os.close(dfd)
+
+
+class JsonWriter:
+    """Writes a session file with :func:`write_json_atomic` on its own thread, so that events
+    noticed in the frame loop never wait on a disk (fsync can take tens of ms).
+
+    ``snapshot()`` returns the file's current text (the session serialises its state under its
+    own lock). :meth:`request` asks for a write soon, coalescing requests that arrive while one
+    is under way (the newest state is what gets written); :meth:`write_now` writes on the
+    calling thread (state changes that must be on disk before anything else happens: the
+    start, the end, a failure) after any write under way. Every write is whole and atomic, so
+    the file is valid JSON whenever a crash comes.
+    """
+
+    def __init__(self, path: Path, snapshot: Callable[[], str]) -> None:
+        self.path = Path(path)
+        self._snapshot = snapshot
+        self._write_lock = threading.Lock()
+        self._wanted = threading.Event()
+        self._stop = False
+        self.error: Exception | None = None
+        self._thread = threading.Thread(target=self._run, name="fovexp-session-file",
+                                        daemon=True)
+        self._thread.start()
+
+    def request(self) -> None:
+        self._wanted.set()
+
+    def write_now(self) -> None:
+        with self._write_lock:
+            write_json_atomic(self.path, self._snapshot())
+
+    def _run(self) -> None:
+        while True:
+            self._wanted.wait()
+            self._wanted.clear()
+            if self._stop:
+                return
+            try:
+                self.write_now()
+            except Exception as exc:  # a full disk: kept, reported by close()
+                self.error = exc
+
+    def close(self) -> None:
+        """Stop the thread, then write the final state on the caller's thread."""
+        self._stop = True
+        self._wanted.set()
+        self._thread.join(timeout=10)
+        self.write_now()

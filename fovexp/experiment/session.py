@@ -3,19 +3,27 @@
 The frame loop of a trial follows paper section 6.1 ("Task"): the reference's left half on the
 left, the mirrored half processed with the current value on the right, a fixation cross on the
 seam; the wheel changes the value, Enter confirms; whenever the gaze leaves the 1.25 deg window
-around the cross (or is invalid or lost) the next frame is black. The window itself is a
-:class:`Screen` (``fovexp.experiment.window.PsychoScreen``); everything here runs without one
-except :meth:`Session.run`.
+around the cross (or is invalid or lost) the next frame is black. The loop itself is
+:class:`fovexp.experiment.frameloop.TrialLoop`. The window is a :class:`Screen`
+(``fovexp.experiment.window.PsychoScreen``); everything here runs without one except
+:meth:`Session.run`.
+
+Between trials the screen shows the cross alone from the first flip after Enter until the next
+trial's stimulus (or a message). File writes stay off the frame loop: the gaze, frame and
+blanking logs are written by their flusher thread, events go to the session file through its
+writer thread, and the trial row (the commit point) is written after the black frame.
 """
 
 from __future__ import annotations
 
+import csv
 import datetime as _dt
 import json
 import os
 import platform
 import signal
 import sys
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -33,6 +41,7 @@ from .calibration import (
     DriftCheck,
     SimulatedCalibration,
 )
+from .frameloop import TrialIO, TrialLoop, display_thread_first
 from .gaze import (
     BlankingMonitor,
     DisplayArea,
@@ -49,11 +58,14 @@ from .logs import (
     FRAME_COLUMNS,
     GAZE_COLUMNS,
     BatchLog,
+    JsonWriter,
     PeriodicFlusher,
     TrialLog,
+    json_text,
     read_trials,
     write_json_atomic,
 )
+from .operator import DISPLAY_CHECKLIST, checklist_text, eta_s, trial_line
 from .participant import SimTruth, SimulatedParticipant
 from .protocol import LoadedProtocol, Trial
 from .quality import target_points
@@ -67,6 +79,9 @@ EXIT_ABORTED = 3
 EXIT_INTERRUPTED = 130
 #: held (an OS file lock) in the participant's folder while a run uses it
 LOCK_FILE = ".fovexp-run.lock"
+#: the quit key's confirmation screen
+QUIT_TEXT = ("Quit the session?\n\nQ: quit - progress is saved; continue later with --resume\n"
+             "Space: go back")
 
 
 class Screen(Protocol):
@@ -82,7 +97,9 @@ class Screen(Protocol):
     def calibration_frame(self, view: Any) -> list[str]: ...
     def take_operator_keys(self) -> set[str]: ...
     def set_reference(self, left: np.ndarray) -> None: ...
-    def set_test(self, right: np.ndarray) -> None: ...
+    def set_test(self, right: Any) -> None: ...
+    def prepare(self, blank: bool) -> None: ...
+    def flip(self) -> float: ...
     def draw(self, blank: bool) -> float: ...
     def poll_input(self) -> list[InputEvent]: ...
     def mouse_position(self) -> tuple[float, float] | None: ...
@@ -107,6 +124,15 @@ class SessionOptions:
     tracker_address: str | None = None
     #: enhancer backend: auto (a hardware GPU if there is one), cpu or gpu
     backend: str = "auto"
+    #: the monitor of a multi-monitor rig (PsychoPy's ``screen``)
+    screen: int = 0
+    #: the participant form (age, sex, vision correction; each may be None), or None when it
+    #: was not asked (dry runs, no terminal, --no-form); recorded at the first start
+    participant_info: dict[str, Any] | None = None
+    #: why the form was not asked, recorded instead of it
+    participant_info_note: str | None = None
+    #: where the per-trial console line and warnings go (default: stderr)
+    console: Callable[[str], None] | None = None
     sim_truth: SimTruth = field(default_factory=SimTruth)
     sim_speed: float = 4.0
     sim_noise_scale: float = 1.0
@@ -119,7 +145,7 @@ class SessionOptions:
 
 
 class Aborted(Exception):
-    """The operator quit (Escape then Q); progress is saved."""
+    """The operator quit (Escape, then Q to confirm); progress is saved."""
 
 
 class Interrupted(Exception):
@@ -191,6 +217,8 @@ class Session:
                               "--tracker simulated")
         self.display = load_display(protocol.display_name)
         self.folder = Path(opts.results_root) / protocol.experiment / self.participant
+        self._info_lock = threading.Lock()
+        self._writer: JsonWriter | None = None
         self._lock = self._lock_folder()
         try:
             self.fixation = FixationGeometry(self.display)
@@ -204,6 +232,8 @@ class Session:
         self.sim: SimulatedParticipant | None = None
         self.events: list[dict[str, Any]] = []
         self.refresh_hz: float = float(self.display.refresh_hz)
+        self._trial_seconds: list[float] = []  # this run's trial durations (the console's ETA)
+        self._operator_notes: list[str] = []  # shown with the instructions (backend, budget)
 
     # -- the participant's folder: one run at a time ---------------------------------------------
     def _lock_folder(self) -> FileLock:
@@ -298,6 +328,26 @@ class Session:
         rows, _ = read_trials(self.folder / "trials.csv")
         self.done = {int(r["trial_index"]) for r in rows if r["session"] == self.session_id}
         self.remaining = [t for t in self.trials if t.index not in self.done]
+        #: attempts begun per trial (all runs): a resumed session numbers on from these
+        self.attempts = self._attempts_so_far()
+
+    def _attempts_so_far(self) -> dict[int, int]:
+        """Attempts already begun per trial index: those the session file recorded at each
+        attempt's start, or, for an attempt whose start a kill kept out of it, those in the
+        frame and blanking logs."""
+        out = {int(k): int(v) for k, v in (self.info.get("attempts") or {}).items()}
+        for name in (f"frames-{self.session_id}.csv", f"blanking-{self.session_id}.csv"):
+            path = self.folder / name
+            if not path.exists():
+                continue
+            with open(path, encoding="utf-8", newline="") as fh:
+                for row in csv.DictReader(fh):
+                    try:
+                        i, a = int(row["trial_index"]), int(row["attempt"])
+                    except (KeyError, TypeError, ValueError):  # a torn last line
+                        continue
+                    out[i] = max(out.get(i, 0), a + 1)
+        return out
 
     def _reuse_derived(self, info: dict[str, Any]) -> None:
         """Resume with the dependency values (f_e per blur-rate, s_k lines, tables) the session
@@ -332,8 +382,18 @@ class Session:
         return self.folder / f"session-{self.session_id}.json"
 
     def _write_info(self, **update: Any) -> None:
-        self.info.update(update)
-        write_json_atomic(self._session_path(), self.info)
+        """Update the session file and write it now (atomic, fsync'ed; after a write the
+        writer thread has under way). Not for the frame loop: :meth:`_event` is."""
+        with self._info_lock:
+            self.info.update(update)
+        if self._writer is not None:
+            self._writer.write_now()
+        else:
+            write_json_atomic(self._session_path(), self._info_text())
+
+    def _info_text(self) -> str:
+        with self._info_lock:
+            return json_text(self.info)
 
     def _start_info(self) -> None:
         proto, opts = self.protocol, self.opts
@@ -362,6 +422,13 @@ class Session:
                 "tracker_quality": [],
                 "events": [],
             }
+        if "participant_info" not in self.info:  # asked at the first start; resume keeps it
+            self.info["participant_info"] = (
+                {**opts.participant_info, "time": run["started"]}
+                if opts.participant_info is not None
+                else {"skipped": opts.participant_info_note or
+                      ("dry run" if opts.dry_run else "not asked")})
+        run["screen"] = opts.screen
         self.info["runs"].append(run)
         self.info["versions"] = _versions()
         if opts.dry_run:
@@ -393,6 +460,10 @@ class Session:
         raise FovexpError(f"--tracker {kind!r}: choose tobii, simulated or mouse")
 
     # -- the run -------------------------------------------------------------------------------
+    def _say(self, line: str) -> None:
+        """A line for the operator's console."""
+        (self.opts.console or (lambda t: print(t, file=sys.stderr, flush=True)))(line)
+
     def run(self, screen_factory: Any = None, gaze: Any = None) -> int:
         """Run the remaining trials; returns an exit status (0 done, 3 aborted, 130 killed)."""
         proto = self.protocol
@@ -413,7 +484,7 @@ class Session:
             self.screen = screen_factory(
                 size=size, fullscreen=self.opts.fullscreen and not self.opts.dry_run,
                 cross_px=self._cross_px(size), dry_run=self.opts.dry_run,
-                refresh_hz=self.display.refresh_hz)
+                refresh_hz=self.display.refresh_hz, screen=self.opts.screen)
             check = self._check_display()
         except BaseException:
             self.release()
@@ -421,10 +492,13 @@ class Session:
         if isinstance(self.gaze, MouseGaze):
             self.gaze.position = self.screen.mouse_position
         self._start_info()
-        self._write_info(display_check=check, display_area=area_info)
+        self._writer = JsonWriter(self._session_path(), self._info_text)
+        self._write_info(display_check={**check, "screen": self.opts.screen},
+                         display_area=area_info)
         self.trial_log = TrialLog(self.folder / "trials.csv")
         sid = self.session_id
-        self.gaze_log = BatchLog(self.folder / f"gaze-{sid}.csv", GAZE_COLUMNS)
+        self.gaze_log = BatchLog(self.folder / f"gaze-{sid}.csv", GAZE_COLUMNS,
+                                 formatter=self._gaze_row)
         self.frame_log = BatchLog(self.folder / f"frames-{sid}.csv", FRAME_COLUMNS)
         self.blank_log = BatchLog(self.folder / f"blanking-{sid}.csv", BLANKING_COLUMNS)
         flusher = PeriodicFlusher([self.gaze_log, self.frame_log, self.blank_log]).start()
@@ -435,17 +509,24 @@ class Session:
         try:
             from .render import TestRenderer
 
-            self.renderer = TestRenderer(self.display, proto.spec.preset,
-                                         proto.spec.geometry_model, self.opts.backend)
+            share = getattr(self.screen, "gl_share", None)
+            self.renderer = TestRenderer(
+                self.display, proto.spec.preset, proto.spec.geometry_model, self.opts.backend,
+                gl_share=share() if share is not None and self.opts.backend != "cpu" else None)
             self._write_info(render=self.renderer.info())
             self.gaze.start()
             self._write_info(tracker=self.gaze.info())
             if self.opts.dry_run:
                 self.sim = SimulatedParticipant(self.opts.sim_truth, self._sim_seed() + 1,
                                                 self.opts.sim_speed, self.opts.sim_noise_scale)
+            self._display_setup()
+            self._check_render_budget()
             self._tracker_setup()
             self._instructions()
-            self._trials()
+            with display_thread_first() as priority:
+                with self._info_lock:
+                    self.info["runs"][-1]["display_thread"] = priority
+                self._trials()
             state, code = "completed", EXIT_OK
             self._message("Thank you - this part is finished.", ["space", "return"], 3.0)
         except Aborted:
@@ -472,6 +553,7 @@ class Session:
                 except Exception:  # closing after an error must not hide the error
                     pass
             flusher.stop()
+            # the renderer lets go of the window's shared GL context before the window closes
             for closer in (getattr(self.renderer, "close", None),
                            getattr(self.screen, "close", None)):
                 if closer is not None:
@@ -483,11 +565,78 @@ class Session:
                     if r["session"] == self.session_id} if hasattr(self, "trial_log") else set()
             complete = state == "completed" and len(done) == len(self.trials)
             extra = {"failure": failure} if failure is not None else {}
+            writer, self._writer = self._writer, None
+            try:
+                writer.close()  # the events it had still to write are in the final write below
+            except Exception:
+                pass
             self._write_info(state=state if not (state == "completed" and not complete)
                              else "incomplete", completed=complete, ended=now_iso(),
                              n_completed=len(done), events=self.info.get("events", []), **extra)
             self.release()
         return code
+
+    def _display_setup(self) -> None:
+        """The operator confirms the display checklist (docs/EXPERIMENT.md) with C; recorded
+        per run. A dry run records it as skipped."""
+        if self.opts.dry_run:
+            entry: dict[str, Any] = {"skipped": "dry run"}
+        else:
+            self._message(checklist_text(), ["c"], None)
+            entry = {"confirmed": True, "time": now_iso(), "items": list(DISPLAY_CHECKLIST)}
+        with self._info_lock:
+            self.info["runs"][-1]["display_setup"] = entry
+        self._write_info()
+
+    def _check_render_budget(self) -> None:
+        """Warn when the backend cannot show a wheel step within the protocol's budget
+        (``render.max_step_ms``), measured on the first remaining trial's image (a warm-up
+        render, then one wheel step), and when ``auto`` fell back to the CPU: on the console,
+        in the session file, and with the instructions. Never stops the session."""
+        spec = self.protocol.spec
+        info = self.renderer.info()
+        if info.get("fallback"):
+            self._operator_note(f"enhancer on the CPU: {info['fallback']}", "backend_fallback",
+                                reason=info["fallback"])
+        for note in info.get("notes") or []:
+            self._operator_note(note, "render_note", note=note)
+        trial = self.remaining[0]
+        frame = self._load_frame(trial)
+        w = frame.shape[1]
+        self.renderer.set_image(frame[:, w // 2:], (w, frame.shape[0]))
+        adj = spec.adjust
+        v0 = trial.start_value
+        v1 = v0 + adj.step if v0 + adj.step <= adj.range[1] else v0 - adj.step
+        times = []
+        for v in (v0, v1):
+            deadline = time.monotonic() + 300
+            serial = self.renderer.request(self._params(trial, v))
+            while True:  # the cross alone meanwhile
+                try:
+                    times.append(self.renderer.wait(serial, timeout=0.05).seconds)
+                    break
+                except TimeoutError:
+                    if time.monotonic() > deadline:
+                        raise FovexpError("the warm-up render took more than 300 s") from None
+                    self.screen.draw(blank=True)
+                    self._drain_gaze()
+        step_ms = 1e3 * times[1]
+        budget = spec.render.max_step_ms
+        result = {"parameter": adj.parameter, "first_render_ms": round(1e3 * times[0], 1),
+                  "step_ms": round(step_ms, 1), "max_step_ms": budget,
+                  "within_budget": step_ms <= budget}
+        self._write_info(render={**info, "wheel_step": result})
+        if step_ms > budget:
+            self._operator_note(
+                f"a wheel step ({adj.parameter}) takes {step_ms:.0f} ms on the "
+                f"{info['backend']} backend, above the protocol's render.max_step_ms = "
+                f"{budget:g} ms", "render_budget_exceeded", **result)
+
+    def _operator_note(self, text: str, event: str, **detail: Any) -> None:
+        """A warning for the operator: console, session file (event), instruction screen."""
+        self._say(f"fovexp run: warning: {text}")
+        self._operator_notes.append(text)
+        self._event(event, **detail)
 
     def _check_display(self) -> dict[str, Any]:
         """Measured refresh rate and window size against the profile (closes the window and
@@ -533,15 +682,36 @@ class Session:
             signal.signal(sig, h)
 
     def _event(self, kind: str, **detail: Any) -> None:
-        self.info.setdefault("events", []).append({"time": now_iso(), "event": kind, **detail})
-        self._write_info()
+        """An event for the session file, written by its writer thread (the frame loop calls
+        this: it never waits on the disk); before the run's writer exists, at once."""
+        with self._info_lock:
+            self.info.setdefault("events", []).append(
+                {"time": now_iso(), "event": kind, **detail})
+        if self._writer is not None:
+            self._writer.request()
+        else:
+            self._write_info()
 
     def _message(self, text: str, keys: list[str], timeout_s: float | None = None) -> str | None:
         """A message screen; the gaze stream keeps going into the gaze log meanwhile (a long
-        break would otherwise overflow the tracker's buffer)."""
+        break would otherwise overflow the tracker's buffer). Escape asks to quit
+        (:meth:`confirm_quit`); going back shows the message again."""
         if self.opts.dry_run:
             timeout_s = self.opts.dry_message_s
-        return self.screen.message(text, keys, timeout_s, self._drain_gaze)
+        while True:
+            key = self.screen.message(text, [*keys, "escape"], timeout_s, self._drain_gaze)
+            if key != "escape":
+                return key
+            self.confirm_quit()
+
+    def confirm_quit(self, trial_index: int | None = None) -> None:
+        """The quit key's confirmation, for every screen (trials go through their pause
+        screen; other screens, such as the tracker's, call this on Escape): Q quits, keeping
+        everything logged (raises :class:`Aborted`), Space goes back."""
+        key = self.screen.message(QUIT_TEXT, ["q", "space"], None, self._drain_gaze)
+        if key == "q":
+            self._event("aborted", trial_index=trial_index)
+            raise Aborted()
 
     def _drain_gaze(self) -> None:
         """Samples that arrived outside a trial's frame loop, into the gaze log (trial empty)."""
@@ -670,14 +840,15 @@ class Session:
     def _instructions(self) -> None:
         text = self.protocol.spec.instructions.strip() or "Adjust the right half to match the left."
         resumed = " (continuing where the last session stopped)" if self.done else ""
-        self._message(f"{self.protocol.spec.title}{resumed}\n\n{text}\n\nPress Space to start.",
-                      ["space"])
+        notes = "".join(f"\n\nOperator: {n}" for n in self._operator_notes)
+        self._message(f"{self.protocol.spec.title}{resumed}\n\n{text}\n\nPress Space to start."
+                      f"{notes}", ["space"])
 
     def _trials(self) -> None:
         spec = self.protocol.spec
-        main_done_this_run = 0
         practice_announced = False
         main_announced = bool(self.done)
+        n_main = sum(not t.practice for t in self.trials)
         for trial in self.remaining:
             if trial.practice and not practice_announced:
                 practice_announced = True
@@ -687,12 +858,15 @@ class Session:
                 if practice_announced:
                     self._message("Practice finished. The experiment starts now.\n\n"
                                   "Press Space.", ["space"])
-            attempt = 0  # a pause or a lost tracker restarts the trial: the next attempt
-            while True:
+            t0 = time.monotonic()
+            while True:  # a pause or a lost tracker restarts the trial: the next attempt
+                attempt = self.attempts.get(trial.index, 0)
+                self.attempts[trial.index] = attempt + 1
+                # on disk before its first frame: a resumed session numbers on from it
+                self._write_info(attempts={str(k): v for k, v in self.attempts.items()})
                 outcome = self._run_trial(trial, attempt)
                 if outcome == "done":
                     break
-                attempt += 1
                 if outcome == "pause":
                     self._event("paused", trial_index=trial.index)
                     # Waits for the operator even in a dry run (no auto-continue).
@@ -705,13 +879,28 @@ class Session:
                         raise Aborted()
                 elif outcome == "disconnected":
                     self._wait_reconnect(trial)
-            if not trial.practice:
-                main_done_this_run += 1
-                left = len([t for t in self.remaining if t.index > trial.index])
-                if spec.break_every and left and main_done_this_run % spec.break_every == 0:
-                    self._message(f"Break. {left} trials to go.\n\nPress Space to continue.",
-                                  ["space"])
+            self._trial_seconds.append(time.monotonic() - t0)
+            left = len([t for t in self.remaining if t.index > trial.index])
+            self._console_line(trial, left)
+            main_done = sum(not t.practice and t.index in self.done for t in self.trials)
+            # breaks at the same places of the plan whatever runs it took (resume)
+            if (not trial.practice and spec.break_every and left
+                    and main_done % spec.break_every == 0):
+                self._message(f"Break. {n_main - main_done} trials to go.\n\n"
+                              "Press Space to continue.", ["space"])
             self._between_trials_checks(trial)  # drift check / recalibration (D, C, every N)
+
+    def _console_line(self, trial: Trial, left: int) -> None:
+        """trial i/N, blanked %, dropped frames, gaze-to-flip latency, ETA (docs/EXPERIMENT.md)."""
+        st = self._last_state
+        lat = np.array(self._last_latency_ms, dtype=float)
+        position = sum(t.practice == trial.practice and t.index <= trial.index
+                       for t in self.trials)
+        total = sum(t.practice == trial.practice for t in self.trials)
+        self._say(trial_line(position=position, total=total, practice=trial.practice,
+                             blanked_fraction=st.blanking.fraction, dropped=st.timer.dropped,
+                             frames=st.n_frames, latency_ms=lat,
+                             eta_s=eta_s(self._trial_seconds, left)))
 
     def _wait_reconnect(self, trial: Trial) -> None:
         """Tracker lost mid-session: screen blanked, a message, wait; Q quits (saved)."""
@@ -724,10 +913,9 @@ class Session:
             self._drain_gaze()
             for ev in self.gaze.poll_events():
                 self._event(ev.kind, **ev.detail)
-            key = self.screen.message(text, ["q"], 0.1, self._drain_gaze)
-            if key == "q":
-                self._event("aborted", trial_index=trial.index)
-                raise Aborted()
+            key = self.screen.message(text, ["q", "escape"], 0.1, self._drain_gaze)
+            if key is not None:
+                self.confirm_quit(trial.index)
         self._event("tracker_reconnected", trial_index=trial.index)
 
     def _params(self, trial: Trial, value: float) -> Any:
@@ -742,11 +930,12 @@ class Session:
         """One attempt at a trial; returns ``done``, ``pause`` or ``disconnected``.
 
         What is logged is what was on screen: each frame's value is that of the render shown
-        in it, and Enter pressed while a newer render is pending is accepted on the first frame
-        that shows it (``final_value`` is the value the participant saw when confirming). Every
-        frame goes to the frame log as it is shown and every attempt's blanking episodes to the
-        blanking log, however the attempt ends (an interrupted one included), tagged with
-        ``attempt``.
+        in it, and ``final_value`` is the value on screen when Enter was pressed (a render still
+        pending then is dropped, never shown). Every frame goes to the frame log as it is shown
+        and every attempt's blanking episodes to the blanking log, however the attempt ends (an
+        interrupted one included), tagged with ``attempt``. From the first flip after the
+        attempt ends the cross is alone on screen; the logs are synced and the trial's row
+        written (the commit point) after it.
         """
         spec = self.protocol.spec
         adj = spec.adjust
@@ -757,72 +946,39 @@ class Session:
                                  trial.start_value)
         st = TrialState(adjuster, self.refresh_hz)
         self.renderer.set_image(frame[:, w // 2:], (w, frame.shape[0]))
-        latest = self.renderer.request(self._params(trial, adjuster.value))
-        # The cross alone while the first frame of the trial is computed.
-        while True:
-            try:
-                shown_serial, shown_params, right, _ = self.renderer.wait(latest, timeout=0.05)
-                break
-            except TimeoutError:
-                self.screen.draw(blank=True)
-                self._drain_gaze()
-        self.screen.set_test(right)
-        st.show(float(getattr(shown_params, adj.parameter)))
         monitor = BlankingMonitor(self.fixation, spec.fixation.radius_deg,
                                   spec.fixation.gaze_timeout_s)
+        participant = None
         if self.sim is not None:
             self.sim.begin(adj.parameter, trial.method, trial.blur_rate, trial.s_f,
                            adj.range[0], adj.range[1], adj.step, adj.fine_step)
-        # Samples from before the stimulus belong to no trial, but they tell the monitor where
-        # the gaze is, so the first frame is not blanked as "lost".
-        early = self.gaze.poll()
-        monitor.update(early, self.gaze.now_us())
-        self.gaze_log.extend(self._gaze_rows(None, early))
-        decision = None
-        confirmed = False  # Enter pressed; waiting for the pending render to be shown
-        drawn_serial = -1  # the render in the last frame drawn
+            participant = self.sim.poll
+        latency_ms: list[float] = []
+
+        def frame_row(row: tuple[Any, ...]) -> None:
+            self.frame_log.add(row)
+            if row[8] is not None:  # gaze-to-flip, for the console line
+                latency_ms.append((row[10] - row[8]) / 1e3)
+
+        loop = TrialLoop(
+            screen=self.screen, gaze=self.gaze, renderer=self.renderer, monitor=monitor,
+            state=st, params_for=lambda v: self._params(trial, v), parameter=adj.parameter,
+            trial_index=trial.index, attempt=attempt, participant=participant,
+            io=TrialIO(frame=frame_row,
+                       gaze=lambda i, a, samples: self.gaze_log.extend(
+                           self._gaze_rows(i, samples, a)),
+                       event=lambda kind, detail: self._event(kind, **detail)))
+        self._last_state, self._last_latency_ms = st, latency_ms
         try:
-            while True:
-                for ev in self.gaze.poll_events():
-                    self._event(ev.kind, trial_index=trial.index, **ev.detail)
-                if not self.gaze.connected:
-                    return "disconnected"  # the trial restarts once the tracker is back
-                samples = self.gaze.poll()
-                decision = monitor.update(samples, self.gaze.now_us())
-                self.gaze_log.extend(self._gaze_rows(trial.index, samples))
-                events = self.screen.poll_input()
-                if confirmed:
-                    # After Enter only a pause counts; the wheel no longer changes the value.
-                    events = [e for e in events if isinstance(e, Key) and e.name == "escape"]
-                elif self.sim is not None and st.t_start is not None:
-                    t_trial = time.monotonic() - st.t_start
-                    events = events + self.sim.poll(t_trial, st.value, not decision.blank)
-                outcome = st.handle(events)
-                if outcome == "pause":
-                    return "pause"
-                if outcome == "confirm":
-                    confirmed = True
-                    st.confirm(time.monotonic())
-                if outcome == "changed":
-                    latest = self.renderer.request(self._params(trial, st.value))
-                got = self.renderer.poll()
-                if got is not None:
-                    shown_serial, shown_params, right, _ = got
-                    self.screen.set_test(right)
-                    st.show(float(getattr(shown_params, adj.parameter)))
-                if confirmed and drawn_serial >= latest:
-                    break  # the last frame drawn showed the confirmed value
-                t = self.screen.draw(blank=decision.blank)
-                drawn_serial = shown_serial
-                dt, dropped = st.flip(t, decision.blank, decision.reason)
-                self.frame_log.add((trial.index, attempt, st.n_frames - 1, round(t, 6),
-                                    None if dt is None else round(dt, 6), dropped,
-                                    decision.blank, st.shown_value))
+            loop.show_first()
+            outcome = loop.run()
         finally:
-            st.finish(time.monotonic())
+            st.finish(time.monotonic())  # when the loop could not flip its closing frame
             self.blank_log.extend(
                 (trial.index, attempt, round(e.start_s, 6), round(e.end_s, 6), e.frames,
                  e.reason) for e in st.blanking.episodes if e.end_s is not None)
+        if outcome != "done":
+            return outcome
         # Side logs first (synced), then the trial row: the row is the commit point.
         for log in (self.gaze_log, self.frame_log, self.blank_log):
             log.flush(sync=True)
@@ -830,8 +986,16 @@ class Session:
         self.done.add(trial.index)
         return "done"
 
-    def _gaze_rows(self, trial_index: int | None, samples: list[GazeSample]) -> list[Any]:
-        return [sample_row(trial_index, s, self.fixation.eccentricity(s.point)) for s in samples]
+    def _gaze_rows(self, trial_index: int | None, samples: list[GazeSample],
+                   attempt: int | None = None) -> list[Any]:
+        """What the gaze log gets for ``samples`` (its rows are made by :meth:`_gaze_row`
+        when written, on the flusher thread); ``attempt`` only within a trial."""
+        a = attempt if trial_index is not None else None
+        return [(trial_index, a, s) for s in samples]
+
+    def _gaze_row(self, item: tuple[int | None, int | None, GazeSample]) -> tuple[Any, ...]:
+        trial_index, attempt, s = item
+        return sample_row(trial_index, attempt, s, self.fixation.eccentricity(s.point))
 
     def _row(self, trial: Trial, st: TrialState) -> dict[str, Any]:
         spec = self.protocol.spec

@@ -4,12 +4,27 @@ It draws the split screen of paper section 6.1 (reference half left, processed m
 fixation cross on the seam), black frames when the gaze check says so (the cross stays, so the
 participant can find it again), text screens and the calibration screens (the views of
 ``fovexp.experiment.calibration``: head-position box, animated targets, per-point results), and
-reads the wheel (Shift held: fine step) and the keys. Under Xvfb there is no vsync, so a dry run
-paces flips to ``refresh_hz`` itself.
+reads the wheel (Shift held: fine step) and the keys.
+
+Each half is a GL texture the window owns, drawn by PsychoPy's ``ImageStim`` (as a movie frame
+is: ``ImageStim`` reads the texture name from ``colorTexture`` at each draw). A new test half
+reaches it as 8-bit RGBA prepared by the render thread, uploaded in the texture's own format
+(one ``glTexSubImage2D``: about 1 ms for a 4K half on Mesa llvmpipe, against 64 ms for the
+float32 array ``ImageStim.image`` took; benchmarks/DISPLAY_LOOP.md), or, from the GPU backend,
+as a texture the render thread wrote in a GL context sharing objects with the window's
+(:meth:`PsychoScreen.gl_share`): then the display thread only switches texture names.
+
+Flip times come from ``win.flip()``'s return value (the time the driver released the buffer,
+close to the vertical blank; ``waitBlanking`` is always on, so every frame's drawing is finished
+when it returns), on ``time.monotonic``'s clock. Xvfb has no vsync: a window opened with
+``pace_hz`` emulates it, holding each flip to the next boundary of a fixed ``1/pace_hz`` grid
+(a frame that misses one lands on a later one, as with vsync).
 """
 
 from __future__ import annotations
 
+import ctypes
+import math
 import time
 from collections.abc import Callable
 from typing import Any
@@ -19,9 +34,10 @@ import numpy as np
 from fovexp import FovexpError
 
 from .calibration import CAL_KEYS, HeadBoxView, ResultView, TargetView, TextView
+from .render import Rendered, to_rgba8
 from .trial import InputEvent, Key, WheelCarry, wheel_notches
 
-KEYS = ["return", "num_enter", "escape", "space", "q", "r"]
+KEYS = ["return", "num_enter", "escape", "space", "q", "r", "c"]
 #: measured refresh may differ from the profile by this fraction (a 120 Hz screen run at 60 Hz
 #: is off by 50 %, far outside it)
 REFRESH_TOLERANCE = 0.05
@@ -66,37 +82,146 @@ def check_display(measured_hz: float | None, window_size: tuple[int, int],
     return info
 
 
+class _TextureSource:
+    """An ``ImageStim`` image that is a GL texture (PsychoPy's interface for movie frames:
+    ``colorTexture`` is read at every draw, row 0 drawn at the top)."""
+
+    isLumImage = False
+
+    def __init__(self, name: Any) -> None:
+        self.colorTexture = name
+
+
+class _HalfTexture:
+    """One half of the split screen: an RGBA8 texture updated in place from 8-bit RGBA rows
+    (row 0 at the top), in its own format so the driver copies without converting."""
+
+    def __init__(self, gl: Any, width: int, height: int) -> None:
+        self._gl = gl
+        self.name = gl.GLuint()
+        gl.glGenTextures(1, ctypes.byref(self.name))
+        self.size = (0, 0)
+        self._allocate(width, height)
+
+    def _allocate(self, width: int, height: int) -> None:
+        gl = self._gl
+        gl.glBindTexture(gl.GL_TEXTURE_2D, self.name)
+        for p in (gl.GL_TEXTURE_MIN_FILTER, gl.GL_TEXTURE_MAG_FILTER):
+            gl.glTexParameteri(gl.GL_TEXTURE_2D, p, gl.GL_NEAREST)
+        for p in (gl.GL_TEXTURE_WRAP_S, gl.GL_TEXTURE_WRAP_T):
+            gl.glTexParameteri(gl.GL_TEXTURE_2D, p, gl.GL_CLAMP_TO_EDGE)
+        gl.glTexImage2D(gl.GL_TEXTURE_2D, 0, gl.GL_RGBA8, width, height, 0, gl.GL_RGBA,
+                        gl.GL_UNSIGNED_BYTE, None)
+        gl.glBindTexture(gl.GL_TEXTURE_2D, 0)
+        self.size = (width, height)
+
+    def upload(self, rgba8: np.ndarray) -> None:
+        gl = self._gl
+        h, w = rgba8.shape[:2]
+        if (w, h) != self.size:
+            self._allocate(w, h)
+        data = np.ascontiguousarray(rgba8)
+        gl.glBindTexture(gl.GL_TEXTURE_2D, self.name)
+        gl.glPixelStorei(gl.GL_UNPACK_ALIGNMENT, 4)  # RGBA8 rows are whole words
+        gl.glTexSubImage2D(gl.GL_TEXTURE_2D, 0, 0, 0, w, h, gl.GL_RGBA, gl.GL_UNSIGNED_BYTE,
+                           data.ctypes.data_as(ctypes.c_void_p))
+        gl.glBindTexture(gl.GL_TEXTURE_2D, 0)
+
+    def delete(self) -> None:
+        if self.name.value:
+            self._gl.glDeleteTextures(1, ctypes.byref(self.name))
+            self.name = self._gl.GLuint(0)
+
+
+class SharedGLContext:
+    """A GLX context sharing objects (textures, buffers) with the window's, on a 1x1 pbuffer, for
+    the render thread: the GPU backend renders there into textures the window draws.
+
+    Created on the window's thread; :meth:`make_current` / :meth:`release_current` on the render
+    thread; :meth:`destroy` on the window's thread once the render thread let go of it.
+    """
+
+    def __init__(self, pyglet_window: Any) -> None:
+        from pyglet.gl import glx
+
+        self._glx = glx
+        main = pyglet_window.context
+        if not hasattr(main, "glx_context"):
+            raise FovexpError("sharing a GL context needs GLX (Linux/X11)")
+        self._dpy = main.x_display
+        self._context = main.config.create_context(main)
+        attrs = (ctypes.c_int * 5)(glx.GLX_PBUFFER_WIDTH, 1, glx.GLX_PBUFFER_HEIGHT, 1, 0)
+        self._pbuffer = glx.glXCreatePbuffer(self._dpy, main.config._fbconfig, attrs)
+        if not self._pbuffer:
+            self.destroy()
+            raise FovexpError("the window's GL configuration has no pbuffer for a shared context")
+
+    def make_current(self) -> None:
+        if not self._glx.glXMakeContextCurrent(self._dpy, self._pbuffer, self._pbuffer,
+                                               self._context.glx_context):
+            raise FovexpError("cannot make the shared GL context current")
+
+    def release_current(self) -> None:
+        self._glx.glXMakeContextCurrent(self._dpy, 0, 0, None)
+
+    def destroy(self) -> None:
+        glx = self._glx
+        if getattr(self, "_pbuffer", None):
+            glx.glXDestroyPbuffer(self._dpy, self._pbuffer)
+            self._pbuffer = None
+        ctx = getattr(self._context, "glx_context", None)
+        if ctx:
+            glx.glXDestroyContext(self._dpy, ctx)
+            self._context.glx_context = None
+
+
 class PsychoScreen:
-    """A PsychoPy window of ``size`` pixels (the stimulus fills it)."""
+    """A PsychoPy window of ``size`` pixels (the stimulus fills it) on monitor ``screen``.
+
+    ``pace_hz`` emulates vsync at that rate where there is none (Xvfb); a dry run paces at
+    :data:`DRY_RUN_REFRESH_HZ` by default. ``refresh_hz`` is then the paced rate.
+    """
 
     def __init__(self, size: tuple[int, int], fullscreen: bool = True, cross_px: float = 20.0,
-                 dry_run: bool = False, refresh_hz: float = 60.0) -> None:
+                 dry_run: bool = False, refresh_hz: float = 60.0, screen: int = 0,
+                 pace_hz: float | None = None) -> None:
         try:  # importing PsychoPy's window module already connects to the X display
+            import pyglet
+
+            # no glGetError after every GL call (pyglet's default; PsychoPy's modules set
+            # this too, but only take effect when imported before pyglet.gl)
+            pyglet.options["debug_gl"] = False
             from psychopy import logging as plog
 
             plog.console.setLevel(plog.ERROR)
             from psychopy import event, visual
+            from pyglet import gl
             from pyglet.window import key as pkey
         except Exception as exc:
             raise FovexpError(f"cannot open a window ({type(exc).__name__}: {exc}); is DISPLAY "
                               "set? (a dry run on a server needs Xvfb: xvfb-run -a fovexp run "
                               "...)") from None
         self._event = event
+        self._gl = gl
+        self._clock = plog.defaultClock  # win.flip() returns times on this clock
         self.size = (int(size[0]), int(size[1]))
         self.dry_run = dry_run
-        # In a dry run flips are paced (Xvfb has no vsync).
-        self.refresh_hz = DRY_RUN_REFRESH_HZ if dry_run else float(refresh_hz)
+        self.screen = int(screen)
+        if pace_hz is None and dry_run:
+            pace_hz = DRY_RUN_REFRESH_HZ
+        self.pace_hz = pace_hz
+        self.refresh_hz = float(pace_hz) if pace_hz else float(refresh_hz)
         w, h = self.size
         try:
             self.win = visual.Window(
-                size=self.size, fullscr=fullscreen, units="pix", color=(-1, -1, -1),
-                colorSpace="rgb", allowGUI=not fullscreen, winType="pyglet",
-                checkTiming=False, waitBlanking=not dry_run, useFBO=False,
+                size=self.size, fullscr=fullscreen, screen=self.screen, units="pix",
+                color=(-1, -1, -1), colorSpace="rgb", allowGUI=not fullscreen,
+                winType="pyglet", checkTiming=False, waitBlanking=True, useFBO=False,
                 gammaErrorPolicy="ignore",
             )
         except Exception as exc:
-            raise FovexpError(f"cannot open a window ({exc}); is DISPLAY set? "
-                              "(a dry run on a server needs Xvfb)") from None
+            raise FovexpError(f"cannot open a window on screen {self.screen} ({exc}); is "
+                              "DISPLAY set? (a dry run on a server needs Xvfb)") from None
         self._keys = pkey.KeyStateHandler()
         self._pkey = pkey
         self._wheel: list[tuple[float, bool]] = []
@@ -109,10 +234,11 @@ class PsychoScreen:
         self.win.winHandle.push_handlers(on_key_press=self._on_key_press)
         self.mouse = event.Mouse(win=self.win, visible=not fullscreen)
         half = (w // 2, h)
-        self.left = visual.ImageStim(self.win, image=np.zeros((h, w // 2, 3)), size=half,
-                                     pos=(-w / 4, 0), units="pix", interpolate=False)
-        self.right = visual.ImageStim(self.win, image=np.zeros((h, w // 2, 3)), size=half,
-                                      pos=(w / 4, 0), units="pix", interpolate=False)
+        self._tex_left = _HalfTexture(gl, w // 2, h)
+        self._tex_right = _HalfTexture(gl, w // 2, h)
+        self._src_right = _TextureSource(self._tex_right.name)
+        self.left = self._texture_stim(visual, self._tex_left.name, half, -w / 4)
+        self.right = self._texture_stim(visual, self._src_right, half, w / 4)
         arm = max(7.0, float(cross_px))
         thick = max(2.0, round(arm / 10))
         self.cross = [
@@ -126,10 +252,25 @@ class PsychoScreen:
         self._visual = visual
         self._cal: dict[str, Any] | None = None  # the calibration screens' stimuli, made once
         self._plot: tuple[Any, list[Any]] | None = None  # (the result view drawn, its stimuli)
-        self._last_flip: float | None = None
+        self._grid0: float | None = None  # paced flips: the emulated vblank grid's origin
+        self._grid_k = -1
+        self._shared: SharedGLContext | None = None
+        #: seconds the last :meth:`set_test` / :meth:`set_reference` spent uploading
+        self.last_upload_s = 0.0
         #: keep a copy of every frame shown in ``last_frame`` (tests; slow)
         self.capture = False
         self.last_frame: np.ndarray | None = None
+
+    def _texture_stim(self, visual: Any, source: Any, size: tuple[int, int], x: float) -> Any:
+        if not isinstance(source, _TextureSource):
+            source = _TextureSource(source)
+        stim = visual.ImageStim(self.win, image=source, size=size, pos=(x, 0), units="pix",
+                                interpolate=False)
+        # ImageStim made a texture of its own, which it never uses with an external one
+        self._gl.glDeleteTextures(1, ctypes.byref(stim._texID))
+        stim._texID = source.colorTexture
+        stim._needUpdate = True
+        return stim
 
     # -- checks --------------------------------------------------------------------------------
     def measure_display(self) -> tuple[float | None, tuple[int, int], tuple[int, int]]:
@@ -141,45 +282,97 @@ class PsychoScreen:
         fb = tuple(int(v) for v in getattr(self.win, "frameBufferSize", size))
         return (None if measured is None else float(measured)), size, (fb[0], fb[1])
 
+    def gl_share(self) -> SharedGLContext | None:
+        """A GL context sharing objects with this window's, for the render thread (None where
+        there is none to be had: not GLX, or no pbuffer)."""
+        if self._shared is None:
+            try:
+                self._shared = SharedGLContext(self.win.winHandle)
+            except FovexpError:
+                return None
+            except Exception:  # an X error from a driver that refuses it
+                return None
+        return self._shared
+
     # -- drawing -------------------------------------------------------------------------------
     @staticmethod
-    def _tex(img: np.ndarray) -> np.ndarray:
-        # Display-encoded [0, 1] values go to the screen unchanged (this PsychoPy maps float
-        # textures [0, 1] -> [0, 255]; tests/test_experiment_window.py checks a ramp). Numpy
-        # textures are drawn bottom row first, so rows are flipped to keep row 0 at the top.
-        return np.ascontiguousarray(np.asarray(img, dtype=np.float32)[::-1])
+    def _rgba8(img: np.ndarray) -> np.ndarray:
+        a = np.asarray(img)
+        if a.dtype == np.uint8 and a.ndim == 3 and a.shape[2] == 4:
+            return a
+        # display-encoded [0, 1] values go to the screen unchanged (tests/experiment/
+        # test_window.py checks a random image to 8-bit rounding)
+        return to_rgba8(a)
 
     def set_reference(self, left: np.ndarray) -> None:
-        """A new trial's reference half; wheel turns from before it (a break, the last trial's
-        leftover fraction) do not move its start value."""
-        self.left.image = self._tex(left)
+        """A new trial's reference half (display-encoded [0, 1], or 8-bit RGBA); wheel turns
+        from before it (a break, the last trial's leftover fraction) do not move its start
+        value."""
+        t0 = time.perf_counter()
+        self._tex_left.upload(self._rgba8(left))
+        self.last_upload_s = time.perf_counter() - t0
         self._wheel, self._wheel_carry = [], (0.0, False)
 
-    def set_test(self, right: np.ndarray) -> None:
-        self.right.image = self._tex(right)
+    def set_test(self, right: Rendered | np.ndarray) -> None:
+        """The test half from now on: a render (its 8-bit RGBA uploaded, or its texture drawn as
+        it is) or an image (display-encoded [0, 1], or 8-bit RGBA)."""
+        t0 = time.perf_counter()
+        if isinstance(right, Rendered) and right.texture is not None:
+            name = self._gl.GLuint(right.texture)
+        else:
+            img = right.rgba8 if isinstance(right, Rendered) else right
+            self._tex_right.upload(self._rgba8(img))
+            name = self._tex_right.name
+        self._use_texture(self.right, self._src_right, name)
+        self.last_upload_s = time.perf_counter() - t0
 
-    def _flip(self) -> float:
-        if self.capture:
-            # The back buffer just before the flip is exactly the frame about to be shown.
-            self.last_frame = np.asarray(self.win._getFrame(buffer="back"))
-        self.win.flip()
-        t = time.monotonic()
-        if self.dry_run:
-            period = 1.0 / self.refresh_hz
-            if self._last_flip is not None and t - self._last_flip < period:
-                time.sleep(period - (t - self._last_flip))
-                t = time.monotonic()
-        self._last_flip = t
-        return t
+    @staticmethod
+    def _use_texture(stim: Any, source: _TextureSource, name: Any) -> None:
+        if source.colorTexture.value != name.value:
+            source.colorTexture = stim._texID = name
+            # with pyglet < 2 PsychoPy draws from a display list that names the texture
+            stim._needUpdate = True
 
-    def draw(self, blank: bool) -> float:
-        """Draw the next frame (black but for the cross when ``blank``); returns its time."""
+    def prepare(self, blank: bool) -> None:
+        """Draw the next frame into the back buffer: black but for the cross when ``blank``."""
         if not blank:
             self.left.draw()
             self.right.draw()
         for c in self.cross:
             c.draw()
-        return self._flip()
+
+    def flip(self) -> float:
+        """Show the back buffer; returns the flip time (``time.monotonic`` seconds) from
+        ``win.flip()``'s return value, or the emulated vblank when pacing."""
+        if self.capture:
+            # The back buffer just before the flip is exactly the frame about to be shown.
+            self.last_frame = np.asarray(self.win._getFrame(buffer="back"))
+        ret = self.win.flip()
+        now = time.monotonic()
+        t = now if ret is None else now - max(0.0, self._clock.getTime() - ret)
+        if self.pace_hz:
+            t = self._pace(t)
+        return t
+
+    def _pace(self, t: float) -> float:
+        """Hold the flip at ``t`` to the next boundary of the ``1/pace_hz`` grid (vsync): a
+        frame that took longer than a period lands on a later boundary."""
+        period = 1.0 / float(self.pace_hz)  # type: ignore[arg-type]
+        if self._grid0 is None:
+            self._grid0, self._grid_k = t, 0
+            return t
+        k = max(math.ceil((t - self._grid0) / period), self._grid_k + 1)
+        self._grid_k = k
+        due = self._grid0 + k * period
+        wait = due - time.monotonic()
+        if wait > 0:
+            time.sleep(wait)
+        return due
+
+    def draw(self, blank: bool) -> float:
+        """:meth:`prepare` and :meth:`flip`; returns the flip time."""
+        self.prepare(blank)
+        return self.flip()
 
     # -- calibration screens -------------------------------------------------------------
     def _px(self, x: float, y: float) -> tuple[float, float]:
@@ -220,7 +413,7 @@ class PsychoScreen:
         since the last call (:data:`fovexp.experiment.calibration.CAL_KEYS`)."""
         self._cal_stims()["bg"].draw()
         self._draw_view(view)
-        self._flip()
+        self.flip()
         return list(self._event.getKeys(keyList=CAL_KEYS))
 
     def _draw_view(self, view: Any) -> None:
@@ -363,12 +556,15 @@ class PsychoScreen:
         t0 = time.monotonic()
         while True:
             self.text.draw()
-            self._flip()
+            self.flip()
             if each_frame is not None:
                 each_frame()
             if keys:
                 got = self._event.getKeys(keyList=keys)
                 if got:
+                    # a key that answered this screen (C confirms the display checklist) is
+                    # not also an operator's between-trial request
+                    self._operator_keys.discard(got[0])
                     return got[0]
             if timeout_s is not None and time.monotonic() - t0 >= timeout_s:
                 return None
@@ -399,6 +595,17 @@ class PsychoScreen:
         return nx, ny
 
     def close(self) -> None:
+        """Close the window (call after the render thread let go of :meth:`gl_share`)."""
+        try:
+            for stim in (self.left, self.right):
+                stim._texID = self._gl.GLuint(0)  # ours: deleted below, not by ImageStim
+            self._tex_left.delete()
+            self._tex_right.delete()
+            if self._shared is not None:
+                self._shared.destroy()
+                self._shared = None
+        except Exception:  # the X server went away
+            pass
         try:
             self.win.close()
         except Exception:  # already closed (display check) or the X server went away

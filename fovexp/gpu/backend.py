@@ -659,6 +659,36 @@ class GpuEnhancer(Enhancer):
         h, w, c = self._hwc()
         return self._read("OUTPUT", h * w * c).reshape(self._image_shape())
 
+    def write_output_to(self, texture: Any, gaze: tuple[float, float] = (0.5, 0.5),
+                        params: Any = None) -> Any:
+        """:meth:`enhance`, the frame going into ``texture`` on the GPU instead of host memory.
+
+        ``texture``: a moderngl texture of this enhancer's context (or of one sharing objects
+        with it), of the image's size, with as many components as the image has channels and
+        dtype ``f4``. The OUTPUT buffer (interleaved float32, row 0 the image's top row) is
+        copied into it as a pixel-unpack transfer, GPU to GPU; texture row 0 is then the
+        image's top row. Nothing is read back. Returns the resolved parameters. The copy is
+        queued, not finished: call ``ctx.finish()`` (or fence) before another context draws
+        the texture. The experiment runner draws it in its window this way (docs/GPU.md).
+        """
+        with self._current():
+            # enhance() ends with the read-back (_output); an instance attribute shadows it for
+            # this one call, so the stage graph, the parameter checks and the stage cache are
+            # enhance()'s own.
+            self._output = lambda: None  # type: ignore[method-assign]
+            try:
+                res = self.enhance(gaze, params)
+            finally:
+                del self._output
+            h, w, c = self._hwc()
+            got = (tuple(texture.size), int(texture.components), str(texture.dtype))
+            if got != ((w, h), c, "f4"):
+                raise FovexpError(f"write_output_to: the texture is {got[0][0]}x{got[0][1]}, "
+                                  f"{got[1]} components, {got[2]}; the output needs {w}x{h}, "
+                                  f"{c} components, f4")
+            texture.write(self._c.get("output"))
+            return res.params
+
     def linear(self, name: str) -> np.ndarray:  # noqa: D102 - Enhancer.linear
         with self._current():
             return super().linear(name)

@@ -68,16 +68,20 @@ GAZE_ORIGIN_COLUMNS: tuple[str, ...] = (
     "left_origin_x_mm", "left_origin_y_mm", "left_origin_z_mm",
     "right_origin_x_mm", "right_origin_y_mm", "right_origin_z_mm",
 )
-#: ``gaze-<session>.csv``: one row per tracker sample; times in microseconds.
+#: ``gaze-<session>.csv``: one row per tracker sample; times in microseconds; ``attempt`` as in
+#: the frame log (empty between trials).
 GAZE_COLUMNS: tuple[str, ...] = (
-    "trial_index", "device_time_us", "system_time_us", "left_x", "left_y", "left_valid",
-    "right_x", "right_y", "right_valid", "x", "y", "valid", "eccentricity_deg",
+    "trial_index", "attempt", "device_time_us", "system_time_us", "left_x", "left_y",
+    "left_valid", "right_x", "right_y", "right_valid", "x", "y", "valid", "eccentricity_deg",
     *GAZE_ORIGIN_COLUMNS,
 )
 #: ``frames-<session>.csv``: one row per stimulus frame; ``value`` is the adjusted value of the
-#: frame actually on screen.
+#: frame actually on screen; ``gaze_system_time_us`` and ``gaze_ecc_deg`` are the newest gaze
+#: sample the frame's blanking decision used, ``flip_system_time_us`` the flip, both on the
+#: tracker's system clock (their difference is the gaze-to-flip latency).
 FRAME_COLUMNS: tuple[str, ...] = (
     "trial_index", "attempt", "frame", "flip_time_s", "interval_s", "dropped", "blanked", "value",
+    "gaze_system_time_us", "gaze_ecc_deg", "flip_system_time_us",
 )
 #: ``blanking-<session>.csv``: one row per blanking episode.
 BLANKING_COLUMNS: tuple[str, ...] = (

@@ -438,7 +438,9 @@ class FastEnhancer:
         class Res:
             output = __import__("numpy").zeros(self.shape, "float32")
 
-        return Res()
+        res = Res()
+        res.params = params  # what the renderer reports as shown
+        return res
 
 
 def dry_session(tmp_path: Path, monkeypatch, n: int, **tracker) -> Session:

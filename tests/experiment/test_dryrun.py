@@ -19,6 +19,7 @@ from fovexp.experiment.logs import (
     read_trials,
 )
 from fovexp.experiment.protocol import load_protocol
+from fovexp.results.frames import gaze_to_flip_ms, read_frame_log, unblanked_violations
 
 from experiment_helpers import make_workspace, run_cli, xvfb_display  # noqa: F401
 
@@ -100,10 +101,33 @@ def check_common(folder: Path, n_trials: int, n_practice: int) -> list[dict]:
         assert blanked_s / (span + 0.1) - 1e-5 <= r["blanked_fraction"] <= blanked_s / span + 1e-5
         assert r["dropped_frames"] == sum(f["dropped"] == "1" for f in fr)
         # Frame values are those of the render on screen: the first frame shows the start
-        # value, the last one the confirmed value (Enter waits for a pending render).
+        # value; the last stimulus frame flipped before Enter shows final_value (a render
+        # pending at Enter is dropped, never shown).
         assert float(fr[0]["value"]) == pytest.approx(r["start_value"])
-        assert float(fr[-1]["value"]) == pytest.approx(r["final_value"])
+        enter = t[0] + r["response_time_s"]
+        before = [f for f in fr if float(f["flip_time_s"]) < enter]
+        assert before and before[-1] is fr[-1]  # no frame of the trial after Enter
+        assert float(before[-1]["value"]) == pytest.approx(r["final_value"])
+    check_frame_log(folder, sid, info)
+    # Gaze rows within a trial carry its attempt; between trials both are empty.
+    assert all(bool(g["trial_index"]) == bool(g["attempt"]) for g in gaze)
     return rows
+
+
+def check_frame_log(folder: Path, sid: str, info: dict) -> None:
+    """From the frame log alone (the logs' reader, fovexp.results.frames): every stimulus frame
+    names the gaze sample that decided it and its flip on the tracker's clock, and none was
+    drawn with the stimulus while the newest sample was invalid, outside 1.25 deg, or older
+    than the gaze timeout when it was decided (after the previous flip)."""
+    frames = read_frame_log(folder / f"frames-{sid}.csv")
+    assert frames["flip_system_time_us"].notna().all()
+    lat = gaze_to_flip_ms(frames).dropna()
+    assert len(lat) >= 0.95 * len(frames) and (lat >= 0).all()
+    period_s = 1 / info["display_check"]["refresh_hz"]
+    bad = unblanked_violations(frames, 1.25, 0.05, 2 * period_s)
+    assert bad.empty, bad.to_string()
+    shown = frames[frames["blanked"] == 0]
+    assert (shown["gaze_ecc_deg"] <= 1.25).all() and len(shown)
 
 
 def test_dry_run_calibration_fe(ws: Path) -> None:
@@ -190,3 +214,5 @@ def test_dry_run_on_the_gpu_backend(ws: Path) -> None:
     rows = check_common(folder, 2, 0)
     info = json.loads((folder / f"session-{rows[0]['session']}.json").read_text())
     assert info["render"]["backend"] == "gpu" and info["render"]["renderer"]
+    # drawn from the textures the enhancer wrote in a context shared with the window
+    assert info["render"]["output"] == "texture"

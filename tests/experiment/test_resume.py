@@ -3,6 +3,7 @@ by the kill never makes a file unreadable (issue 3, item 7)."""
 
 from __future__ import annotations
 
+import csv
 import json
 import signal
 import time
@@ -57,7 +58,7 @@ def test_sigkill_then_resume(tmp_path: Path, xvfb_display) -> None:  # noqa: F81
     rows_before, _ = read_trials(folder / "trials.csv")
     assert 3 <= len(rows_before) < 9
     (session_file,) = folder.glob("session-*.json")
-    info = json.loads(session_file.read_text())
+    info = killed_info = json.loads(session_file.read_text())
     assert info["completed"] is False and info["state"] == "running"
     # A write cut off mid-row, as a kill during the write would leave it.
     torn = before.splitlines(keepends=True)[-1][:37]
@@ -93,6 +94,18 @@ def test_sigkill_then_resume(tmp_path: Path, xvfb_display) -> None:  # noqa: F81
     assert info["runs"][1]["remaining_trials"] == 9 - len(rows_before)
     gaze = next(folder.glob("gaze-*.csv")).read_text().splitlines()
     assert all(len(line.split(",")) == len(GAZE_COLUMNS) for line in gaze)  # no torn row
+    # Attempts number on across the kill: the trial cut off by it was begun again as a new
+    # attempt, never a second attempt 0 (frames and gaze rows of both are kept apart).
+    with open(next(folder.glob("frames-*.csv"))) as fh:
+        frames = list(csv.DictReader(fh))
+    keys = [(f["trial_index"], f["attempt"], f["frame"]) for f in frames]
+    assert len(keys) == len(set(keys))
+    cut = str(len(rows_before))  # the trial under way at the kill (the plan's order)
+    begun = killed_info["attempts"][cut]  # recorded before its first frame
+    assert begun >= 1
+    attempts = sorted({int(f["attempt"]) for f in frames if f["trial_index"] == cut})
+    assert attempts and attempts[-1] == begun and info["attempts"][cut] == begun + 1, attempts
+    assert all(a < begun for a in attempts[:-1])  # the killed run's, if any reached the disk
     # Running again has nothing left to do.
     r = run_cli([*args, "--resume"], ws)
     assert r.returncode == 2 and "no incomplete session" in r.stderr

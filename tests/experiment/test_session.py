@@ -49,13 +49,15 @@ class FakeEnhancer:
         class Res:
             output = np.full(self.shape, params.f_e, np.float32)
 
-        return Res()
+        res = Res()
+        res.params = params
+        return res
 
 
 def use_enhancer(monkeypatch, cls) -> None:
     """The runner gets its enhancer from fovexp.make_enhancer (public API): hand it ``cls``."""
     monkeypatch.setattr(fovexp, "make_enhancer", lambda display, preset="paper", geometry=None,
-                        table=None, backend="auto": cls(display, preset, geometry))
+                        table=None, backend="auto", ctx=None: cls(display, preset, geometry))
 
 
 def options(tmp_path: Path, pid: str, **kw) -> SessionOptions:
@@ -70,30 +72,40 @@ def centre_gaze() -> ScriptedGaze:
     return ScriptedGaze(lambda t: (0.5, 0.5))
 
 
-def test_logged_value_is_the_one_on_screen(tmp_path: Path, monkeypatch) -> None:
-    """Enter pressed while the render of the last wheel step is still computed: the trial ends
-    on the first frame that shows it, and that value (not merely the requested one) is logged,
-    per frame and as final_value."""
+@pytest.mark.parametrize("enter_poll", [4, 150])
+def test_logged_value_is_the_one_on_screen(tmp_path: Path, monkeypatch, enter_poll: int) -> None:
+    """Enter pressed while the render of the last wheel step is still computed (poll 4: a
+    render takes 0.2 s): that render is dropped, never shown, and the value on screen is the
+    answer. Enter pressed once it is shown (poll 150): its value. Per frame and as
+    final_value, what is logged is what was on screen."""
     use_enhancer(monkeypatch, FakeEnhancer)
     FakeEnhancer.instances.clear()
     lp = load_protocol(REPO / "protocols" / "calibration-fe.yaml")
     _, plan = lp.plan("V01", limit=1, practice=0)
     start = plan[0].start_value
     notches = 3 if start < 0.2 else -3
+    stepped = round(start + notches * lp.spec.adjust.step, 10)
+    expected = start if enter_poll == 4 else stepped
     screens: list[StubScreen] = []
 
     def factory(**kw):
-        screens.append(StubScreen(inputs={3: [Wheel(notches)], 4: [Key("return")]}, **kw))
+        screens.append(StubScreen(inputs={3: [Wheel(notches)], enter_poll: [Key("return")]},
+                                  **kw))
         return screens[-1]
 
     s = Session(lp, options(tmp_path, "V01"))
     assert s.run(screen_factory=factory, gaze=centre_gaze()) == 0
     (row,), _ = read_trials(s.folder / "trials.csv")
-    expected = round(start + notches * lp.spec.adjust.step, 10)
     assert row["final_value"] == pytest.approx(expected) and row["f_e"] == row["final_value"]
-    # The last frame drawn showed the confirmed value's render.
-    blank, shown = screens[0].frames[-1]
-    assert not blank and float(shown.mean()) == pytest.approx(expected, abs=1e-6)
+    # The last stimulus frame showed the confirmed value's render (8-bit: within 1/255) ...
+    stim = [(b, shown) for b, shown in screens[0].frames if shown is not None]
+    blank, shown = [f for f in screens[0].frames if not f[0]][-1]
+    assert float(shown[..., :3].mean()) / 255 == pytest.approx(expected, abs=0.5 / 255)
+    # ... and the dropped render never reached the screen.
+    if enter_poll == 4:
+        assert all(abs(float(x[..., :3].mean()) / 255 - stepped) > 1 / 255 for _, x in stim)
+    # The first flip after Enter is black (the cross alone).
+    assert screens[0].frames[-1][0] is True
     with open(s.folder / f"frames-{s.session_id}.csv") as fh:
         frames = list(csv.DictReader(fh))
     assert float(frames[-1]["value"]) == pytest.approx(expected)

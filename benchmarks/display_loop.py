@@ -1,0 +1,389 @@
+"""The runner's display loop at 4K: does the display thread ever wait?
+
+Runs the session's own frame loop (:class:`fovexp.experiment.frameloop.TrialLoop`) in a real
+PsychoPy window of 3840x2160 under Xvfb, with simulated gaze at 600 Hz and the enhancer
+rendering the 4K test half on a worker thread (CPU backend; optionally the GPU backend writing
+into the window's textures), a wheel step every 100 ms. The simulated samples are delivered by a
+producer thread into the frame loop's buffer, as the Tobii adapter delivers a tracker's
+(:class:`ThreadedSimulatedGaze`). It records, per frame, the display
+thread's own time (from the frame's first step, and from the start of the gaze poll, to the flip
+call), split into frames with and without a new test half; the flips later than 1.5 periods;
+and, in the same run, the time to upload a 4K half: 8-bit RGBA (the runner's path) against the
+float32 array ``ImageStim.image`` took before (the runner's path until now).
+
+    xvfb-run -a -s "-screen 0 3840x2160x24" .venv/bin/python benchmarks/display_loop.py
+
+Writes benchmarks/DISPLAY_LOOP.md and benchmarks/display_loop.json (with the machine).
+
+Xvfb has no vsync: the window paces its flips to a 120 Hz grid (``PsychoScreen(pace_hz=120)``,
+each flip held to the next 1/120 s boundary; a frame whose drawing and swap take longer lands on
+a later boundary, as with vsync). Under Xvfb the swap itself (Mesa llvmpipe drawing the frame,
+then copying 33 MB into the X server) takes tens of ms at 4K, so nearly every flip is "late"
+here: that count measures this machine's software display, not the loop. The display thread's
+own time is the loop's figure.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+SPONZA = ROOT.parent / "shared" / "stimuli" / "sponza-4k.jpg"
+W, H = 3840, 2160
+REFRESH_HZ = 120.0
+#: targets of issue 9, section 2 (this machine)
+TARGET_WORK_P99_MS = 2.0
+TARGET_UPLOAD_MS = 1e3 / REFRESH_HZ
+
+
+def _frame() -> tuple[np.ndarray, str]:
+    """The 4K split screen: Sponza when the shared frame is there, else a generated scene."""
+    from fovexp.experiment.stimuli import load_stimulus, split_screen
+
+    path = SPONZA if SPONZA.exists() else ROOT / "stimuli" / "generated" / "scene-00.png"
+    return split_screen(load_stimulus(path, (W, H))), path.name
+
+
+def _pct(values: list[float], q: float) -> float:
+    return float(np.percentile(values, q)) if values else float("nan")
+
+
+def _stats_ms(values_s: list[float]) -> dict[str, float]:
+    v = [1e3 * x for x in values_s]
+    return {"n": len(v), "p50": _pct(v, 50), "p99": _pct(v, 99),
+            "max": max(v) if v else float("nan")}
+
+
+class ThreadedSimulatedGaze:
+    """Simulated gaze delivered as the Tobii adapter delivers a tracker's: a producer thread
+    (the SDK's callback thread there) puts each sample into a :class:`SampleBuffer` as it
+    falls due, and the frame loop's ``poll`` only drains it. The samples are
+    :class:`SimulatedGaze`'s (fixation, drift, saccades, blinks); generating them costs the
+    producer the GIL for tens of microseconds each, as the SDK's Python callback does."""
+
+    name = "simulated"
+
+    def __init__(self, sim, period_s: float = 0.002) -> None:
+        from fovexp.experiment.gaze import SampleBuffer
+
+        self.sim, self.period_s = sim, period_s
+        self.buffer = SampleBuffer()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._produce, name="gaze-producer", daemon=True)
+
+    def _produce(self) -> None:
+        while not self._stop.wait(self.period_s):
+            for s in self.sim.poll():
+                self.buffer.append(s)
+
+    def start(self) -> None:
+        self.sim.start()
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=5)
+
+    def now_us(self) -> int:
+        return self.sim.now_us()
+
+    def poll(self) -> list:
+        return self.buffer.drain()
+
+    def poll_events(self) -> list:
+        return []
+
+    @property
+    def connected(self) -> bool:
+        return True
+
+
+def run_loop(screen, backend: str, parameter: str, seconds: float, seed: int = 1) -> dict:
+    """The session's frame loop for ``seconds`` with wheel steps every 100 ms."""
+    from fovexp import load_display, make_params
+    from fovexp.experiment.frameloop import TrialIO, TrialLoop, display_thread_first
+    from fovexp.experiment.gaze import BlankingMonitor, FixationGeometry, SimulatedGaze
+    from fovexp.experiment.render import TestRenderer
+    from fovexp.experiment.trial import TrialState, ValueAdjuster, Wheel
+
+    display = load_display("lg-oled55cx")
+    fix = FixationGeometry(display)
+    frame, _ = _frame()
+    screen.set_reference(frame[:, : W // 2])
+    renderer = TestRenderer(display, backend=backend,
+                            gl_share=screen.gl_share() if backend != "cpu" else None)
+    info = renderer.info()
+    renderer.set_image(frame[:, W // 2:], (W, H))
+    ranges = {"f_e": (0.0, 0.4, 0.02, "contrast"), "s_k": (0.0, 45.0, 1.0, "ours")}
+    lo, hi, step, method = ranges[parameter]
+    adjuster = ValueAdjuster(lo, hi, step, step / 4, (lo + hi) / 2)
+    st = TrialState(adjuster, REFRESH_HZ)
+    gaze = ThreadedSimulatedGaze(SimulatedGaze(fix, seed=seed))
+    gaze.start()
+    monitor = BlankingMonitor(fix)
+    ticks = {"next": 0.1, "dir": 1}
+
+    def participant(t: float, value: float, judgeable: bool) -> list:
+        if t < ticks["next"]:
+            return []
+        ticks["next"] += 0.1
+        if not lo < adjuster.value + ticks["dir"] * step < hi:
+            ticks["dir"] *= -1
+        return [Wheel(ticks["dir"])]
+
+    def params_for(v: float):
+        kw = {"f_e": v} if parameter == "f_e" else {"f_e": 0.23, "s_k": v, "s_f": 2.21}
+        return make_params(method=method, blur_rate=0.34, impulses=12, seed=seed, **kw)
+
+    rows: list[tuple] = []
+    n_gaze = [0]
+    timings: list = []
+    loop = TrialLoop(screen=screen, gaze=gaze, renderer=renderer, monitor=monitor, state=st,
+                     params_for=params_for, parameter=parameter, trial_index=0, attempt=0,
+                     participant=participant, timings=timings,
+                     io=TrialIO(frame=rows.append,
+                                gaze=lambda i, a, s: n_gaze.__setitem__(0, n_gaze[0] + len(s)),
+                                event=lambda kind, detail: None))
+    loop.show_first()
+    t0 = time.monotonic()
+    with display_thread_first() as priority:  # as Session.run
+        loop.run(max_s=seconds)
+    elapsed = time.monotonic() - t0
+    gaze.stop()
+    renderer.close()
+    up = [t for t in timings if t.upload_s is not None]
+    no = [t for t in timings if t.upload_s is None]
+    intervals = [r[4] for r in rows if r[4] is not None]
+    late = sum(dt > 1.5 / REFRESH_HZ for dt in intervals)
+    latency = [(r[10] - r[8]) / 1e3 for r in rows if r[8] is not None]
+    return {
+        "backend": info, "parameter": parameter, "seconds": round(elapsed, 2),
+        "display_thread": priority,
+        "frames": len(rows), "wheel_steps": st.adjuster.notches, "renders_shown": len(up),
+        "gaze_samples": n_gaze[0],
+        "work_ms": {"no_upload": _stats_ms([t.work_s for t in no]),
+                    "upload": _stats_ms([t.work_s for t in up])},
+        "gaze_to_flip_call_ms": {"no_upload": _stats_ms([t.gaze_to_flip_call_s for t in no]),
+                                 "upload": _stats_ms([t.gaze_to_flip_call_s for t in up])},
+        "work_cpu_ms": {"no_upload": _stats_ms([t.work_cpu_s for t in no]),
+                        "upload": _stats_ms([t.work_cpu_s for t in up])},
+        "work_without_source_poll_ms": {
+            "no_upload": _stats_ms([t.work_s - t.gaze_poll_s for t in no]),
+            "upload": _stats_ms([t.work_s - t.gaze_poll_s for t in up])},
+        "source_poll_ms": _stats_ms([t.gaze_poll_s for t in timings]),
+        "samples_per_frame": {"p50": _pct([t.samples for t in timings], 50),
+                              "max": max((t.samples for t in timings), default=0)},
+        "source_poll_us_per_sample": 1e6 * sum(t.gaze_poll_s for t in timings)
+        / max(1, sum(t.samples for t in timings)),
+        "upload_ms": _stats_ms([t.upload_s for t in up]),
+        "flip_call_ms": _stats_ms([t.flip_s for t in timings]),
+        "late_flips": late, "late_fraction": late / max(1, len(intervals)),
+        "gaze_to_flip_ms": {"p50": _pct(latency, 50), "p95": _pct(latency, 95),
+                            "max": max(latency) if latency else float("nan")},
+    }
+
+
+def measure_uploads(screen, reps: int) -> dict:
+    """A 4K half uploaded as 8-bit RGBA (``PsychoScreen.set_test``) and as the float32 array
+    ``ImageStim.image`` took before, interleaved; each timed to ``glFinish`` (the driver's copy
+    included)."""
+    from psychopy import visual
+    from pyglet import gl
+
+    from fovexp.experiment.render import to_rgba8
+
+    frame, _ = _frame()
+    half = np.ascontiguousarray(frame[:, W // 2:], dtype=np.float32)
+    rgba = to_rgba8(half)
+    old = visual.ImageStim(screen.win, image=np.zeros((H, W // 2, 3)), size=(W // 2, H),
+                           pos=(W / 4, 0), units="pix", interpolate=False)
+    flipped = np.ascontiguousarray(half[::-1])  # as the old window passed it
+    out: dict[str, list[float]] = {"rgba8": [], "float32_imagestim": [], "to_rgba8": []}
+    for _ in range(reps):
+        t0 = time.perf_counter()
+        screen.set_test(rgba)
+        gl.glFinish()
+        out["rgba8"].append(time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        old.image = flipped
+        gl.glFinish()
+        out["float32_imagestim"].append(time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        to_rgba8(half, rgba)  # on the render thread in a session
+        out["to_rgba8"].append(time.perf_counter() - t0)
+    old._texID = gl.GLuint(0)
+    del old
+    return {k: _stats_ms(v) for k, v in out.items()}
+
+
+def _fmt(d: dict) -> str:
+    return f"{d['p50']:.2f} / {d['p99']:.2f} / {d['max']:.2f} (n={d['n']})"
+
+
+def _run_name(r: dict) -> str:
+    return f"{r['backend']['backend']} ({r['backend']['output']}), {r['parameter']} steps"
+
+
+def _met(value: float, target: float) -> str:
+    if value != value:  # NaN: nothing of that kind in the run
+        return "none in this run"
+    return "met" if value <= target else "NOT met"
+
+
+def report(res: dict, m: dict) -> str:
+    lines = [
+        "# Display loop at 4K (issue 9, section 2)", "",
+        f"Machine: {m['cpu']}, {m['cores']} cores, {m['memory_gb']} GB; Numba {m['numba']}; "
+        f"{m['renderer']}; {m['display']}; load average {m['load_average']} at the start; "
+        f"{m['date']}. Command: `xvfb-run -a -s \"-screen 0 3840x2160x24\" "
+        f".venv/bin/python benchmarks/display_loop.py {res['args']}`.", "",
+        "The session's own frame loop (`TrialLoop`) in a 3840x2160 PsychoPy window under Xvfb, "
+        "flips paced to a 120 Hz grid (Xvfb has no vsync; a frame that misses a boundary lands "
+        "on a later one), simulated gaze at 600 Hz, the enhancer rendering the 4K test half "
+        f"on its worker thread with a wheel step every 100 ms, {res['seconds']:g} s per run. "
+        "Times in ms as p50 / p99 / max (n). *Work*: the display thread, wall clock, from the "
+        "frame's first step to the flip call; *gaze to flip call*: from the start of the gaze "
+        "poll to the flip call (the issue's measure); *upload*: the new test half reaching its "
+        "texture (an 8-bit upload, or a texture switch).", "",
+        "| run | frames | renders shown | work, no upload | work, upload | gaze to flip call, "
+        "no upload | gaze to flip call, upload | upload | late flips | gaze-to-flip latency "
+        "p50 / p95 / max |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in res["runs"]:
+        lat = r["gaze_to_flip_ms"]
+        lines.append(
+            f"| {_run_name(r)} | {r['frames']} | {r['renders_shown']} | "
+            f"{_fmt(r['work_ms']['no_upload'])} | {_fmt(r['work_ms']['upload'])} | "
+            f"{_fmt(r['gaze_to_flip_call_ms']['no_upload'])} | "
+            f"{_fmt(r['gaze_to_flip_call_ms']['upload'])} | {_fmt(r['upload_ms'])} | "
+            f"{r['late_flips']} ({100 * r['late_fraction']:.0f} %) | "
+            f"{lat['p50']:.1f} / {lat['p95']:.1f} / {lat['max']:.1f} |")
+    lines += [
+        "", "Where the display thread's time goes: its CPU time over the same span (wall minus "
+        "CPU: waiting for the GIL or for a core), the gaze source's poll (draining the samples "
+        "its producer thread delivered), the work without that poll, and the flip call "
+        "(llvmpipe drawing, the copy into Xvfb, the pacing wait).", "",
+        "| run | work CPU, no upload | work CPU, upload | source poll | samples per frame "
+        "(p50 / max) | source poll per sample | work without the source poll, no upload | "
+        "flip call |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for r in res["runs"]:
+        spf = r["samples_per_frame"]
+        lines.append(
+            f"| {_run_name(r)} | {_fmt(r['work_cpu_ms']['no_upload'])} | "
+            f"{_fmt(r['work_cpu_ms']['upload'])} | {_fmt(r['source_poll_ms'])} | "
+            f"{spf['p50']:.0f} / {spf['max']} | {r['source_poll_us_per_sample']:.0f} us | "
+            f"{_fmt(r['work_without_source_poll_ms']['no_upload'])} | "
+            f"{_fmt(r['flip_call_ms'])} |")
+    u = res["uploads"]
+    lines += [
+        "", "Upload of a 4K half (1920x2160), same run, the renderer stopped, interleaved, each "
+        "to `glFinish`:", "",
+        "| path | p50 / p99 / max ms |", "|---|---|",
+        f"| 8-bit RGBA, `glTexSubImage2D` into an RGBA8 texture (the runner) | "
+        f"{_fmt(u['rgba8'])} |",
+        f"| float32 array into `ImageStim.image` (before) | {_fmt(u['float32_imagestim'])} |",
+        f"| float32 -> 8-bit RGBA (`to_rgba8`, on the render thread) | {_fmt(u['to_rgba8'])} |",
+        "", f"Targets (issue 9, this machine): frames without an upload, the display thread's "
+        f"own work p99 <= {TARGET_WORK_P99_MS:g} ms; a 4K half-frame upload <= "
+        f"{TARGET_UPLOAD_MS:.1f} ms (one period at 120 Hz).", "",
+    ]
+    for r in res["runs"]:
+        g = r["gaze_to_flip_call_ms"]["no_upload"]["p99"]
+        w = r["work_ms"]["no_upload"]["p99"]
+        c = r["work_cpu_ms"]["no_upload"]["p99"]
+        up = r["upload_ms"]["p99"]
+        lines.append(
+            f"- {_run_name(r)}: gaze poll to flip call p99 {g:.2f} ms "
+            f"({_met(g, TARGET_WORK_P99_MS)}); the whole frame's work p99 {w:.2f} ms wall "
+            f"({_met(w, TARGET_WORK_P99_MS)}), "
+            f"{c:.2f} ms CPU ({_met(c, TARGET_WORK_P99_MS)}); upload in the loop p99 {up:.2f} ms "
+            f"({_met(up, TARGET_UPLOAD_MS)}).")
+    lines += [
+        f"- 8-bit upload alone: p50 {u['rgba8']['p50']:.2f} ms, p99 {u['rgba8']['p99']:.2f} ms "
+        f"({_met(u['rgba8']['p99'], TARGET_UPLOAD_MS)}); the float32 path it replaces: p50 "
+        f"{u['float32_imagestim']['p50']:.1f} ms.",
+        "", "Reading these figures: under Xvfb the flip call (llvmpipe drawing two 4K textured "
+        "halves on the CPU, then the copy of the frame into the X server) takes far longer than "
+        "a 120 Hz period, so almost every flip is late and each frame spans many gaze samples; "
+        "neither happens on a rig, where `win.flip()` waits for the vertical blank of a GPU "
+        "that draws in well under a period (the frame log's `dropped` column counts the "
+        "misses there). The late-flip count and the gaze-to-flip latency here measure this "
+        "machine's software display, not the loop. The loop's own figures are the work "
+        "columns; wall time above CPU time is time the display thread was runnable but not "
+        "running (on 2 cores shared with the render thread, llvmpipe's threads, Xvfb and "
+        "whatever else the machine runs).", ""]
+    gpu = [r for r in res["runs"] if r["backend"]["output"] == "texture"]
+    if gpu and all("llvmpipe" in str(r["backend"]["renderer"]) for r in gpu):
+        switch = gpu[0]["upload_ms"]
+        lines += [
+            "The GPU runs here are Mesa llvmpipe's (no hardware GPU on this machine), in a GL "
+            "context sharing objects with the window's: the texture switch itself costs "
+            f"{switch['p50']:.2f} ms (p50), but the display thread's GL calls wait while "
+            "llvmpipe executes the render thread's compute shaders on the same two cores, and "
+            "do work of their own (its CPU time above); `auto` never picks a software renderer "
+            "for this reason. How the display thread fares beside the compute shaders on a "
+            "hardware GPU is not measured (no session so far had one): the same command with "
+            "`--backends cpu,gpu` on a rig measures it.", ""]
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--seconds", type=float, default=20.0)
+    ap.add_argument("--parameters", default="f_e,s_k", help="stepped parameters (f_e, s_k)")
+    ap.add_argument("--backends", default="cpu",
+                    help="cpu and/or gpu (the GPU backend writing the window's textures)")
+    ap.add_argument("--upload-reps", type=int, default=30)
+    ap.add_argument("--out", type=Path, default=HERE)
+    ap.add_argument("--report-only", action="store_true",
+                    help="rewrite DISPLAY_LOOP.md from display_loop.json (no measurement)")
+    args = ap.parse_args(argv)
+    if args.report_only:
+        res = json.loads((args.out / "display_loop.json").read_text())
+        (args.out / "DISPLAY_LOOP.md").write_text(report(res, res["machine"]))
+        return 0
+    sys.path.insert(0, str(HERE))
+    from run import machine  # the same machine description as the main benchmark
+
+    from fovexp.experiment.frameloop import display_thread_first
+    from fovexp.experiment.window import PsychoScreen
+
+    screen = PsychoScreen((W, H), fullscreen=False, cross_px=28, refresh_hz=REFRESH_HZ,
+                          pace_hz=REFRESH_HZ)
+    try:
+        from pyglet import gl
+
+        m = {**machine(), "renderer": gl.gl_info.get_renderer(),
+             "display": "Xvfb 3840x2160x24",
+             "load_average": " ".join(f"{v:.1f}" for v in os.getloadavg())}
+        runs = [run_loop(screen, b, p, args.seconds)
+                for b in args.backends.split(",") for p in args.parameters.split(",")]
+        with display_thread_first():  # as during a session's trials
+            uploads = measure_uploads(screen, args.upload_reps)
+    finally:
+        screen.close()
+    flags = " ".join(a for a in (argv if argv is not None else sys.argv[1:]))
+    res = {"machine": m, "seconds": args.seconds, "runs": runs, "uploads": uploads,
+           "args": flags}
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "display_loop.json").write_text(json.dumps(res, indent=2) + "\n")
+    text = report(res, m)
+    (args.out / "DISPLAY_LOOP.md").write_text(text)
+    print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,101 @@
+"""The frame log (``frames-<session>.csv``, docs/LOGS.md) as data: what every stimulus frame
+showed and what drove it.
+
+Each frame names the newest gaze sample its blanking decision used (``gaze_system_time_us``,
+``gaze_ecc_deg``) and its flip (``flip_system_time_us``), both on the tracker's system clock:
+their difference is the frame's gaze-to-flip latency, and the blanking rule of paper section 6.1
+("stimuli are hidden by rendering a black frame whenever participants' gaze position moved
+outside a small circular region with radius 1.25 deg") can be checked from the log alone.
+Logs written before these columns existed read with them empty.
+"""
+
+from __future__ import annotations
+
+import io
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from fovexp import FovexpError
+
+from .format import FRAME_COLUMNS
+
+#: Integer columns of the frame log (nullable: empty fields are missing values).
+FRAME_INT_COLUMNS = ("trial_index", "attempt", "frame", "dropped", "blanked",
+                     "gaze_system_time_us", "flip_system_time_us")
+
+
+def read_frame_log(path: str | Path) -> pd.DataFrame:
+    """A frame log, typed, one row per frame; a torn last line (a kill mid-write) is dropped.
+    Columns missing from an older log are added empty. Raises :class:`FovexpError` naming the
+    file when it cannot be read as one."""
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise FovexpError(f"{path}: cannot read: {exc.strerror}") from None
+    data = data[: data.rfind(b"\n") + 1]  # complete lines only
+    try:
+        frame = pd.read_csv(io.BytesIO(data), dtype=str, keep_default_na=False)
+    except (ValueError, pd.errors.ParserError) as exc:
+        raise FovexpError(f"{path}: not a frame log ({exc})") from None
+    missing = [c for c in ("trial_index", "attempt", "frame", "blanked") if c not in frame]
+    if missing:
+        raise FovexpError(f"{path}: not a frame log (no {', '.join(missing)} column)")
+    out = pd.DataFrame(index=frame.index)
+    for col in FRAME_COLUMNS:
+        raw = frame[col] if col in frame else pd.Series("", index=frame.index)
+        num = pd.to_numeric(raw, errors="coerce")  # empty fields: missing
+        out[col] = num.round().astype("Int64") if col in FRAME_INT_COLUMNS else num
+    return out
+
+
+def gaze_to_flip_ms(frames: pd.DataFrame) -> pd.Series:
+    """Per frame: the flip's time minus that of the newest gaze sample its decision used (ms),
+    on the tracker's clock; missing where a frame had no sample."""
+    return (frames["flip_system_time_us"] - frames["gaze_system_time_us"]).astype(float) / 1e3
+
+
+def latency_summary(frames: pd.DataFrame) -> dict[str, float]:
+    """``frames`` (all frames), ``with_gaze`` (frames whose decision had a sample), the
+    gaze-to-flip latency's ``median_ms``, ``p95_ms``, ``max_ms`` (NaN without any), and the
+    share of ``dropped`` frames."""
+    lat = gaze_to_flip_ms(frames).dropna().to_numpy()
+    n = len(frames)
+    return {
+        "frames": n,
+        "with_gaze": int(lat.size),
+        "median_ms": float(np.median(lat)) if lat.size else float("nan"),
+        "p95_ms": float(np.percentile(lat, 95)) if lat.size else float("nan"),
+        "max_ms": float(lat.max()) if lat.size else float("nan"),
+        "dropped_fraction": float(frames["dropped"].fillna(0).mean()) if n else float("nan"),
+    }
+
+
+def unblanked_violations(frames: pd.DataFrame, radius_deg: float, gaze_timeout_s: float,
+                         first_frame_slack_s: float) -> pd.DataFrame:
+    """Frames drawn with the stimulus (``blanked`` 0) that the blanking rule forbids: without a
+    valid gaze sample (``gaze_ecc_deg`` empty), with one farther than ``radius_deg`` from the
+    cross, or with one that was not recent when the frame was decided.
+
+    "Recent" is checked exactly from the log: a frame is decided after the previous frame's
+    flip, when its newest sample may be at most ``gaze_timeout_s`` old, so that sample cannot
+    be older than the previous flip minus ``gaze_timeout_s``. An attempt's first frame has no
+    previous flip in the log; its sample may be at most ``gaze_timeout_s`` plus
+    ``first_frame_slack_s`` (drawing and waiting for the vertical blank) older than its own
+    flip. Empty when the log keeps the rule."""
+    f = frames.sort_values(["trial_index", "attempt", "frame"])
+    prev_flip = f.groupby(["trial_index", "attempt"])["flip_system_time_us"].shift(1)
+    timeout_us = 1e6 * gaze_timeout_s
+    oldest_us = (prev_flip - timeout_us).where(
+        prev_flip.notna(), f["flip_system_time_us"] - timeout_us - 1e6 * first_frame_slack_s)
+    shown = f["blanked"] == 0
+    gaze_us = f["gaze_system_time_us"]
+    bad = shown & (f["gaze_ecc_deg"].isna() | (f["gaze_ecc_deg"] > radius_deg)
+                   | gaze_us.isna() | (gaze_us.astype(float) < oldest_us.astype(float)))
+    return f[bad.fillna(True)]
+
+
+__all__ = ["FRAME_INT_COLUMNS", "gaze_to_flip_ms", "latency_summary", "read_frame_log",
+           "unblanked_violations"]

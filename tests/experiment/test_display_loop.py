@@ -1,0 +1,191 @@
+"""The display loop in a real PsychoPy window under Xvfb (issue 9, sections 2 and 3): nothing but
+the cross between trials, the blanking rule checked from the written frame log alone with
+scripted gaze crossing 1.25 deg and dropping out, and the GPU backend's zero-copy output on
+screen as the enhancer computed it."""
+
+from __future__ import annotations
+
+import csv
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fovexp import load_display, make_params
+from fovexp.experiment.gaze import FixationGeometry
+from fovexp.experiment.logs import read_trials
+from fovexp.experiment.protocol import load_protocol
+from fovexp.experiment.session import Session, SessionOptions
+from fovexp.results.frames import gaze_to_flip_ms, read_frame_log, unblanked_violations
+
+from experiment_helpers import REPO, ScriptedGaze, xvfb_display  # noqa: F401
+
+pytestmark = [pytest.mark.gui]
+
+W, H = 480, 270
+DISPLAY = load_display("lg-oled55cx")
+
+
+def recording_screen(shown: list[tuple[float, int]]):
+    """A PsychoScreen that keeps, for every flip, its time and the brightest value outside the
+    cross (0: black but for the cross)."""
+    from fovexp.experiment.window import PsychoScreen
+
+    class Recording(PsychoScreen):
+        def __init__(self, **kw) -> None:
+            super().__init__(**kw)
+            self.capture = True
+            arm = int(math.ceil(max(7.0, kw.get("cross_px", 20.0)))) + 2
+            self._mask = np.ones((H, W), bool)
+            self._mask[H // 2 - arm:H // 2 + arm, W // 2 - arm:W // 2 + arm] = False
+
+        def flip(self) -> float:
+            t = super().flip()
+            shown.append((t, int(self.last_frame[self._mask].max())))
+            return t
+
+    return Recording
+
+
+def session(tmp_path: Path, pid: str, **kw) -> Session:
+    lp = load_protocol(REPO / "protocols" / "calibration-fe.yaml")
+    opts = SessionOptions(participant=pid, results_root=tmp_path / "results", tracker="simulated",
+                          dry_run=True, window_size=(W, H), practice_trials=0, sim_speed=6.0,
+                          console=lambda line: None, **kw)
+    return Session(lp, opts)
+
+
+def point_at(fix: FixationGeometry, ecc: float) -> tuple[float, float]:
+    lo, hi = 0.0, 0.4
+    for _ in range(80):
+        mid = 0.5 * (lo + hi)
+        if fix.eccentricity((0.5 + mid, 0.5)) < ecc:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 + 0.5 * (lo + hi), 0.5
+
+
+def test_between_trials_only_the_cross(tmp_path: Path, xvfb_display) -> None:  # noqa: F811
+    """From the first flip after Enter until the next trial's first stimulus frame, every frame
+    is black but for the cross, however long the next trial takes to prepare (its image, its
+    first render, the logs' sync)."""
+    shown: list[tuple[float, int]] = []
+    s = session(tmp_path, "X01", limit_trials=3)
+    assert s.run(screen_factory=recording_screen(shown)) == 0
+    rows, _ = read_trials(s.folder / "trials.csv")
+    frames = read_frame_log(s.folder / f"frames-{s.session_id}.csv")
+    assert len(rows) == 3
+    first, enter = {}, {}
+    for r in rows:
+        fr = frames[frames["trial_index"] == r["trial_index"]]
+        t0 = float(fr["flip_time_s"].iloc[0])
+        enter[r["trial_index"]] = t0 + r["response_time_s"]
+        first[r["trial_index"]] = float(fr.loc[fr["blanked"] == 0, "flip_time_s"].iloc[0])
+    assert any(v > 0 for _, v in shown)  # stimulus frames were seen, so black is meaningful
+    for i in (0, 1):
+        between = [v for t, v in shown if enter[i] < t < first[i + 1] - 1e-4]
+        assert len(between) >= 1, "no flip between the trials"
+        assert max(between) == 0, f"stimulus on screen between trials {i} and {i + 1}"
+        # the first flip after Enter is already black
+        after = [v for t, v in shown if t > enter[i]]
+        assert after[0] == 0
+
+
+class GappyGaze(ScriptedGaze):
+    """Scripted gaze whose stream pauses (no samples at all, the tracker still connected) for
+    ``gap_s`` every ``every_s``: the blanking monitor must call such gaze "lost"."""
+
+    def __init__(self, path, every_s: float = 0.9, gap_s: float = 0.15) -> None:
+        super().__init__(path)
+        self.every_s, self.gap_s = every_s, gap_s
+
+    def poll(self):
+        return [s for s in super().poll()
+                if (s.device_time_us / 1e6) % self.every_s < self.every_s - self.gap_s]
+
+
+def test_blanking_rule_holds_in_the_frame_log(tmp_path: Path, xvfb_display) -> None:  # noqa: F811
+    """Gaze steps between the cross, 1.1 deg (inside), 1.4 deg (outside) and an invalid sample,
+    and the stream pauses: read back from the written frame log alone, no frame was drawn with
+    the stimulus against the rule, and every case occurred (so the check had something to
+    catch)."""
+    fix = FixationGeometry(DISPLAY)
+    inside, outside = point_at(fix, 1.1), point_at(fix, 1.4)
+
+    def path(t: float):
+        k = int(t / 0.13) % 5
+        return [(0.5, 0.5), outside, inside, None, inside][k]
+
+    s = session(tmp_path, "G01", limit_trials=2)
+    s.opts.sim_speed = 2.0
+    assert s.run(gaze=GappyGaze(path)) == 0
+    frames = read_frame_log(s.folder / f"frames-{s.session_id}.csv")
+    period_s = 1 / 60  # the dry run's paced rate
+    bad = unblanked_violations(frames, 1.25, 0.05, 2 * period_s)
+    assert bad.empty, bad.to_string()
+    age_ms = gaze_to_flip_ms(frames)
+    blanked = frames["blanked"] == 1
+    # outside the radius: only ever black
+    assert (frames["gaze_ecc_deg"] > 1.25).any()
+    assert blanked[frames["gaze_ecc_deg"] > 1.25].all()
+    # invalid newest sample: black, and its eccentricity empty
+    invalid = frames["gaze_ecc_deg"].isna() & frames["gaze_system_time_us"].notna()
+    assert invalid.any() and blanked[invalid].all()
+    # the stream paused: frames decided when their newest sample was older than the timeout
+    # (a frame is decided after the previous flip) are black
+    prev_flip = frames.groupby(["trial_index", "attempt"])["flip_system_time_us"].shift(1)
+    stale = (frames["gaze_system_time_us"] < prev_flip - 50_000).fillna(False)
+    assert stale.any() and blanked[stale].all()
+    # inside, near the radius: shown
+    near = (frames["gaze_ecc_deg"] > 1.0) & (frames["gaze_ecc_deg"] <= 1.25) & (age_ms < 40)
+    assert (~blanked[near]).any()
+    # the blanking log agrees on the reasons
+    with open(s.folder / f"blanking-{s.session_id}.csv") as fh:
+        reasons = {e["reason"] for e in csv.DictReader(fh)}
+    assert {"outside", "invalid", "lost"} <= reasons
+
+
+def test_gpu_output_reaches_the_screen_without_a_read_back(xvfb_display) -> None:  # noqa: F811
+    """The GPU backend renders in a GL context sharing objects with the window's into one of
+    two textures; the window draws that texture. The frame on screen (the back buffer before
+    the flip) equals the enhancer's output to 8-bit rounding: compared with the same backend's
+    read-back output, quantised as the 8-bit path does it. A second render goes to the other
+    texture and replaces the first on screen."""
+    pytest.importorskip("moderngl")
+    from fovexp.experiment.render import TestRenderer
+    from fovexp.experiment.window import PsychoScreen
+
+    screen = PsychoScreen((W, H), fullscreen=False, cross_px=12, dry_run=True)
+    rng = np.random.default_rng(3)
+    right = rng.uniform(0.05, 0.95, (H, W // 2, 3)).astype(np.float32)
+    share = screen.gl_share()
+    assert share is not None
+    zero = TestRenderer(DISPLAY, backend="gpu", gl_share=share)
+    readback = TestRenderer(DISPLAY, backend="gpu")  # its own context, the 8-bit path
+    try:
+        info = zero.info()
+        assert info["backend"] == "gpu" and info["output"] == "texture", info
+        assert readback.info()["output"] == "8-bit upload"
+        textures = []
+        for blur in (0.34, 0.57):
+            p = make_params(method="ours", blur_rate=blur, impulses=12)
+            for r in (zero, readback):
+                r.set_image(right, (W, H))
+            got = zero.wait(zero.request(p))
+            ref = readback.wait(readback.request(p))
+            assert got.rgba8 is None and got.texture is not None and ref.rgba8 is not None
+            textures.append(got.texture)
+            screen.set_test(got)
+            screen.capture = True
+            screen.draw(blank=False)
+            on_screen = screen.last_frame[:, W // 2:].astype(int)
+            diff = np.abs(on_screen - ref.rgba8[..., :3].astype(int))
+            diff[H // 2 - 14:H // 2 + 14, :14] = 0  # the cross
+            assert diff.max() <= 1, (blur, diff.max())
+        assert textures[0] != textures[1]  # the second render did not overwrite the first
+    finally:
+        zero.close()
+        readback.close()
+        screen.close()
