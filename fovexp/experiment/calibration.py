@@ -298,9 +298,16 @@ class _Animator:
         return TargetView(self.pos, back, self.front)
 
 
+#: The keys that ask to quit, on every screen of the runner.
+QUIT_KEYS = ("q", "escape")
+#: The one confirmation they lead to (also the session's message screens'): Y quits, N or
+#: Escape goes back.
+QUIT_QUESTION = "Quit the session? Everything so far is saved; continue later with --resume."
+QUIT_PROMPT = "Y: quit    N: go back"
+
+
 def _confirm(behind: Any) -> TextView:
-    return TextView("Quit the session? Everything so far is saved; continue later with "
-                    "--resume.", "Y: quit    N: go back", behind)
+    return TextView(QUIT_QUESTION, QUIT_PROMPT, behind)
 
 
 def head_box_view(guide: tuple[Vec3 | None, Vec3 | None], distance_mm: float | None,
@@ -525,7 +532,7 @@ class CalibrationFlow(_Base):
             if k in ("space", "return", "num_enter"):
                 self._calibrate(list(range(len(self.cal_points))))
                 return
-            if k == "q":
+            if k in QUIT_KEYS:
                 self._ask_quit(self.view())
                 return
 
@@ -557,7 +564,7 @@ class CalibrationFlow(_Base):
     def _step_targets(self, keys: list[str]) -> None:
         idx = self._queue[self._qpos]
         pos = self._points()[idx]
-        if "q" in keys:
+        if any(k in QUIT_KEYS for k in keys):
             self._quit_pending = True
         if self._quit_pending and self._job is None:  # not while the tracker collects
             self._quit_pending = False
@@ -667,7 +674,7 @@ class CalibrationFlow(_Base):
             if k == "s":
                 self._set("position")
                 return
-            if k == "q":
+            if k in QUIT_KEYS:
                 self._ask_quit(self.view())
                 return
 
@@ -722,7 +729,7 @@ class CalibrationFlow(_Base):
             if k == "t":
                 self.mode = "calibration" if self.mode == "validation" else "validation"
                 return
-            if k == "q":
+            if k in QUIT_KEYS:
                 self._ask_quit(self.view())
                 return
             if k.isdigit():
@@ -872,7 +879,7 @@ class DriftCheck(_Base):
                 self._target()
             return
         if self.phase == "target":
-            if "q" in keys:
+            if any(k in QUIT_KEYS for k in keys):
                 self._ask_quit(self.view())
                 return
             if self._sub == "move":
@@ -905,7 +912,7 @@ class DriftCheck(_Base):
                     self.outcome = "recalibrate"
                 elif k == "d":
                     self._target()
-                elif k == "q":
+                elif k in QUIT_KEYS:
                     self._ask_quit(self.view())
                 if self.outcome is not None or self.phase != "decide":
                     return

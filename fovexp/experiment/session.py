@@ -36,6 +36,9 @@ from filelock import FileLock, Timeout
 from fovexp import FovexpError
 
 from .calibration import (
+    QUIT_KEYS,
+    QUIT_PROMPT,
+    QUIT_QUESTION,
     CalibrationFlow,
     CalibrationTiming,
     DriftCheck,
@@ -80,8 +83,7 @@ EXIT_INTERRUPTED = 130
 #: held (an OS file lock) in the participant's folder while a run uses it
 LOCK_FILE = ".fovexp-run.lock"
 #: the quit key's confirmation screen
-QUIT_TEXT = ("Quit the session?\n\nQ: quit - progress is saved; continue later with --resume\n"
-             "Space: go back")
+QUIT_TEXT = f"{QUIT_QUESTION}\n\n{QUIT_PROMPT}"
 
 
 class Screen(Protocol):
@@ -694,22 +696,25 @@ class Session:
 
     def _message(self, text: str, keys: list[str], timeout_s: float | None = None) -> str | None:
         """A message screen; the gaze stream keeps going into the gaze log meanwhile (a long
-        break would otherwise overflow the tracker's buffer). Escape asks to quit
-        (:meth:`confirm_quit`); going back shows the message again."""
+        break would otherwise overflow the tracker's buffer). Escape or Q (where Q is not one of
+        the message's own keys) asks to quit (:meth:`confirm_quit`); going back shows the
+        message again."""
         if self.opts.dry_run:
             timeout_s = self.opts.dry_message_s
+        quit_keys = [k for k in QUIT_KEYS if k not in keys]
         while True:
-            key = self.screen.message(text, [*keys, "escape"], timeout_s, self._drain_gaze)
-            if key != "escape":
+            key = self.screen.message(text, [*keys, *quit_keys], timeout_s, self._drain_gaze)
+            if key not in quit_keys:
                 return key
             self.confirm_quit()
 
     def confirm_quit(self, trial_index: int | None = None) -> None:
-        """The quit key's confirmation, for every screen (trials go through their pause
-        screen; other screens, such as the tracker's, call this on Escape): Q quits, keeping
-        everything logged (raises :class:`Aborted`), Space goes back."""
-        key = self.screen.message(QUIT_TEXT, ["q", "space"], None, self._drain_gaze)
-        if key == "q":
+        """The quit keys' confirmation, for every screen (trials go through their pause
+        screen): Y quits, keeping everything logged (raises :class:`Aborted`); N or Escape
+        goes back. The calibration
+        screens ask the same (:data:`fovexp.experiment.calibration.QUIT_QUESTION`)."""
+        key = self.screen.message(QUIT_TEXT, ["y", "n", "escape"], None, self._drain_gaze)
+        if key == "y":
             self._event("aborted", trial_index=trial_index)
             raise Aborted()
 

@@ -185,10 +185,13 @@ def test_display_checklist_is_confirmed_and_recorded(tmp_path: Path, monkeypatch
 
 
 # -- quitting, breaks, the console line ------------------------------------------------------------
-@pytest.mark.parametrize("confirm", ["q", "space"])
-def test_quit_key_on_a_message_asks_first(tmp_path: Path, monkeypatch, confirm: str) -> None:
-    """Escape on the instructions opens the confirmation: Q quits (exit 3, everything kept),
-    Space goes back to the instructions and the session goes on."""
+@pytest.mark.parametrize(("quit_key", "confirm"), [("escape", "y"), ("q", "y"), ("escape", "n"),
+                                                 ("q", "escape")])
+def test_quit_key_on_a_message_asks_first(tmp_path: Path, monkeypatch, quit_key: str,
+                                          confirm: str) -> None:
+    """Escape or Q on the instructions opens the confirmation, the same as the calibration
+    screens': Y quits (exit 3, everything kept), N or Escape goes back to the instructions and
+    the session goes on."""
     use(monkeypatch, QuickEnhancer)
     lp = load_protocol(REPO / "protocols" / "calibration-fe.yaml")
     seen: list[str] = []
@@ -196,17 +199,17 @@ def test_quit_key_on_a_message_asks_first(tmp_path: Path, monkeypatch, confirm: 
     def answer(text, keys, timeout_s):
         seen.append(text)
         if "Press Space to start" in text and seen.count(text) == 1:
-            assert "escape" in keys  # the quit key is offered on every message
-            return "escape"
+            assert "escape" in keys and "q" in keys  # the quit keys are offered on every message
+            return quit_key
         if text == QUIT_TEXT:
             return confirm
         return keys[0]
 
-    s = Session(lp, options(tmp_path, f"Q{confirm[0]}"))
+    s = Session(lp, options(tmp_path, f"Q{quit_key[0]}{confirm[0]}"))
     code = s.run(screen_factory=lambda **kw: StubScreen(inputs=enter_every(3), answer=answer,
                                                         **kw), gaze=gaze())
     info = session_file(s)
-    if confirm == "q":
+    if confirm == "y":
         assert code == 3 and info["state"] == "aborted"
         assert info["events"][-1]["event"] == "aborted"
         assert not read_trials(s.folder / "trials.csv")[0]

@@ -234,6 +234,23 @@ def test_wheel_and_modifier_and_keys(screen) -> None:
     assert screen.poll_input() == [Key("return"), Key("escape")]
 
 
+def test_a_key_that_answers_a_message_is_not_an_operator_request(screen) -> None:
+    """C confirms the display checklist and is also the operator's between-trial
+    "recalibrate": the press that answered the message must not also recalibrate after the
+    first trial; a C pressed on any other screen still counts."""
+    from pyglet.window import key
+
+    screen.take_operator_keys()
+    # pressed while the message is up (it reads the key buffer it cleared on opening)
+    threading.Timer(0.3, press, args=(screen, key.C)).start()
+    assert screen.message("checklist", ["c"], 5.0) == "c"
+    assert screen.take_operator_keys() == set()
+    press(screen, key.C)
+    press(screen, key.D)
+    assert screen.message("instructions", ["space"], 0.05) is None
+    assert screen.take_operator_keys() == {"c", "d"}
+
+
 class EscapeGaze(SimulatedGaze):
     """The operator presses Escape during the second trial, then Q on the pause screen."""
 
