@@ -28,8 +28,8 @@ from .errors import FovexpError
 IMAGE_SUFFIXES = {".png": "PNG", ".tif": "TIFF", ".tiff": "TIFF", ".jpg": "JPEG", ".jpeg": "JPEG"}
 #: Integer sample depths files are written with.
 BIT_DEPTHS = (8, 16)
-#: zlib level of PNG output (1: fastest compression, files about 10 % larger than at 6, which
-#: takes several times longer at 4K: benchmarks/CLI.md).
+#: zlib level of PNG output (1: the fastest compression; a 4K frame's file is about 20 % larger
+#: than at the default 6, which takes several times longer: benchmarks/CLI.md).
 PNG_ZLIB_LEVEL = 1
 #: JPEG quality of JPEG output.
 JPEG_QUALITY = 95
@@ -191,9 +191,13 @@ def _encode_opencv(kind: str, data: np.ndarray) -> memoryview:
         code = cv2.COLOR_RGBA2BGRA if data.shape[2] == 4 else cv2.COLOR_RGB2BGR
         data = cv2.cvtColor(data, code)
     if kind == "PNG":
-        # Z_RLE: as small as the default strategy on rendered frames, and faster
+        # zlib's run-length strategy and the "up" filter on every row (libpng otherwise tries
+        # five filters per row): 3x faster than the defaults at level 1, files ~10 % larger
+        # (benchmarks/CLI.md). OpenCV before 4.11 has no filter option: its default then.
         params = [cv2.IMWRITE_PNG_COMPRESSION, PNG_ZLIB_LEVEL,
                   cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_RLE]
+        if hasattr(cv2, "IMWRITE_PNG_FILTER"):
+            params += [cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_UP]
         ok, buf = cv2.imencode(".png", data, params)
     else:
         ok, buf = cv2.imencode(".jpg", data, [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
