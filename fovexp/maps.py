@@ -67,6 +67,23 @@ def dump_maps(result: EnhanceResult, folder: Path) -> None:
             _write_preview(folder / f"{name}.png", name, m, band_empty)
 
 
+def _scale(name: str, style: _Style, finite: np.ndarray) -> tuple[float, float, str]:
+    """The colour scale's ends for the map's shown values, and which ends the colour bar marks
+    as exceeded (matplotlib's ``extend``)."""
+    if name == "orientation_rad":
+        return -180.0, 180.0, "neither"
+    lo, hi = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 1.0)
+    extend = "neither"
+    if style.symmetric:  # the noise's rare peaks would leave the rest white
+        nonzero = np.abs(finite[finite != 0.0])
+        lim = float(np.percentile(nonzero, NOISE_PERCENTILE)) if nonzero.size else 1.0
+        extend = "both" if max(-lo, hi) > lim else "neither"
+        lo, hi = -lim, lim
+    if hi <= lo:  # a constant map: a scale around its value
+        lo, hi = lo - 0.5, hi + 0.5
+    return lo, hi, extend
+
+
 def _write_preview(path: Path, name: str, m: np.ndarray, band_empty: np.ndarray) -> None:
     from matplotlib import colormaps
     from matplotlib.colors import Normalize
@@ -76,25 +93,14 @@ def _write_preview(path: Path, name: str, m: np.ndarray, band_empty: np.ndarray)
     style = _STYLES[name]
     step = max(1, math.ceil(max(m.shape[:2]) / PREVIEW_MAX_PX))
     values = np.asarray(m[::step, ::step], dtype=np.float64)
-    if name == "orientation_rad":
+    if name == "orientation_rad":  # radians of any turn -> degrees in [-180, 180)
         values = (np.degrees(values) + 180.0) % 360.0 - 180.0
-        norm = Normalize(-180.0, 180.0)
     mask = ~np.isfinite(values)
     if style.band_masked:
         mask |= band_empty[::step, ::step]
     shown = np.ma.masked_array(values, mask)
-    extend = "neither"
-    if name != "orientation_rad":
-        finite = values[~mask]
-        lo, hi = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 1.0)
-        if style.symmetric:  # the noise's rare peaks would leave the rest white
-            nonzero = np.abs(finite[finite != 0.0])
-            lim = float(np.percentile(nonzero, NOISE_PERCENTILE)) if nonzero.size else 1.0
-            extend = "both" if max(-lo, hi) > lim else "neither"
-            lo, hi = -lim, lim
-        if hi <= lo:  # a constant map: a scale around its value
-            lo, hi = lo - 0.5, hi + 0.5
-        norm = Normalize(lo, hi)
+    lo, hi, extend = _scale(name, style, values[~mask])
+    norm = Normalize(lo, hi)
     full_h, full_w = m.shape[:2]
     side = 9.0 / max(full_w, full_h)
     fig = Figure(figsize=(2.0 + full_w * side, 1.2 + full_h * side), dpi=100,
