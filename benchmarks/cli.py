@@ -3,7 +3,7 @@ frame with 12 impulses, end to end, warm and as the first run after set-up (an e
 cache), ``fovexp --version`` and ``--help``, where the time goes, and the image encoders.
 Results: benchmarks/CLI.md and benchmarks/cli.json, with the machine.
 
-    .venv/bin/python benchmarks/cli.py [--baseline REV] [--repeats 5]
+    .venv/bin/python benchmarks/cli.py [--baseline REV] [--repeats 5] [--fresh-clone]
 
 The baseline is REV's tree (default: where this branch left main, ``git merge-base HEAD main``,
 so that only this branch's changes are compared), exported with ``git archive`` into a
@@ -14,7 +14,9 @@ their runs are interleaved (baseline, new, baseline, new, ...), so that the load
 machine falls on both alike; medians are reported. The first run after set-up is measured once
 per tree, each from an empty ``NUMBA_CACHE_DIR``: the baseline's set-up compiled nothing, the
 new one's runs ``fovexp compile`` (what ``./dev setup`` does). The same runs check that one seed
-gives the same bytes from a freshly compiled and a cached kernel.
+gives the same bytes from a freshly compiled and a cached kernel. ``--fresh-clone`` also clones
+this repository's HEAD into a temporary folder, runs the README's set-up there (``./dev setup``:
+a new virtual environment, the package, ``fovexp compile``) and times the first runs after it.
 """
 
 from __future__ import annotations
@@ -99,6 +101,30 @@ class Tree:
         assert out.strip().startswith(str(self.path)), (self.name, out)
 
 
+def fresh_clone(tmp: Path, repeats: int = 3) -> dict:
+    """``./dev setup`` in a fresh clone of HEAD, then the first ``fovexp enhance`` runs."""
+    clone = tmp / "clone"
+    head = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "HEAD"], check=True,
+                          capture_output=True, text=True).stdout.strip()
+    subprocess.run(["git", "clone", "-q", "--no-checkout", str(ROOT), str(clone)], check=True)
+    subprocess.run(["git", "-C", str(clone), "checkout", "-q", head], check=True)
+    # the shared frame lies beside the repository, as in a real checkout
+    (tmp / "shared").symlink_to(ROOT.parent / "shared")
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("NUMBA_CACHE_DIR", "PYTHONPATH", "VIRTUAL_ENV")}
+    t = time.perf_counter()
+    subprocess.run(["./dev", "setup"], cwd=clone, env=env, check=True, capture_output=True)
+    setup_s = time.perf_counter() - t
+    runs = []
+    for i in range(repeats):
+        t = time.perf_counter()
+        subprocess.run([str(clone / ".venv" / "bin" / "fovexp"), *enhance_argv(
+            tmp / f"clone-out{i}.png")], cwd=tmp, env=env, check=True, capture_output=True)
+        runs.append(time.perf_counter() - t)
+    same = len({digest(tmp / f"clone-out{i}.png") for i in range(repeats)}) == 1
+    return {"commit": head[:7], "setup_s": setup_s, "runs_s": runs, "identical": same}
+
+
 def enhance_argv(out: Path) -> list[str]:
     return [str(SPONZA) if a == "IN" else str(out) if a == "OUT" else a for a in ENHANCE]
 
@@ -113,6 +139,8 @@ def main() -> None:
                     "HEAD and main)")
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--out", type=Path, default=HERE)
+    ap.add_argument("--fresh-clone", action="store_true",
+                    help="also time ./dev setup and the first runs in a fresh clone of HEAD")
     args = ap.parse_args()
     if not SPONZA.is_file():
         sys.exit(f"the shared 4K Sponza frame is absent ({SPONZA})")
@@ -170,6 +198,9 @@ def main() -> None:
                             "identical": warm_digests == {cold}}
         sizes = {t.name: (out / f"{tag}-warm0.png").stat().st_size
                  for t, tag in ((base, "b"), (new, "n"))}
+        clone = fresh_clone(tmp) if args.fresh_clone else None
+        if clone:
+            print("fresh clone", clone, flush=True)
 
     result = {
         "machine": machine(), "load_average_before": load_before,
@@ -179,7 +210,7 @@ def main() -> None:
         "first_run": first,
         "warm_median_s": {n: {k: statistics.median(v) for k, v in rows.items()}
                           for n, rows in warm.items()},
-        "warm_all_s": warm, "same_bytes": same, "png_bytes": sizes,
+        "warm_all_s": warm, "same_bytes": same, "png_bytes": sizes, "fresh_clone": clone,
     }
     (args.out / "cli.json").write_text(json.dumps(result, indent=2) + "\n")
     (args.out / "CLI.md").write_text(render(result))
@@ -217,6 +248,17 @@ def render(r: dict) -> str:
         f"| `fovexp enhance`, warm | {wb['enhance']:.2f} | {wn['enhance']:.2f} |",
         f"| `fovexp --version` | {wb['--version']:.2f} | {wn['--version']:.2f} |",
         f"| `fovexp --help` | {wb['--help']:.2f} | {wn['--help']:.2f} |",
+    ]
+    if r.get("fresh_clone"):
+        c = r["fresh_clone"]
+        lines += [
+            "",
+            f"In a fresh clone of {c['commit']}: `./dev setup` (new virtual environment, "
+            f"package, `fovexp compile`) took {c['setup_s']:.0f} s; the `fovexp enhance` runs "
+            "after it took " + ", ".join(f"{v:.2f}" for v in c["runs_s"]) + " s (first run "
+            f"first); same bytes each time: {'yes' if c['identical'] else 'no'}.",
+        ]
+    lines += [
         "",
         "## Where a warm `fovexp enhance` spends its time (in-process, median seconds)",
         "",
