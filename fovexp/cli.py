@@ -62,7 +62,7 @@ def _gaze(text: str) -> tuple[float, float]:
     if not all(0.0 <= v <= 1.0 for v in (x, y)):  # NaN fails every comparison
         raise argparse.ArgumentTypeError(
             f"{text!r}: x and y must be finite numbers in [0, 1] (normalised screen "
-            "coordinates, x right, y down): the gaze is outside the screen"
+            "coordinates, x right, y down; 0 and 1 are the screen's edges)"
         )
     return x, y
 

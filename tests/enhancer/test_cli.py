@@ -98,7 +98,7 @@ CASES = [
     (["{five}", "{out}"], "5 channels"),
     (["{nan}", "{out}"], "NaN"),
     (["{png}", "{outbmp}"], "unsupported output type"),
-    (["{png}", "{out}", "--gaze", "1.5,0.5"], "outside the screen"),
+    (["{png}", "{out}", "--gaze", "1.5,0.5"], "--gaze: '1.5,0.5': x and y must be finite"),
     (["{png}", "{out}", "--gaze", "middle"], "gaze must be"),
     (["{png}", "{out}", "--blur-rate", "-1"], "--blur-rate"),
     (["{png}", "{out}", "--impulses", "100000"], "--impulses"),
