@@ -19,8 +19,6 @@ from fovexp.jit import FASTMATH
 
 from engine_helpers import textured_image
 
-pytestmark = pytest.mark.slow
-
 # The CLI writes the frame (16-bit PNG); the API's float32 output and noise of the same call
 # are hashed too, so that a difference below a 16-bit step is caught as well.
 SCRIPT = r"""
@@ -74,6 +72,7 @@ def test_kernels_are_compiled_without_fast_math():
         assert disp.targetoptions.get("fastmath") is FASTMATH, name
 
 
+@pytest.mark.slow  # compiles every kernel twice, in fresh caches
 def test_same_seed_same_bytes_however_the_kernels_were_compiled(tmp_path):
     src = tmp_path / "frame.png"
     iio.imwrite(src, np.round(textured_image(270, 480, seed=5) * 255).astype(np.uint8))
