@@ -60,16 +60,20 @@ def _enhance(src, out, cache_dir, threads: int) -> dict:
 
 
 def test_kernels_are_compiled_without_fast_math():
-    """The cause (fovexp/jit.py): every kernel takes its flags from one place, without
-    fast-math, whose reassociation and FMA fusion let two compilations of one loop differ."""
+    """The cause (fovexp/jit.py): no kernel is compiled with fast-math (no flag of it either),
+    whose reassociation and FMA fusion let two compilations of one loop differ. The engine's
+    kernels say so with ``fastmath=FASTMATH``; a kernel of the runner may leave the flag out
+    (it may not import fovexp.jit), which is the same."""
     from fovexp.warmup import _exercise, kernels
 
     assert FASTMATH is False
-    _exercise()  # imports every kernel module
+    _exercise()  # imports every kernel module of the engine
     found = kernels()
     assert len(found) >= 10
     for name, disp in found.items():
-        assert disp.targetoptions.get("fastmath") is FASTMATH, name
+        assert not disp.targetoptions.get("fastmath", False), name
+        if not name.startswith(("fovexp.experiment.", "fovexp.analysis.")):
+            assert "fastmath" in disp.targetoptions, name  # the engine's say it explicitly
 
 
 @pytest.mark.slow  # compiles every kernel twice, in fresh caches
