@@ -1,24 +1,49 @@
 """fovexp: noise-based enhancement for foveated rendering (Tariq, Tursun, Didyk 2022).
 
 The public API (docs/API.md); the experiment runner and the analysis use only these names.
+Each is imported from its module when first used (PEP 562), so that ``import fovexp`` and
+``fovexp --version`` do not load Numba, SciPy or pandas; ``from fovexp import Enhancer``
+works as usual.
 """
 
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
 from ._version import __version__
-from .backends import BACKENDS, make_enhancer
-from .config import parse_yaml, read_yaml
-from .errors import FovexpError, validation_error
-from .geometry import Display, ViewingGeometry, load_display
-from .io import read_image, write_image
-from .params import (
-    METHODS,
-    PAPER_TABLE2,
-    PARAMETER_RANGES,
-    EnhanceParams,
-    ParameterTable,
-    make_params,
-)
-from .pipeline import MAP_NAMES, Enhancer, EnhanceResult, enhance
-from .resources import find_protocol
+
+#: Public name -> the module of the package that defines it.
+_PUBLIC: dict[str, str] = {
+    "BACKENDS": "backends", "make_enhancer": "backends",
+    "parse_yaml": "config", "read_yaml": "config",
+    "FovexpError": "errors", "validation_error": "errors",
+    "Display": "geometry", "ViewingGeometry": "geometry", "load_display": "geometry",
+    "read_image": "io", "write_image": "io",
+    "METHODS": "params", "PAPER_TABLE2": "params", "PARAMETER_RANGES": "params",
+    "EnhanceParams": "params", "ParameterTable": "params", "make_params": "params",
+    "MAP_NAMES": "pipeline", "Enhancer": "pipeline", "EnhanceResult": "pipeline",
+    "enhance": "pipeline",
+    "find_protocol": "resources",
+}
+
+if TYPE_CHECKING:  # the same names for type checkers (tests/test_layers.py holds the
+    # three lists equal)
+    from .backends import BACKENDS, make_enhancer
+    from .config import parse_yaml, read_yaml
+    from .errors import FovexpError, validation_error
+    from .geometry import Display, ViewingGeometry, load_display
+    from .io import read_image, write_image
+    from .params import (
+        METHODS,
+        PAPER_TABLE2,
+        PARAMETER_RANGES,
+        EnhanceParams,
+        ParameterTable,
+        make_params,
+    )
+    from .pipeline import MAP_NAMES, Enhancer, EnhanceResult, enhance
+    from .resources import find_protocol
 
 __all__ = [
     "BACKENDS", "MAP_NAMES", "METHODS", "PAPER_TABLE2", "PARAMETER_RANGES", "Display",
@@ -27,3 +52,16 @@ __all__ = [
     "make_params", "parse_yaml", "read_image", "read_yaml", "validation_error", "write_image",
     "__version__",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    module = _PUBLIC.get(name)
+    if module is None:
+        raise AttributeError(f"module 'fovexp' has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{module}", __name__), name)
+    globals()[name] = value  # looked up once
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *_PUBLIC})

@@ -1,22 +1,55 @@
-"""``fovexp`` command line: ``enhance`` (this module), ``run`` (experiment runner) and
-``analyze`` (analysis). Bad input prints one ``fovexp: error: ...`` line and exits with 2."""
+"""``fovexp`` command line: ``enhance`` and ``compile`` (this module), ``run`` (experiment
+runner) and ``analyze`` (analysis). Bad input prints one ``fovexp: error: ...`` line and exits
+with 2.
+
+A command's module, and what it imports, is loaded only when that command runs (or its
+``--help`` is asked for): ``fovexp enhance`` loads neither the runner nor the analysis (nor
+pandas, matplotlib unless ``--dump-maps``, PsychoPy), and ``fovexp --help`` and ``--version``
+load no command at all.
+"""
 
 from __future__ import annotations
 
 import argparse
+import importlib
 import sys
 import warnings
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
-import numpy as np
-
-from . import __version__
-from .backends import BACKENDS, make_enhancer
+from ._version import __version__
 from .errors import FovexpError
-from .geometry import load_display
-from .io import IMAGE_SUFFIXES, read_image, save_npy, write_image
-from .params import METHODS, PRESETS, ParameterTable, make_params
-from .pipeline import MAP_NAMES, Enhancer, EnhanceResult
+
+#: The commands: name -> (module, function adding the command's arguments to its parser, the
+#: line ``fovexp --help`` shows).
+COMMANDS: dict[str, tuple[str, str, str]] = {
+    "enhance": ("fovexp.cli", "add_enhance_parser",
+                "foveate and enhance an image, a folder of frames or a video"),
+    "run": ("fovexp.experiment.cli", "add_run_parser",
+            "run an experiment protocol with a participant"),
+    "analyze": ("fovexp.analysis.cli", "add_analyze_parser",
+                "turn trial logs into the paper's results (Table 2, validation tests)"),
+    "compile": ("fovexp.cli", "add_compile_parser",
+                "compile the Numba kernels ahead of the first run (once after installing)"),
+}
+
+
+# --------------------------------------------------------------------------------- enhance
+def _parameter(name: str) -> Callable[[str], float | int]:
+    """An argparse type: the value of parameter ``name`` within its accepted range
+    (:func:`fovexp.params.check_parameter`), else a one-line error naming the range."""
+
+    def parse(text: str) -> float | int:
+        from .params import check_parameter
+
+        try:
+            return check_parameter(name, text)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(f"{text!r}: {exc}") from None
+
+    parse.__name__ = name  # argparse names the type in some messages
+    return parse
 
 
 def _gaze(text: str) -> tuple[float, float]:
@@ -26,27 +59,41 @@ def _gaze(text: str) -> tuple[float, float]:
         raise argparse.ArgumentTypeError(
             f"gaze must be 'x,y' in normalised screen coordinates, got {text!r}"
         ) from None
+    if not all(0.0 <= v <= 1.0 for v in (x, y)):  # NaN fails every comparison
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: x and y must be finite numbers in [0, 1] (normalised screen "
+            "coordinates, x right, y down; 0 and 1 are the screen's edges)"
+        )
     return x, y
 
 
-def add_enhance_parser(sub: argparse._SubParsersAction) -> None:
+def add_enhance_parser(sub: Any) -> argparse.ArgumentParser:
+    from .backends import BACKENDS
+    from .io import BIT_DEPTHS
+    from .params import METHODS, PRESETS
+
     p = sub.add_parser(
-        "enhance", help="foveate and enhance an image, a folder of frames or a video",
+        "enhance", help=COMMANDS["enhance"][2],
         description="Foveation simulation, contrast enhancement and noise-based enhancement "
-        "(Tariq et al. 2022). IN and OUT are image files (PNG/TIFF/JPEG), or folders of "
-        "frames, or videos.",
+        "(Tariq et al. 2022). IN and OUT are image files (PNG/TIFF/JPEG; grey or RGB, with or "
+        "without alpha, which passes through unchanged), or folders of frames, or videos.",
     )
     p.add_argument("input", type=Path, metavar="IN")
     p.add_argument("output", type=Path, metavar="OUT")
     p.add_argument("--display", default="lg-oled55cx", help="display profile name or YAML path")
     p.add_argument("--gaze", type=_gaze, default=(0.5, 0.5), help="x,y in [0, 1] (x right, y down)")
-    p.add_argument("--blur-rate", type=float, default=0.34, help="arcmin per deg past the fovea")
+    p.add_argument("--blur-rate", type=_parameter("blur_rate"), default=0.34,
+                   help="arcmin per deg past the fovea")
     p.add_argument("--method", choices=METHODS, default="ours")
-    p.add_argument("--fe", type=float, help="contrast enhancement f_e (default: from the table)")
-    p.add_argument("--sk", type=float, help="noise amplitude scale s_k (default: from the table)")
-    p.add_argument("--sf", type=float, help="noise bandwidth scale s_f (default: from the table)")
-    p.add_argument("--impulses", type=int, default=64, help="impulses per kernel (12 is fast)")
-    p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--fe", type=_parameter("f_e"),
+                   help="contrast enhancement f_e (default: from the table)")
+    p.add_argument("--sk", type=_parameter("s_k"),
+                   help="noise amplitude scale s_k (default: from the table)")
+    p.add_argument("--sf", type=_parameter("s_f"),
+                   help="noise bandwidth scale s_f (default: from the table)")
+    p.add_argument("--impulses", type=_parameter("impulses"), default=64,
+                   help="impulses per kernel (12 is fast)")
+    p.add_argument("--seed", type=_parameter("seed"), default=1)
     p.add_argument("--preset", choices=sorted(PRESETS), default="paper")
     p.add_argument("--backend", choices=BACKENDS, default="auto",
                    help="cpu, gpu (OpenGL 4.5 compute), or auto: a hardware GPU if there is one")
@@ -57,31 +104,19 @@ def add_enhance_parser(sub: argparse._SubParsersAction) -> None:
                    help="IN is already foveated at --blur-rate (skip the foveation simulation)")
     p.add_argument("--sigma-map", type=Path, help="IN is already foveated with this sigma map "
                    "(.npy, px, the image's size)")
-    p.add_argument("--bit-depth", type=int, choices=(8, 16), default=8)
+    p.add_argument("--bit-depth", type=int, choices=BIT_DEPTHS, default=None,
+                   help="bits per sample of OUT (default: IN's; JPEG and videos are 8-bit)")
     p.add_argument("--dump-maps", type=Path, metavar="DIR",
                    help="write every intermediate map as float32 .npy and a PNG preview")
     p.set_defaults(func=enhance_command)
-
-
-def _preview(m: np.ndarray) -> np.ndarray:
-    """A [0, 1] picture of a map: images as they are, other maps scaled to their finite range."""
-    v = np.where(np.isfinite(m), m, np.nan)
-    lo, hi = np.nanmin(v), np.nanmax(v)
-    if not np.isfinite(lo) or hi <= lo:
-        return np.zeros(m.shape, np.float32)
-    return np.nan_to_num((v - lo) / (hi - lo), nan=1.0)
-
-
-def dump_maps(result: EnhanceResult, folder: Path) -> None:
-    folder.mkdir(parents=True, exist_ok=True)
-    for name in MAP_NAMES:
-        m = result.map(name)
-        save_npy(folder / f"{name}.npy", m)
-        image_like = name in ("foveated", "contrast", "output")
-        write_image(folder / f"{name}.png", m if image_like else _preview(m))
+    return p
 
 
 def _enhancer_and_params(args: argparse.Namespace):
+    from .backends import make_enhancer
+    from .geometry import load_display
+    from .params import ParameterTable, make_params
+
     table = ParameterTable.load(args.table) if args.table else None
     enh = make_enhancer(load_display(args.display), preset=args.preset, geometry=args.geometry,
                         table=table, backend=args.backend)
@@ -92,11 +127,21 @@ def _enhancer_and_params(args: argparse.Namespace):
     return enh, params
 
 
-def _set(enh: Enhancer, image: np.ndarray, args: argparse.Namespace, sigma) -> None:
+def _set(enh: Any, image: Any, args: argparse.Namespace, sigma: Any) -> None:
     enh.set_image(image, foveated=args.input_foveated, sigma_px=sigma)
 
 
+def _output_depth(args: argparse.Namespace, path: Path, input_depth: int) -> int:
+    """``--bit-depth``, else the input's depth where the output format has it (JPEG: 8)."""
+    if args.bit_depth is not None:
+        return args.bit_depth
+    return 8 if path.suffix.lower() in (".jpg", ".jpeg") else input_depth
+
+
 def enhance_command(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from .io import IMAGE_SUFFIXES, read_image_with_depth, write_image
     from .sequence import is_sequence
 
     enh, params = _enhancer_and_params(args)
@@ -113,11 +158,13 @@ def enhance_command(args: argparse.Namespace) -> int:
             f"{args.output}: unsupported output type {args.output.suffix!r} "
             f"(use {', '.join(IMAGE_SUFFIXES)})"
         )
-    image = read_image(args.input)
+    image, depth = read_image_with_depth(args.input)
     _set(enh, image, args, sigma)
     result = enh.enhance(args.gaze, params)
-    write_image(args.output, result.output, args.bit_depth)
+    write_image(args.output, result.output, _output_depth(args, args.output, depth))
     if args.dump_maps:
+        from .maps import dump_maps
+
         dump_maps(result, args.dump_maps)
     print(f"wrote {args.output} ({params.method}, blur-rate {params.blur_rate}, "
           f"f_e {result.params.f_e:.3g}, s_k {result.params.s_k:.3g}, s_f {result.params.s_f:.3g}; "
@@ -125,13 +172,14 @@ def enhance_command(args: argparse.Namespace) -> int:
     return 0
 
 
-def _backend_name(enh: Enhancer) -> str:
-    return f"gpu: {enh.renderer}" if enh.backend == "gpu" else "cpu"  # type: ignore[attr-defined]
+def _backend_name(enh: Any) -> str:
+    return f"gpu: {enh.renderer}" if enh.backend == "gpu" else "cpu"
 
 
-def _enhance_sequence(enh: Enhancer, params, args: argparse.Namespace, sigma) -> int:
+def _enhance_sequence(enh: Any, params: Any, args: argparse.Namespace, sigma: Any) -> int:
     from tqdm import tqdm
 
+    from .io import write_image
     from .sequence import VIDEO_SUFFIXES, InterframeSSIM, VideoWriter, iter_frames
 
     count, fps, frames = iter_frames(args.input)
@@ -141,14 +189,15 @@ def _enhance_sequence(enh: Enhancer, params, args: argparse.Namespace, sigma) ->
     ssim_in, ssim_out = InterframeSSIM(), InterframeSSIM()
     n = 0
     try:
-        for name, image in tqdm(frames, total=count, desc="enhance", unit="frame",
-                                file=sys.stderr):
+        for name, image, depth in tqdm(frames, total=count, desc="enhance", unit="frame",
+                                       file=sys.stderr):
             _set(enh, image, args, sigma)  # the impulses stay: they depend on size and seed
             result = enh.enhance(args.gaze, params)
             ssim_in.add(image)
             ssim_out.add(result.output)
             if video is None:
-                write_image(args.output / f"{name}.png", result.output, args.bit_depth)
+                out = args.output / f"{name}.png"
+                write_image(out, result.output, _output_depth(args, out, depth))
             else:
                 video.append(result.output)
             n += 1
@@ -163,24 +212,94 @@ def _enhance_sequence(enh: Enhancer, params, args: argparse.Namespace, sigma) ->
     return 0
 
 
+# --------------------------------------------------------------------------------- compile
+def add_compile_parser(sub: Any) -> argparse.ArgumentParser:
+    p = sub.add_parser(
+        "compile", help=COMMANDS["compile"][2],
+        description="Compile every Numba kernel of the enhancer into Numba's on-disk cache, so "
+        "that the first 'fovexp enhance' or 'fovexp run' does not spend about 20 s doing it. "
+        "Run it once after installing or upgrading fovexp, as the user who runs fovexp "
+        "(./dev setup does). The cache is $NUMBA_CACHE_DIR when set, else beside the "
+        "installed package when that folder is writable, else ~/.cache/numba.",
+    )
+    p.set_defaults(func=compile_command)
+    return p
+
+
+def compile_command(args: argparse.Namespace) -> int:
+    from .warmup import compile_kernels
+
+    report = compile_kernels()
+    where = ", ".join(sorted(report.cache_dirs)) or "no cache folder"
+    print(f"fovexp compile: {len(report.compiled)} kernels compiled, {len(report.loaded)} "
+          f"already cached, in {report.seconds:.1f} s; cache: {where}")
+    return 0
+
+
+# --------------------------------------------------------------------------------- parser
 class _Parser(argparse.ArgumentParser):
-    """Argument errors as one line, like every other input error."""
+    """Argument errors as one line, like every other input error. A command's parser is
+    filled in (its module imported) only when it parses or shows its help."""
+
+    def __init__(self, *args: Any, fill: Callable[[_Parser], None] | None = None,
+                 **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._fill = fill
+
+    def _filled(self) -> None:
+        fill, self._fill = self._fill, None
+        if fill is not None:
+            fill(self)
+
+    def parse_known_args(self, args=None, namespace=None):  # noqa: ANN001, ANN201
+        self._filled()
+        return super().parse_known_args(args, namespace)
+
+    def format_help(self) -> str:
+        self._filled()
+        return super().format_help()
+
+    def format_usage(self) -> str:
+        self._filled()
+        return super().format_usage()
 
     def error(self, message: str) -> None:  # type: ignore[override]
         print(f"fovexp: error: {message} (see '{self.prog} --help')", file=sys.stderr)
         raise SystemExit(2)
 
 
+class _Into:
+    """What a command's ``add_*_parser(subparsers)`` is given: ``add_parser`` returns the
+    command's parser, already made, with the description (and formatting) it asks for."""
+
+    def __init__(self, parser: _Parser) -> None:
+        self._parser = parser
+
+    def add_parser(self, name: str, **kwargs: Any) -> _Parser:
+        for key in ("description", "epilog", "formatter_class"):
+            if key in kwargs:
+                setattr(self._parser, key, kwargs[key])
+        return self._parser
+
+
+def _filler(module: str, function: str) -> Callable[[_Parser], None]:
+    def fill(parser: _Parser) -> None:
+        getattr(importlib.import_module(module), function)(_Into(parser))
+
+    return fill
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="fovexp", description=__doc__)
+    parser = _Parser(
+        prog="fovexp",
+        description="Noise-based enhancement for foveated rendering (Tariq, Tursun, Didyk 2022): "
+        "enhance frames, run the experiments, analyse their logs. Bad input prints one "
+        "'fovexp: error: ...' line and exits with status 2.",
+    )
     parser.add_argument("--version", action="version", version=f"fovexp {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
-    add_enhance_parser(sub)
-    from .analysis.cli import add_analyze_parser
-    from .experiment.cli import add_run_parser
-
-    add_run_parser(sub)
-    add_analyze_parser(sub)
+    for name, (module, function, line) in COMMANDS.items():
+        sub.add_parser(name, help=line, fill=_filler(module, function))
     return parser
 
 

@@ -11,6 +11,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from .jit import FASTMATH
+
 #: BT.601 luma weights. The release's Y of YCbCr, normalised as (Y - 16/255) / (219/255), equals
 #: 0.299 R + 0.587 G + 0.114 B (notes section 3.4); its grey for orientation uses the same
 #: weights rounded as MATLAB's rgb2gray (0.2989, 0.5870, 0.1140).
@@ -33,7 +35,7 @@ def linearize(encoded: np.ndarray, gamma: float, transfer: str = "power") -> np.
     return np.power(out, np.float32(gamma), out=out)
 
 
-@numba.njit(parallel=True, cache=True, fastmath=True, nogil=True)
+@numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
 def _add_grey_clip(img, a, b, out):  # pragma: no cover - compiled
     """out = clip(img + a + b, 0, 1), a and b grey (H, W) added to every channel."""
     h, w, c = img.shape

@@ -27,6 +27,7 @@ import numba
 import numpy as np
 
 from .foveation import per_pixel_sigma
+from .jit import FASTMATH
 
 #: Box-filter width per integer blur level (notes section 3.3): level k averages ceil(4 k) px.
 BOX_WIDTH_PX_PER_LEVEL = 4
@@ -37,7 +38,7 @@ def box_width_px(level: int) -> int:
     return int(math.ceil(BOX_WIDTH_PX_PER_LEVEL * level))
 
 
-@numba.njit(cache=True, inline="always", nogil=True)
+@numba.njit(cache=True, inline="always", nogil=True, fastmath=FASTMATH)
 def _symmetric(i, n):  # pragma: no cover - compiled
     """MATLAB 'symmetric' padding index (-1 -> 0, n -> n - 1), repeated past the edges as
     padarray does when the pad is wider than the image (period 2 n)."""
@@ -45,7 +46,7 @@ def _symmetric(i, n):  # pragma: no cover - compiled
     return 2 * n - 1 - i if i >= n else i
 
 
-@numba.njit(parallel=True, cache=True, fastmath=True, nogil=True)
+@numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
 def _sat(img, pad):  # pragma: no cover - compiled
     """Summed-area table (float64, leading zero row and column) of a grey image padded by
     ``pad`` pixels with symmetric borders (:func:`_symmetric`)."""
@@ -71,7 +72,7 @@ def _sat(img, pad):  # pragma: no cover - compiled
     return s
 
 
-@numba.njit(parallel=True, cache=True, fastmath=True, nogil=True)
+@numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
 def _enhance(img, sigma, sat, pad, f_e, minus):  # pragma: no cover - compiled
     """The enhanced image, less ``minus`` times the input (1: just the change)."""
     h, w = img.shape

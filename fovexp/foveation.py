@@ -28,6 +28,7 @@ import numba
 import numpy as np
 
 from .geometry import arcmin_to_px
+from .jit import FASTMATH
 from .pyramids import gaussian_pyramid, gaussian_sigma_px, level_scale
 
 #: Gaussians are truncated at 4 sigma, as scipy.ndimage.gaussian_filter does.
@@ -108,7 +109,7 @@ def gaussian_kernel(sigma: float) -> np.ndarray:
     return (g / g.sum()).astype(np.float32)
 
 
-@numba.njit(cache=True, fastmath=True, nogil=True)
+@numba.njit(cache=True, fastmath=FASTMATH, nogil=True)
 def _blur_patch(src, ly0, ly1, lx0, lx1, g):  # pragma: no cover - compiled
     """Separable Gaussian of ``src`` (h, w, c) over rows [ly0, ly1), cols [lx0, lx1);
     samples outside ``src`` replicate its border."""
@@ -141,7 +142,7 @@ def _blur_patch(src, ly0, ly1, lx0, lx1, g):  # pragma: no cover - compiled
     return out
 
 
-@numba.njit(parallel=True, cache=True, fastmath=True, nogil=True)
+@numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
 def _foveate_bands(
     img, sigma, levels, lvl_m, kbuf, kmeta, pbuf, pmeta, pad, band_h
 ):  # pragma: no cover - compiled
@@ -319,7 +320,7 @@ def _foveate(
     )
 
 
-@numba.njit(parallel=True, cache=True, nogil=True)
+@numba.njit(parallel=True, cache=True, nogil=True, fastmath=FASTMATH)
 def _exact_at(img, sigma, ys, xs, truncate):  # pragma: no cover - compiled
     h, w, c = img.shape
     n = ys.shape[0]

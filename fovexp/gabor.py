@@ -40,6 +40,8 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from .jit import FASTMATH
+
 #: Envelope value at which the kernel is truncated (notes section 2).
 KERNEL_TRUNCATION = 0.01
 #: Frequency used in the normalisation's variance (notes section 3.9).
@@ -63,7 +65,7 @@ def kernel_radius_px(gabor_a_cpp: float) -> float:
     return math.sqrt(-math.log(KERNEL_TRUNCATION) / math.pi) / gabor_a_cpp
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, fastmath=FASTMATH)
 def cell_counts(width_px: int, height_px: int, cell_px: float) -> tuple[int, int]:
     """Cells per row and per column of the grid the impulses are drawn on (borders included);
     compiled, so that :func:`_generate` uses it too."""
@@ -105,7 +107,7 @@ class Impulses:
         return int(self.x_px.size)
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, fastmath=FASTMATH)
 def _splitmix(state):  # pragma: no cover - compiled
     state = (state + np.uint64(0x9E3779B97F4A7C15)) & np.uint64(0xFFFFFFFFFFFFFFFF)
     z = state
@@ -118,14 +120,14 @@ def _splitmix(state):  # pragma: no cover - compiled
     return state, z ^ (z >> np.uint64(31))
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, fastmath=FASTMATH)
 def _uniform(state):  # pragma: no cover - compiled
     state, z = _splitmix(state)
     # 53 random bits, strictly inside (0, 1)
     return state, ((z >> np.uint64(11)) + 0.5) * (1.0 / 9007199254740992.0)
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, fastmath=FASTMATH)
 def _generate(width, height, cell, mean_count, seed, period):  # pragma: no cover - compiled
     x0 = -CELL_BORDER
     y0 = -CELL_BORDER
@@ -184,7 +186,7 @@ def generate_impulses(
 WINDOW_MULTIPLE = 16
 
 
-@numba.njit(cache=True, fastmath=True, nogil=True)
+@numba.njit(cache=True, fastmath=FASTMATH, nogil=True)
 def _splat_band(
     out, y0, y1, pad, xs, ys, amp, kx, ky, lo, hi, r, a, nwin, er, ei
 ):  # pragma: no cover - compiled
@@ -241,7 +243,7 @@ def _splat_band(
             c, s = c * rc - s * rs, s * rc + c * rs
 
 
-@numba.njit(parallel=True, cache=True, nogil=True)
+@numba.njit(parallel=True, cache=True, nogil=True, fastmath=FASTMATH)
 def _splat(height, width, xs, ys, amp, kx, ky, row_start, cell, r, a, band):  # pragma: no cover
     rr = int(math.ceil(r))
     nwin = ((2 * rr + 2 + WINDOW_MULTIPLE - 1) // WINDOW_MULTIPLE) * WINDOW_MULTIPLE

@@ -36,6 +36,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from .config import read_yaml
 from .errors import FovexpError, validation_error
+from .jit import FASTMATH
 from .resources import shipped_displays
 
 GeometryModel = Literal["exact", "linear", "release"]
@@ -124,7 +125,7 @@ def load_display(name_or_path: str | Path) -> Display:
         raise validation_error(f"display profile {path}", exc) from None
 
 
-@numba.njit(cache=True, inline="always", nogil=True)
+@numba.njit(cache=True, inline="always", nogil=True, fastmath=FASTMATH)
 def _angle_deg(ux, uy, vx, vy, d):  # pragma: no cover - compiled
     """Angle (deg) between the rays from the eye to screen points u and v (cm from the
     screen centre, eye at distance d on the normal): atan2(|u x v|, u . v)."""
@@ -135,23 +136,25 @@ def _angle_deg(ux, uy, vx, vy, d):  # pragma: no cover - compiled
     return math.degrees(math.atan2(math.sqrt(cx * cx + cy * cy + cz * cz), dot))
 
 
-@numba.njit(cache=True, inline="always", nogil=True)
+@numba.njit(cache=True, inline="always", nogil=True, fastmath=FASTMATH)
 def _ppd_at(ux, uy, d, pitch):  # pragma: no cover - compiled
     """(pi / 180) L / pitch with L the eye-to-point distance (see ViewingGeometry.ppd)."""
     return (math.pi / 180.0) * math.sqrt(ux * ux + uy * uy + d * d) / pitch
 
 
-@numba.vectorize(["float64(float64, float64, float64, float64, float64)"], cache=True)
+@numba.vectorize(["float64(float64, float64, float64, float64, float64)"], cache=True,
+                 fastmath=FASTMATH)
 def _angle_ufunc(ux, uy, vx, vy, d):  # pragma: no cover - compiled
     return _angle_deg(ux, uy, vx, vy, d)
 
 
-@numba.vectorize(["float64(float64, float64, float64, float64)"], cache=True)
+@numba.vectorize(["float64(float64, float64, float64, float64)"], cache=True,
+                 fastmath=FASTMATH)
 def _ppd_ufunc(ux, uy, d, pitch):  # pragma: no cover - compiled
     return _ppd_at(ux, uy, d, pitch)
 
 
-@numba.njit(parallel=True, cache=True, nogil=True)
+@numba.njit(parallel=True, cache=True, nogil=True, fastmath=FASTMATH)
 def _exact_grids(ux, uy, vx, vy, d, pitch):  # pragma: no cover - compiled
     """Eccentricity and ppd of every pixel (float32), rows in parallel."""
     h, w = uy.shape[0], ux.shape[0]

@@ -1,124 +1,230 @@
-"""Image files in and out: PNG, TIFF and JPEG, 8- and 16-bit, as float arrays in [0, 1].
+"""Image files in and out: PNG, TIFF and JPEG, 8- and 16-bit, grey or colour, with or without
+an alpha channel, as float32 arrays in [0, 1].
+
+Channels (last axis): grey (H, W), grey + alpha (H, W, 2), RGB (H, W, 3), RGBA (H, W, 4).
+The enhancer processes the colour; alpha passes through unchanged (docs/API.md).
+
+Encoders: OpenCV for PNG and JPEG (libpng and libjpeg-turbo, 8- and 16-bit), written with a
+fast zlib setting (:data:`PNG_ZLIB_LEVEL`: a 4K frame in a fraction of a second, instead of the
+seconds maximum compression takes); tifffile for TIFF (float samples too); pypng for the one
+layout OpenCV cannot write, grey + alpha PNG. They are imported when first used.
 
 Writes are atomic (a temporary file in the destination folder, then a rename), so a failed or
-interrupted run never leaves a partial output file behind.
+interrupted run never leaves a partial output file behind, and the file gets the permissions
+the user's umask gives a new file (the temporary file is created as any new file is).
 """
 
 from __future__ import annotations
 
 import os
-import tempfile
-import warnings
+import secrets
+from collections.abc import Callable
 from pathlib import Path
 
-import imageio.v3 as iio
 import numpy as np
 
 from .errors import FovexpError
 
 IMAGE_SUFFIXES = {".png": "PNG", ".tif": "TIFF", ".tiff": "TIFF", ".jpg": "JPEG", ".jpeg": "JPEG"}
+#: Integer sample depths files are written with.
+BIT_DEPTHS = (8, 16)
+#: zlib level of PNG output (1: the fastest compression; a 4K frame's file is about 20 % larger
+#: than at the default 6, which takes several times longer: benchmarks/CLI.md).
+PNG_ZLIB_LEVEL = 1
+#: JPEG quality of JPEG output.
+JPEG_QUALITY = 95
+
+_CHANNELS = {2: "grey + alpha", 3: "RGB", 4: "RGBA"}
+_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+_PNG_GREY_ALPHA = 4  # IHDR colour type
 
 
 def read_image(path: str | Path) -> np.ndarray:
-    """Read an image as float32 display-encoded values in [0, 1]: (H, W) or (H, W, 3).
+    """Read an image as float32 values in [0, 1]: grey (H, W), grey + alpha (H, W, 2),
+    RGB (H, W, 3) or RGBA (H, W, 4); colour display-encoded as stored, alpha as stored.
 
-    8-bit files are divided by 255, 16-bit by 65535; float TIFFs are taken as they are and
-    checked. An alpha channel or any other channel count is an error.
+    8-bit files are divided by 255, 16-bit by 65535; float TIFFs are taken as they are.
     """
+    return read_image_with_depth(path)[0]
+
+
+def read_image_with_depth(path: str | Path) -> tuple[np.ndarray, int]:
+    """:func:`read_image` and the file's sample depth: 8 or 16 (float TIFFs count as 16, the
+    deepest integer depth they can be written back with)."""
     path = Path(path)
-    if path.suffix.lower() not in IMAGE_SUFFIXES:
+    kind = IMAGE_SUFFIXES.get(path.suffix.lower())
+    if kind is None:
         raise FovexpError(
             f"{path}: unsupported image type {path.suffix!r} (use {', '.join(IMAGE_SUFFIXES)})"
         )
     if not path.is_file():
         raise FovexpError(f"{path}: no such file")
     try:
-        with warnings.catch_warnings():
-            # a broken file makes imageio probe every plugin; the legacy ones warn of their own
-            # deprecation, noise beside the one error below
-            warnings.simplefilter("ignore", DeprecationWarning)
-            raw = _read_png16(path) if _is_png16(path) else iio.imread(path)
-    except Exception as exc:  # imageio raises many types for bad files
+        raw = _read_tiff(path) if kind == "TIFF" else _read_opencv(path)
+    except FovexpError:
+        raise
+    except Exception as exc:  # the decoders raise many types for bad files
         raise FovexpError(f"{path}: cannot be read as an image ({type(exc).__name__})") from None
     if raw.ndim == 3 and raw.shape[2] == 1:
         raw = raw[..., 0]
-    if raw.ndim not in (2, 3) or (raw.ndim == 3 and raw.shape[2] != 3):
-        n = raw.shape[2] if raw.ndim == 3 else raw.ndim
-        raise FovexpError(
-            f"{path}: {n} channels; expected grey or RGB (remove any alpha channel first)"
-        )
+    if raw.ndim not in (2, 3):
+        raise FovexpError(f"{path}: an array of shape {raw.shape} (several pages?); expected "
+                          "one grey, grey + alpha, RGB or RGBA image")
+    if raw.ndim == 3 and raw.shape[2] not in _CHANNELS:
+        raise FovexpError(f"{path}: {raw.shape[2]} channels; expected grey, grey + alpha, RGB "
+                          "or RGBA")
     if raw.dtype == np.uint8:
-        img = raw.astype(np.float32) / 255.0
+        img, depth = raw.astype(np.float32) / 255.0, 8
     elif raw.dtype == np.uint16:
-        img = raw.astype(np.float32) / 65535.0
-    elif np.issubdtype(raw.dtype, np.floating):
-        img = raw.astype(np.float32)
+        img, depth = raw.astype(np.float32) / 65535.0, 16
+    elif raw.dtype in (np.float32, np.float64):
+        img, depth = raw.astype(np.float32), 16
     else:
         raise FovexpError(f"{path}: unsupported sample type {raw.dtype}")
     if not np.isfinite(img).all():
         raise FovexpError(f"{path}: contains NaN or Inf pixels")
-    return img
+    return img, depth
 
 
-def _is_png16(path: Path) -> bool:
-    """PNG with 16-bit samples (IHDR bit depth, byte 24): Pillow would read it as 8-bit."""
-    with open(path, "rb") as fh:
-        head = fh.read(25)
-    return head[:8] == b"\x89PNG\r\n\x1a\n" and len(head) == 25 and head[24] == 16
+def _read_opencv(path: Path) -> np.ndarray:
+    """PNG or JPEG as stored (8/16-bit, 1-4 channels), channels in RGB(A) order."""
+    import cv2
+
+    data = path.read_bytes()  # imdecode: any path, and no silent None for an unreadable one
+    raw = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
+    if raw is None:
+        raise FovexpError(f"{path}: cannot be read as an image (not a valid "
+                          f"{IMAGE_SUFFIXES[path.suffix.lower()]} file)")
+    if raw.ndim == 3:
+        if data[:8] == _PNG_SIGNATURE and len(data) > 25 and data[25] == _PNG_GREY_ALPHA:
+            return raw[..., [0, 3]]  # OpenCV expands grey + alpha to BGRA (B = G = R)
+        code = cv2.COLOR_BGRA2RGBA if raw.shape[2] == 4 else cv2.COLOR_BGR2RGB
+        raw = cv2.cvtColor(raw, code)
+    return raw
 
 
-def _read_png16(path: Path) -> np.ndarray:
-    import png
+def _read_tiff(path: Path) -> np.ndarray:
+    import tifffile
 
-    width, height, rows, info = png.Reader(filename=str(path)).asDirect()
-    data = np.vstack([np.asarray(r, dtype=np.uint16) for r in rows])
-    return data.reshape(height, width, info["planes"]) if info["planes"] > 1 else data
+    with tifffile.TiffFile(path) as tif:
+        series = tif.series[0]
+        axes = series.axes
+        if axes not in ("YX", "YXS", "SYX"):
+            raise FovexpError(f"{path}: a TIFF of shape {series.shape} (axes {axes}: several "
+                              "pages?); expected one grey, grey + alpha, RGB or RGBA image")
+        raw = series.asarray()
+    if axes == "SYX":  # planar samples: channels last
+        raw = np.moveaxis(raw, 0, -1)
+    return raw
 
 
-def atomic_write_bytes(path: Path, write) -> None:
-    """Call ``write(tmp_path)`` for a temporary file beside ``path`` and rename it into place."""
+def _temporary_beside(path: Path) -> Path:
+    """A new empty file ``.STEM.RANDOM.SUFFIX`` beside ``path``, created as any new file is
+    (mode 0o666, the umask applied by the system), unlike :func:`tempfile.mkstemp`'s 0o600."""
+    for _ in range(100):
+        tmp = path.with_name(f".{path.stem}.{secrets.token_hex(4)}{path.suffix}")
+        try:
+            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+        except FileExistsError:
+            continue
+        os.close(fd)
+        return tmp
+    raise FovexpError(f"{path.parent}: cannot create a temporary file")  # pragma: no cover
+
+
+def atomic_write_bytes(path: Path, write: Callable[[Path], None]) -> None:
+    """Call ``write(tmp_path)`` for a temporary file beside ``path`` and rename it into place;
+    the file keeps the permissions a new file gets (folders too: created as ``mkdir`` does)."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
-    os.close(fd)
+    tmp = _temporary_beside(path)
     try:
-        write(Path(tmp))
+        write(tmp)
         os.replace(tmp, path)
     except BaseException:
-        Path(tmp).unlink(missing_ok=True)
+        tmp.unlink(missing_ok=True)
         raise
 
 
 def write_image(path: str | Path, image: np.ndarray, bit_depth: int = 8) -> None:
-    """Write float values in [0, 1] as an 8- or 16-bit PNG/TIFF, or an 8-bit JPEG (quality 95)."""
+    """Write float values in [0, 1] (grey, grey + alpha, RGB or RGBA; values outside are
+    clipped) as an 8- or 16-bit PNG or TIFF, or an 8-bit JPEG (quality :data:`JPEG_QUALITY`,
+    no alpha)."""
     path = Path(path)
     kind = IMAGE_SUFFIXES.get(path.suffix.lower())
     if kind is None:
         raise FovexpError(
             f"{path}: unsupported output type {path.suffix!r} (use {', '.join(IMAGE_SUFFIXES)})"
         )
-    if bit_depth not in (8, 16):
+    if bit_depth not in BIT_DEPTHS:
         raise FovexpError(f"bit depth must be 8 or 16, not {bit_depth}")
+    a = np.asarray(image)
+    if a.ndim == 3 and a.shape[2] == 1:
+        a = a[..., 0]
+    if a.ndim not in (2, 3) or (a.ndim == 3 and a.shape[2] not in _CHANNELS):
+        raise FovexpError(f"{path}: cannot write an image of shape {a.shape} "
+                          "(grey, grey + alpha, RGB or RGBA)")
+    channels = 1 if a.ndim == 2 else a.shape[2]
     if kind == "JPEG" and bit_depth != 8:
-        raise FovexpError(f"{path}: JPEG is 8-bit only")
-    v = np.clip(np.asarray(image, dtype=np.float64), 0.0, 1.0)
-    top = 255 if bit_depth == 8 else 65535
-    data = np.round(v * top).astype(np.uint8 if bit_depth == 8 else np.uint16)
-    if kind == "PNG" and bit_depth == 16:
-        # Pillow cannot write 16-bit colour PNGs; pypng can.
-        import png
+        raise FovexpError(f"{path}: JPEG is 8-bit only (write PNG or TIFF for 16 bits)")
+    if kind == "JPEG" and channels in (2, 4):
+        raise FovexpError(f"{path}: JPEG has no alpha channel (write PNG or TIFF)")
+    top = 255.0 if bit_depth == 8 else 65535.0
+    dtype = np.uint8 if bit_depth == 8 else np.uint16
+    data = np.empty(a.shape, dtype)
+    # one pass per step, float32 as the enhancer computes (exact for k / top inputs)
+    scaled = np.clip(a, 0.0, 1.0, dtype=np.float32) * np.float32(top)
+    np.rint(scaled, out=scaled)
+    data[...] = scaled
+    if kind == "TIFF":
+        atomic_write_bytes(path, lambda tmp: _write_tiff(tmp, data))
+    elif kind == "PNG" and channels == 2:
+        atomic_write_bytes(path, lambda tmp: _write_png_grey_alpha(tmp, data))
+    else:
+        encoded = _encode_opencv(kind, data)
+        atomic_write_bytes(path, lambda tmp: tmp.write_bytes(encoded))
 
-        planes = 1 if data.ndim == 2 else data.shape[2]
-        rows = data.reshape(data.shape[0], -1)
 
-        def write_png16(tmp: Path) -> None:
-            with open(tmp, "wb") as fh:
-                png.Writer(data.shape[1], data.shape[0], greyscale=planes == 1, bitdepth=16
-                           ).write(fh, rows)
+def _encode_opencv(kind: str, data: np.ndarray) -> memoryview:
+    import cv2
 
-        atomic_write_bytes(path, write_png16)
-        return
-    extra = {"quality": 95} if kind == "JPEG" else {}
-    atomic_write_bytes(path, lambda tmp: iio.imwrite(tmp, data, extension=path.suffix, **extra))
+    if data.ndim == 3:
+        code = cv2.COLOR_RGBA2BGRA if data.shape[2] == 4 else cv2.COLOR_RGB2BGR
+        data = cv2.cvtColor(data, code)
+    if kind == "PNG":
+        # zlib's run-length strategy and the "up" filter on every row (libpng otherwise tries
+        # five filters per row): 3x faster than the defaults at level 1, files ~10 % larger
+        # (benchmarks/CLI.md). OpenCV before 4.11 has no filter option: its default then.
+        params = [cv2.IMWRITE_PNG_COMPRESSION, PNG_ZLIB_LEVEL,
+                  cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_RLE]
+        if hasattr(cv2, "IMWRITE_PNG_FILTER"):
+            params += [cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_UP]
+        ok, buf = cv2.imencode(".png", data, params)
+    else:
+        ok, buf = cv2.imencode(".jpg", data, [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
+    if not ok:  # pragma: no cover - OpenCV encodes any 8/16-bit 1/3/4-channel array
+        raise FovexpError(f"OpenCV could not encode a {data.shape} {data.dtype} {kind}")
+    return memoryview(buf)
+
+
+def _write_png_grey_alpha(tmp: Path, data: np.ndarray) -> None:
+    import png
+
+    writer = png.Writer(data.shape[1], data.shape[0], greyscale=True, alpha=True,
+                        bitdepth=8 * data.itemsize, compression=PNG_ZLIB_LEVEL)
+    rows = data.reshape(data.shape[0], -1).astype(data.dtype.newbyteorder(">"))  # PNG order
+    with open(tmp, "wb") as fh:
+        writer.write_packed(fh, (row.tobytes() for row in rows))
+
+
+def _write_tiff(tmp: Path, data: np.ndarray) -> None:
+    import tifffile
+
+    channels = 1 if data.ndim == 2 else data.shape[2]
+    tifffile.imwrite(
+        tmp, data, photometric="minisblack" if channels <= 2 else "rgb",
+        planarconfig="contig" if channels > 1 else None,
+        extrasamples=["unassalpha"] if channels in (2, 4) else None,
+    )
 
 
 def save_npy(path: str | Path, array: np.ndarray) -> None:

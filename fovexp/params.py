@@ -13,13 +13,22 @@ linearly in blur-rate and clamps outside the table's range. A lab's own calibrat
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
 import numpy as np
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    ValidationInfo,
+    field_validator,
+    model_validator,
+)
 
 from .config import read_yaml
 from .errors import FovexpError, validation_error
@@ -83,6 +92,48 @@ S_F_RANGE = (0.0, 50.0)  # open at 0: the log-normal needs a width
 PARAMETER_RANGES: dict[str, tuple[float, float]] = {
     "blur_rate": BLUR_RATE_RANGE, "f_e": F_E_RANGE, "s_k": S_K_RANGE, "s_f": S_F_RANGE,
 }
+IMPULSES_RANGE = (1, 512)  # impulses per kernel
+SEED_RANGE = (0, 2**31 - 1)
+#: What :func:`check_parameter` checks: (lo, hi, open at lo, integer, unit).
+_CHECKS: dict[str, tuple[float, float, bool, bool, str]] = {
+    "blur_rate": (*BLUR_RATE_RANGE, False, False, " arcmin/deg"),
+    "f_e": (*F_E_RANGE, False, False, ""),
+    "s_k": (*S_K_RANGE, False, False, ""),
+    "s_f": (*S_F_RANGE, True, False, ""),
+    "impulses": (*IMPULSES_RANGE, False, True, " per kernel"),
+    "seed": (*SEED_RANGE, False, True, ""),
+}
+
+
+def check_parameter(name: str, value: object) -> float | int:
+    """``value`` as the number parameter ``name`` takes, if it is one within the accepted range;
+    else ``ValueError`` whose message names the range (NaN and Inf are refused, not compared)."""
+    lo, hi, open_lo, integer, unit = _CHECKS[name]
+    what = "an integer" if integer else "a finite number"
+    where = f"{'(' if open_lo else '['}{lo:g}, {hi:g}]{unit}" if not integer else (
+        f"[{int(lo)}, {int(hi)}]{unit}")
+    try:
+        if isinstance(value, bool) or (integer and isinstance(value, float)
+                                       and not value.is_integer()):
+            raise TypeError
+        v = int(value) if integer else float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError, OverflowError):
+        raise ValueError(f"must be {what} in {where}") from None
+    if not math.isfinite(v) or not (lo < v if open_lo else lo <= v) or v > hi:
+        raise ValueError(f"must be {what} in {where}")
+    return v
+
+
+class _CheckedParameters(BaseModel):
+    """Range checks of the parameters a model has, before pydantic's own parsing, so that a
+    bad value is reported with the accepted range (NaN too, which fails no comparison)."""
+
+    @field_validator("*", mode="before")
+    @classmethod
+    def _in_range(cls, value: object, info: ValidationInfo) -> object:
+        if info.field_name in _CHECKS and value is not None:
+            return check_parameter(info.field_name, value)
+        return value
 
 
 def _blur_rate(**kw: object) -> float:
@@ -101,7 +152,7 @@ def _s_f(**kw: object) -> float:
     return Field(gt=S_F_RANGE[0], le=S_F_RANGE[1], **kw)  # type: ignore[return-value]
 
 
-class TableRow(BaseModel):
+class TableRow(_CheckedParameters):
     model_config = ConfigDict(extra="forbid")
     blur_rate: float = _blur_rate()
     f_e: float = _f_e()
@@ -166,7 +217,7 @@ RELEASE_TABLE = ParameterTable(
 )
 
 
-class EnhanceParams(BaseModel):
+class EnhanceParams(_CheckedParameters):
     """Everything that selects what the enhancer computes for one frame.
 
     ``f_e``, ``s_k`` and ``s_f`` left as ``None`` are taken from the preset's table at
@@ -180,8 +231,8 @@ class EnhanceParams(BaseModel):
     f_e: float | None = _f_e(default=None)
     s_k: float | None = _s_k(default=None)
     s_f: float | None = _s_f(default=None)
-    impulses: int = Field(default=64, ge=1, le=512)
-    seed: int = Field(default=1, ge=0, le=2**31 - 1)
+    impulses: int = Field(default=64, ge=IMPULSES_RANGE[0], le=IMPULSES_RANGE[1])
+    seed: int = Field(default=1, ge=SEED_RANGE[0], le=SEED_RANGE[1])
     preset: PresetName = "paper"
 
     def resolved(self, table: ParameterTable | None = None) -> EnhanceParams:

@@ -42,6 +42,24 @@ POINT_MAPS: tuple[str, ...] = (
 )
 
 
+def split_alpha(image: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    """``(colour, alpha)`` of an image: grey + alpha (H, W, 2) and RGBA (H, W, 4) give their
+    last channel as ``alpha`` (H, W), which the enhancer passes through unchanged (renderers'
+    frames often carry one); grey and RGB give ``alpha = None``."""
+    a = np.asarray(image)
+    if a.ndim == 3 and a.shape[2] in (2, 4):
+        return np.ascontiguousarray(a[..., :-1]), np.ascontiguousarray(a[..., -1])
+    return a, None
+
+
+def with_alpha(colour: np.ndarray, alpha: np.ndarray | None) -> np.ndarray:
+    """``colour`` with ``alpha`` attached as its last channel (inverse of :func:`split_alpha`)."""
+    if alpha is None:
+        return colour
+    c = colour if colour.ndim == 3 else colour[..., None]
+    return np.concatenate([c, alpha[..., None].astype(c.dtype, copy=False)], axis=2)
+
+
 def check_image(image: np.ndarray, what: str = "image") -> np.ndarray:
     """Validate a display-encoded float image: (H, W) or (H, W, 3), finite, in [0, 1]."""
     a = np.asarray(image)
@@ -50,7 +68,8 @@ def check_image(image: np.ndarray, what: str = "image") -> np.ndarray:
     if a.ndim not in (2, 3) or (a.ndim == 3 and a.shape[2] != 3):
         ch = a.shape[2] if a.ndim == 3 else "?"
         raise FovexpError(
-            f"{what} has shape {a.shape}: expected grey (H, W) or RGB (H, W, 3), got {ch} channels"
+            f"{what} has shape {a.shape}: expected grey (H, W) or RGB (H, W, 3), each with or "
+            f"without an alpha channel, got {ch} channels"
         )
     if min(a.shape[:2]) < 16:
         raise FovexpError(f"{what} is {a.shape[1]}x{a.shape[0]} px: at least 16x16 is needed")
@@ -150,7 +169,10 @@ class ImpulseParams:
 
 @dataclass
 class EnhanceResult:
-    """The output of one :meth:`Enhancer.enhance` call and access to every intermediate map."""
+    """The output of one :meth:`Enhancer.enhance` call and access to every intermediate map.
+
+    ``output`` has the input's channels: the alpha channel of an input that has one comes back
+    unchanged as the last channel (the maps are colour only)."""
 
     output: np.ndarray
     params: EnhanceParams
@@ -204,6 +226,7 @@ class Enhancer:
         )
         self.table = table
         self._version = 0
+        self._alpha: np.ndarray | None = None
         self._c = _StageCache()
         self._define_stages()
 
@@ -247,12 +270,17 @@ class Enhancer:
         """Set the frame: a full-resolution reference to foveate (default), or an already
         foveated frame described by the blur-rate (``foveated=True``) or a sigma map in px.
 
-        ``image`` is display-encoded, float, in [0, 1], (H, W) or (H, W, 3). It fills the
+        ``image`` is display-encoded, float, in [0, 1], (H, W) or (H, W, 3); with an alpha
+        channel, (H, W, 2) or (H, W, 4), the colour is processed and the alpha channel comes
+        back in :attr:`EnhanceResult.output` unchanged (:func:`split_alpha`). It fills the
         screen, or, with ``viewport = (x0, y0, screen_width, screen_height)``, only that part
         of a full-screen frame (the gaze stays in the frame's normalised coordinates): the
         experiment runner enhances just the processed half of its split screen this way.
         """
-        img = check_image(image)
+        colour, alpha = split_alpha(image)
+        img = check_image(colour)
+        if alpha is not None:
+            alpha = check_image(alpha, "alpha channel")
         sigma_given = None
         if sigma_px is not None:
             sigma_given = np.asarray(sigma_px, dtype=np.float32)
@@ -268,6 +296,7 @@ class Enhancer:
                                       viewport)  # validates it
         self._c.set(image=img, shape=img.shape[:2], sigma_given=sigma_given, viewport=viewport,
                     already_foveated=bool(foveated or sigma_px is not None))
+        self._alpha = alpha  # no stage depends on it
         self._version += 1
 
     def enhance(
@@ -292,7 +321,7 @@ class Enhancer:
             s_f=params.s_f, n_impulses=params.impulses, seed=params.seed, method=params.method,
         )
         self._version += 1
-        out = self._output()
+        out = with_alpha(self._output(), self._alpha)
         return EnhanceResult(out, params, dict(self._c.timings_s), self, self._version)
 
     def _output(self) -> np.ndarray:

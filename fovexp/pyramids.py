@@ -18,6 +18,8 @@ import numba
 import numpy as np
 from scipy import ndimage
 
+from .jit import FASTMATH
+
 #: Burt-Adelson 5-tap binomial kernel; its variance is 1 px^2 at the level it filters.
 BINOMIAL_5 = np.array([1.0, 4.0, 6.0, 4.0, 1.0], dtype=np.float32) / 16.0
 #: :func:`expand`'s polyphase taps (zero insertion, then BINOMIAL_5 x 2): an even output takes
@@ -44,7 +46,7 @@ def gaussian_sigma_px(level: int) -> float:
     return float(np.sqrt((4.0**level - 1.0) / 3.0))
 
 
-@numba.njit(parallel=True, cache=True, fastmath=True, nogil=True)
+@numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
 def _reduce_2d(img: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
     h, w = img.shape
     ho, wo = (h + 1) // 2, (w + 1) // 2
@@ -70,7 +72,7 @@ def _reduce_2d(img: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
     return out
 
 
-@numba.njit(parallel=True, cache=True, fastmath=True, nogil=True)
+@numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
 def _expand_2d(a: np.ndarray, ho: int, wo: int) -> np.ndarray:  # pragma: no cover - compiled
     h, w = a.shape
     out = np.empty((ho, wo), dtype=np.float32)
@@ -133,7 +135,7 @@ def gaussian_pyramid(image: np.ndarray, levels: int) -> list[np.ndarray]:
     return pyr
 
 
-@numba.njit(parallel=True, cache=True, fastmath=True, nogil=True)
+@numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
 def _abs_diff_box3(fine, up):  # pragma: no cover - compiled
     h, w = fine.shape
     out = np.empty((h, w), dtype=np.float32)
@@ -168,7 +170,7 @@ def laplacian_levels(gaussian: list[np.ndarray], levels: int) -> dict[int, np.nd
     return out
 
 
-@numba.njit(parallel=True, cache=True, nogil=True)
+@numba.njit(parallel=True, cache=True, nogil=True, fastmath=FASTMATH)
 def _block_extremes(img, add, block):  # pragma: no cover - compiled
     h, w, c = img.shape
     bh, bw = (h + block - 1) // block, (w + block - 1) // block
@@ -225,7 +227,7 @@ def sample_nearest(grid: np.ndarray, x_px: np.ndarray, y_px: np.ndarray, block: 
 KEYS_A = -0.5
 
 
-@numba.njit(cache=True, inline="always", nogil=True)
+@numba.njit(cache=True, inline="always", nogil=True, fastmath=FASTMATH)
 def _keys_weight(t):  # pragma: no cover - compiled
     """Keys' cubic-convolution kernel W(t), a = KEYS_A (interpolating: W(0) = 1, W(+-1) = 0)."""
     t = abs(t)
@@ -237,7 +239,7 @@ def _keys_weight(t):  # pragma: no cover - compiled
     return 0.0
 
 
-@numba.njit(parallel=True, cache=True, nogil=True)
+@numba.njit(parallel=True, cache=True, nogil=True, fastmath=FASTMATH)
 def _sample_cubic(grid, u, v):  # pragma: no cover - compiled
     h, w = grid.shape
     out = np.empty(u.shape[0])

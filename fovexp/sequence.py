@@ -2,7 +2,8 @@
 
 The paper keeps the impulse positions fixed over a sequence (section 4.4) and measures temporal
 coherence as the mean SSIM between consecutive frames (section 7.2); both are done here. Frames
-are streamed: one input and one output frame are held at a time, whatever the length.
+are streamed: one input and one output frame are held at a time, whatever the length. Frames of
+a folder keep their alpha channel and bit depth; videos are 8-bit colour.
 """
 
 from __future__ import annotations
@@ -11,10 +12,9 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
-from skimage.metrics import structural_similarity
 
 from .errors import FovexpError
-from .io import IMAGE_SUFFIXES, read_image
+from .io import IMAGE_SUFFIXES, read_image_with_depth
 
 VIDEO_SUFFIXES = (".mp4", ".mov", ".avi", ".mkv", ".webm", ".gif")
 
@@ -31,12 +31,14 @@ def frame_paths(folder: Path) -> list[Path]:
     return frames
 
 
-def iter_frames(source: Path) -> tuple[int | None, float | None, Iterator[tuple[str, np.ndarray]]]:
+def iter_frames(
+    source: Path,
+) -> tuple[int | None, float | None, Iterator[tuple[str, np.ndarray, int]]]:
     """``(count or None, fps or None, frames)`` of a folder or a video; frames are
-    ``(name, float image in [0, 1])``."""
+    ``(name, float image in [0, 1], bit depth of the file)``."""
     if source.is_dir():
         paths = frame_paths(source)
-        return len(paths), None, ((p.stem, read_image(p)) for p in paths)
+        return len(paths), None, ((p.stem, *read_image_with_depth(p)) for p in paths)
     if not source.is_file():
         raise FovexpError(f"{source}: no such file or folder")
     import imageio.v3 as iio
@@ -49,13 +51,13 @@ def iter_frames(source: Path) -> tuple[int | None, float | None, Iterator[tuple[
     n = meta.get("nframes")
     count = int(n) if isinstance(n, (int, float)) and np.isfinite(n) else None
 
-    def gen() -> Iterator[tuple[str, np.ndarray]]:
+    def gen() -> Iterator[tuple[str, np.ndarray, int]]:
         try:
             for i, f in enumerate(iio.imiter(source)):
                 f = np.asarray(f)
-                scale = 255.0 if f.dtype == np.uint8 else 65535.0
+                depth = 8 if f.dtype == np.uint8 else 16
                 rgb = f[..., :3] if f.ndim == 3 else np.repeat(f[..., None], 3, axis=2)
-                yield f"frame{i:05d}", rgb.astype(np.float32) / scale
+                yield f"frame{i:05d}", rgb.astype(np.float32) / (2.0**depth - 1.0), depth
         except FovexpError:
             raise
         except Exception as exc:
@@ -79,9 +81,11 @@ class VideoWriter:
         self._kw = kw
 
     def append(self, frame: np.ndarray) -> None:
+        """Add a frame (grey or colour; an alpha channel is dropped: videos have none)."""
         import imageio.v2 as iio2
 
-        data = np.round(np.clip(frame, 0, 1) * 255).astype(np.uint8)
+        colour = _colour(frame)
+        data = np.round(np.clip(colour, 0, 1) * 255).astype(np.uint8)
         if self._writer is None:
             self._writer = iio2.get_writer(self.tmp, **self._kw)
         self._writer.append_data(data)
@@ -97,6 +101,13 @@ class VideoWriter:
         self.tmp.unlink(missing_ok=True)
 
 
+def _colour(frame: np.ndarray) -> np.ndarray:
+    """A frame without its alpha channel, if it has one."""
+    from .pipeline import split_alpha
+
+    return split_alpha(frame)[0]
+
+
 class InterframeSSIM:
     """Running mean SSIM between consecutive frames (paper section 7.2), on grey."""
 
@@ -106,7 +117,10 @@ class InterframeSSIM:
         self._n = 0
 
     def add(self, frame: np.ndarray) -> None:
-        grey = frame.mean(axis=2) if frame.ndim == 3 else frame
+        from skimage.metrics import structural_similarity
+
+        colour = _colour(frame)
+        grey = colour.mean(axis=2) if colour.ndim == 3 else colour
         if self._prev is not None:
             self._sum += structural_similarity(self._prev, grey, data_range=1.0)
             self._n += 1

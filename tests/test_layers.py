@@ -160,3 +160,27 @@ def test_every_subpackage_is_in_the_wheel():
     assert code <= listed, sorted(code - listed)
     for pkg, folder in conf["package-dir"].items():
         assert (ROOT / folder).is_dir(), (pkg, folder)
+
+
+def test_the_lazy_public_names_are_one_list():
+    """``fovexp/__init__.py`` imports its public names on first use (``_PUBLIC``: name ->
+    module), lists them for type checkers (imports under ``TYPE_CHECKING``, which this walker
+    reads as the package's edges) and in ``__all__``: the three agree, and each name resolves
+    to the object its module defines."""
+    import importlib
+
+    import fovexp
+
+    tree = ast.parse((PACKAGE / "__init__.py").read_text())
+    typed: dict[str, str] = {}
+    for node in ast.walk(tree):
+        if isinstance(node, ast.If) and getattr(node.test, "id", "") == "TYPE_CHECKING":
+            for imp in node.body:
+                assert isinstance(imp, ast.ImportFrom) and imp.level == 1
+                typed.update({a.name: imp.module for a in imp.names})
+    assert typed == fovexp._PUBLIC
+    assert sorted(fovexp.__all__) == sorted([*fovexp._PUBLIC, "__version__"])
+    for name, module in fovexp._PUBLIC.items():
+        assert getattr(fovexp, name) is getattr(importlib.import_module(f"fovexp.{module}"), name)
+    with pytest.raises(AttributeError):
+        fovexp.no_such_name  # noqa: B018

@@ -197,6 +197,11 @@ class PsychoScreen:
             from psychopy import event, visual
             from pyglet import gl
             from pyglet.window import key as pkey
+        except ModuleNotFoundError as exc:
+            if (exc.name or "").split(".")[0] not in ("psychopy", "pyglet"):
+                raise FovexpError(f"PsychoPy cannot be imported: {exc}") from None
+            raise FovexpError(f"the experiment runner needs PsychoPy ({exc}): pip install "
+                              "'fovexp[experiment]'") from None
         except Exception as exc:
             raise FovexpError(f"cannot open a window ({type(exc).__name__}: {exc}); is DISPLAY "
                               "set? (a dry run on a server needs Xvfb: xvfb-run -a fovexp run "

@@ -136,7 +136,7 @@ def create_context(ctx: Any = None) -> Any:
         import moderngl
     except ImportError:
         raise FovexpError(
-            "the GPU backend needs moderngl: install fovexp with the 'gpu' extra"
+            "the GPU backend needs moderngl: pip install 'fovexp[gpu]'"
         ) from None
     if ctx is None:
         try:

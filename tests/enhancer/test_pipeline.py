@@ -164,7 +164,7 @@ def test_release_preset_runs_with_its_constants(frame):
 @pytest.mark.parametrize("bad,msg", [
     (lambda f: np.where(np.arange(f.size).reshape(f.shape) == 7, np.nan, f), "NaN"),
     (lambda f: f * 1.5, r"\[0, 1\]"),
-    (lambda f: f[..., :2], "channels"),
+    (lambda f: np.dstack([f, f[..., :2]]), "5 channels"),  # 2 and 4: colour + alpha
     (lambda f: (f * 255).astype(np.uint8), "float"),
 ])
 def test_bad_images_are_refused_with_a_clear_message(frame, bad, msg):

@@ -166,7 +166,7 @@ def test_make_enhancer_picks_the_backend(ctx):
 
 
 def test_the_cli_enhances_on_the_gpu_as_on_the_cpu(ctx, frame, tmp_path, capsys, monkeypatch):
-    from fovexp import cli, read_image, write_image
+    from fovexp import backends, cli, read_image, write_image
     from fovexp.gpu import GpuEnhancer
 
     made = []  # the CLI leaves its enhancer open: closed here (its EGL context too)
@@ -175,8 +175,8 @@ def test_the_cli_enhances_on_the_gpu_as_on_the_cpu(ctx, frame, tmp_path, capsys,
         made.append(cli_make(*args, **kwargs))
         return made[-1]
 
-    cli_make = cli.make_enhancer
-    monkeypatch.setattr(cli, "make_enhancer", recording)
+    cli_make = backends.make_enhancer
+    monkeypatch.setattr(backends, "make_enhancer", recording)  # the CLI imports it when it runs
     src = tmp_path / "in.png"
     write_image(src, frame, 16)
     outs = {}

@@ -1,0 +1,28 @@
+"""How every Numba kernel of the package is compiled (one definition for all stage modules).
+
+``FASTMATH`` is off, for bit-identical output: the same seed gives the same bytes however
+the kernels were compiled (in this process, loaded from the cache, one thread or many).
+
+Why (measured, issue 10): with ``fastmath=True`` the first run after installing differed from
+every later run by 1 LSB in about 700 pixels of a 4K frame. Numba compiles the body of a
+``prange`` loop as a separate library (the parfor gufunc) that is JIT-compiled and optimised
+on its own, and also linked into the kernel's library and optimised a second time there. The
+process that compiles a kernel runs the first copy; the on-disk cache holds, and every later
+process runs, the second. Fast-math lets LLVM reassociate and fuse (FMA) floating-point
+operations, and the two optimisations did so differently (``pyramids._reduce_2d`` alone:
+451,900 of 2.07 M level-1 values differ between a fresh and a cached compile). With IEEE
+semantics the optimiser may not change any result, so every copy computes the same bits.
+The kernels are memory-bound: fast-math saved no measurable time (CPU seconds of the 4K
+enhancement with 12 impulses, three interleaved rounds on the shared 2-core VM: 1.65-1.90 s
+with it, 1.86-1.94 s without; end to end against the landed main: benchmarks/CLI.md).
+
+Kernels use no cross-thread reductions either, so the thread count does not change a result
+(``tests/enhancer/test_determinism.py`` checks both across processes).
+"""
+
+from __future__ import annotations
+
+#: Numba's ``fastmath`` flag of every kernel: off (see the module docstring). Numba's cache
+#: does not notice a change here (it checks the kernels' own files): after changing it, delete
+#: the cached kernels (``fovexp/__pycache__/*.nbi``, ``*.nbc``) and run ``fovexp compile``.
+FASTMATH = False

@@ -1,0 +1,107 @@
+"""Compile every Numba kernel ahead of the first run (``fovexp compile``; ``./dev setup`` runs it).
+
+Numba compiles a kernel at its first call and keeps the machine code in an on-disk cache
+(``cache=True``); compiling all of them takes about 20 s on a 2-core machine, which the first
+``fovexp enhance`` after installing would otherwise spend. :func:`compile_kernels` runs the
+enhancer through every path that reaches a kernel, on small frames, so that each kernel is
+compiled for the argument types a real run passes (a cached kernel is found by its types).
+
+Where the cache goes is numba's choice: ``$NUMBA_CACHE_DIR`` when set; else a ``__pycache__``
+folder beside the package's modules when it is writable (a virtual environment, an editable
+install); else numba's per-user cache (``~/.cache/numba``). A lab that installs fovexp with pip
+runs ``fovexp compile`` once, as the user who runs the experiments, after each install.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass
+class CompileReport:
+    """What :func:`compile_kernels` did: the kernels compiled in this call and those loaded
+    from the cache (a kernel called only by other kernels is in neither once its callers come
+    from the cache: it is compiled into them), the cache folders, and the seconds it took."""
+
+    compiled: list[str] = field(default_factory=list)
+    loaded: list[str] = field(default_factory=list)
+    cache_dirs: set[str] = field(default_factory=set)
+    seconds: float = 0.0
+
+
+def _textured(h: int, w: int, channels: int) -> np.ndarray:
+    rng = np.random.default_rng(0)
+    img = rng.random((h, w, channels), dtype=np.float32)
+    return img[..., 0] if channels == 1 else img
+
+
+def _exercise() -> None:
+    """Every path of the CPU enhancer that reaches a kernel, on small frames: foveation
+    (simulated, given as a blur-rate or a sigma map), contrast, noise, every map, both presets
+    and the viewing-geometry models, colour and grey, full screen and a viewport."""
+    from .foveation import foveate_exact
+    from .geometry import load_display
+    from .params import EnhanceParams
+    from .pipeline import MAP_NAMES, Enhancer
+
+    display = load_display("lg-oled55cx")
+    w, h = display.width_px, display.height_px
+    # a corner of the screen, gaze at the centre: far enough out that the band is open
+    viewport = (0, 0, w, h)
+    for preset, geometry in (("paper", "exact"), ("paper", "linear"), ("release", None)):
+        enh = Enhancer(display, preset=preset, geometry=geometry)
+        params = EnhanceParams(preset=preset, impulses=4, seed=1)
+        for channels in (3, 1):
+            enh.set_image(_textured(96, 160, channels), viewport=viewport)
+            res = enh.enhance((0.5, 0.5), params)
+            for name in MAP_NAMES:
+                res.map(name)
+        enh.set_image(_textured(48, 80, 3))  # the frame fills the screen
+        enh.enhance((0.3, 0.6), params)
+        for method in ("foveated", "contrast"):
+            enh.enhance((0.5, 0.5), params.model_copy(update={"method": method}))
+    enh = Enhancer(display)
+    frame = _textured(96, 160, 3)
+    enh.set_image(frame, foveated=True, viewport=viewport)
+    enh.enhance((0.5, 0.5), EnhanceParams(impulses=4))
+    sigma = np.full(frame.shape[:2], 2.0, np.float32)
+    enh.set_image(frame, sigma_px=sigma, viewport=viewport)
+    enh.enhance((0.5, 0.5), EnhanceParams(impulses=4))
+    foveate_exact(frame[:8, :8], sigma[:8, :8])  # the reference the benchmarks measure against
+
+
+def kernels() -> dict[str, object]:
+    """``{module.name: dispatcher}`` of every Numba kernel in the loaded ``fovexp`` modules."""
+    from numba.core.dispatcher import Dispatcher
+
+    out: dict[str, object] = {}
+    for mod_name, mod in sorted(sys.modules.items()):
+        if not mod_name.startswith("fovexp.") or mod is None:
+            continue
+        for name, obj in vars(mod).items():
+            if isinstance(obj, Dispatcher) and obj.__module__ == mod_name:
+                out[f"{mod_name}.{name}"] = obj
+    return out
+
+
+def compile_kernels() -> CompileReport:
+    """Compile (or load from the cache) every kernel; see the module docstring."""
+    t0 = time.perf_counter()
+    _exercise()
+    report = CompileReport()
+    for name, disp in kernels().items():
+        stats = disp.stats  # type: ignore[attr-defined]
+        if stats.cache_misses:
+            report.compiled.append(name)
+        elif stats.cache_hits:
+            report.loaded.append(name)
+        cache = getattr(disp, "_cache", None)
+        path = getattr(cache, "cache_path", None)
+        if path:
+            report.cache_dirs.add(str(path))
+    report.seconds = time.perf_counter() - t0
+    return report

@@ -1,0 +1,48 @@
+"""A missing optional part (issue 11) is named with the extra that installs it, in one line:
+PsychoPy (``experiment``), moderngl (``gpu``), tobii-research (``tracker``). Each is made
+unimportable for the test the way an environment without it is (``sys.modules[name] = None``
+makes ``import name`` raise ModuleNotFoundError)."""
+
+from __future__ import annotations
+
+import sys
+
+import pytest
+
+from fovexp import FovexpError
+
+
+def _without(monkeypatch, *names: str) -> None:
+    for name in names:
+        for loaded in [m for m in sys.modules if m == name or m.startswith(name + ".")]:
+            monkeypatch.delitem(sys.modules, loaded)
+        monkeypatch.setitem(sys.modules, name, None)
+
+
+def test_no_psychopy_names_the_experiment_extra(monkeypatch):
+    from fovexp.experiment.window import PsychoScreen
+
+    _without(monkeypatch, "psychopy")
+    with pytest.raises(FovexpError) as exc:
+        PsychoScreen((64, 48), fullscreen=False, dry_run=True)
+    msg = str(exc.value)
+    assert "pip install 'fovexp[experiment]'" in msg and "DISPLAY" not in msg
+    assert "\n" not in msg
+
+
+def test_no_moderngl_names_the_gpu_extra(monkeypatch):
+    from fovexp import load_display, make_enhancer
+
+    _without(monkeypatch, "moderngl")
+    with pytest.raises(FovexpError, match=r"pip install 'fovexp\[gpu\]'"):
+        make_enhancer(load_display("lg-oled55cx"), backend="gpu")
+    # auto falls back to the CPU without a word
+    assert make_enhancer(load_display("lg-oled55cx"), backend="auto").backend == "cpu"
+
+
+def test_no_tobii_sdk_names_the_tracker_extra(monkeypatch):
+    from fovexp.experiment.tobii import import_tobii
+
+    _without(monkeypatch, "tobii_research")
+    with pytest.raises(FovexpError, match=r"pip install 'fovexp\[tracker\]'"):
+        import_tobii()
