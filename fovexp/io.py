@@ -4,10 +4,12 @@ an alpha channel, as float32 arrays in [0, 1].
 Channels (last axis): grey (H, W), grey + alpha (H, W, 2), RGB (H, W, 3), RGBA (H, W, 4).
 The enhancer processes the colour; alpha passes through unchanged (docs/API.md).
 
-Encoders: OpenCV for PNG and JPEG (libpng and libjpeg-turbo, 8- and 16-bit), written with a
-fast zlib setting (:data:`PNG_ZLIB_LEVEL`: a 4K frame in a fraction of a second, instead of the
-seconds maximum compression takes); tifffile for TIFF (float samples too); pypng for the one
-layout OpenCV cannot write, grey + alpha PNG. They are imported when first used.
+Codecs: imagecodecs for PNG and JPEG (libpng and libjpeg-turbo; 8- and 16-bit, 1 to 4
+channels), PNG written with a fast zlib setting (:data:`PNG_ZLIB_LEVEL`, run-length strategy,
+the "up" filter: a 4K frame in a fraction of a second, instead of the seconds maximum
+compression takes); tifffile for TIFF (float samples too). Both are imported when first used.
+(Not OpenCV: PsychoPy depends on ``opencv-python``, and a second OpenCV wheel in the same
+environment would share its ``cv2`` folder.)
 
 Writes are atomic (a temporary file in the destination folder, then a rename), so a failed or
 interrupted run never leaves a partial output file behind, and the file gets the permissions
@@ -35,8 +37,6 @@ PNG_ZLIB_LEVEL = 1
 JPEG_QUALITY = 95
 
 _CHANNELS = {2: "grey + alpha", 3: "RGB", 4: "RGBA"}
-_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
-_PNG_GREY_ALPHA = 4  # IHDR colour type
 
 
 def read_image(path: str | Path) -> np.ndarray:
@@ -60,7 +60,7 @@ def read_image_with_depth(path: str | Path) -> tuple[np.ndarray, int]:
     if not path.is_file():
         raise FovexpError(f"{path}: no such file")
     try:
-        raw = _read_tiff(path) if kind == "TIFF" else _read_opencv(path)
+        raw = _read_tiff(path) if kind == "TIFF" else _decode(kind, path.read_bytes())
     except FovexpError:
         raise
     except Exception as exc:  # the decoders raise many types for bad files
@@ -86,21 +86,11 @@ def read_image_with_depth(path: str | Path) -> tuple[np.ndarray, int]:
     return img, depth
 
 
-def _read_opencv(path: Path) -> np.ndarray:
-    """PNG or JPEG as stored (8/16-bit, 1-4 channels), channels in RGB(A) order."""
-    import cv2
+def _decode(kind: str, data: bytes) -> np.ndarray:
+    """A PNG or JPEG file's samples as stored (8/16-bit, 1-4 channels, RGB(A) order)."""
+    import imagecodecs
 
-    data = path.read_bytes()  # imdecode: any path, and no silent None for an unreadable one
-    raw = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
-    if raw is None:
-        raise FovexpError(f"{path}: cannot be read as an image (not a valid "
-                          f"{IMAGE_SUFFIXES[path.suffix.lower()]} file)")
-    if raw.ndim == 3:
-        if data[:8] == _PNG_SIGNATURE and len(data) > 25 and data[25] == _PNG_GREY_ALPHA:
-            return raw[..., [0, 3]]  # OpenCV expands grey + alpha to BGRA (B = G = R)
-        code = cv2.COLOR_BGRA2RGBA if raw.shape[2] == 4 else cv2.COLOR_BGR2RGB
-        raw = cv2.cvtColor(raw, code)
-    return raw
+    return imagecodecs.png_decode(data) if kind == "PNG" else imagecodecs.jpeg8_decode(data)
 
 
 def _read_tiff(path: Path) -> np.ndarray:
@@ -177,43 +167,22 @@ def write_image(path: str | Path, image: np.ndarray, bit_depth: int = 8) -> None
     data[...] = scaled
     if kind == "TIFF":
         atomic_write_bytes(path, lambda tmp: _write_tiff(tmp, data))
-    elif kind == "PNG" and channels == 2:
-        atomic_write_bytes(path, lambda tmp: _write_png_grey_alpha(tmp, data))
     else:
-        encoded = _encode_opencv(kind, data)
+        encoded = _encode(kind, data)
         atomic_write_bytes(path, lambda tmp: tmp.write_bytes(encoded))
 
 
-def _encode_opencv(kind: str, data: np.ndarray) -> memoryview:
-    import cv2
+def _encode(kind: str, data: np.ndarray) -> bytes:
+    import imagecodecs
 
-    if data.ndim == 3:
-        code = cv2.COLOR_RGBA2BGRA if data.shape[2] == 4 else cv2.COLOR_RGB2BGR
-        data = cv2.cvtColor(data, code)
     if kind == "PNG":
         # zlib's run-length strategy and the "up" filter on every row (libpng otherwise tries
-        # five filters per row): 3x faster than the defaults at level 1, files ~10 % larger
-        # (benchmarks/CLI.md). OpenCV before 4.11 has no filter option: its default then.
-        params = [cv2.IMWRITE_PNG_COMPRESSION, PNG_ZLIB_LEVEL,
-                  cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_RLE]
-        if hasattr(cv2, "IMWRITE_PNG_FILTER"):
-            params += [cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_UP]
-        ok, buf = cv2.imencode(".png", data, params)
-    else:
-        ok, buf = cv2.imencode(".jpg", data, [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
-    if not ok:  # pragma: no cover - OpenCV encodes any 8/16-bit 1/3/4-channel array
-        raise FovexpError(f"OpenCV could not encode a {data.shape} {data.dtype} {kind}")
-    return memoryview(buf)
-
-
-def _write_png_grey_alpha(tmp: Path, data: np.ndarray) -> None:
-    import png
-
-    writer = png.Writer(data.shape[1], data.shape[0], greyscale=True, alpha=True,
-                        bitdepth=8 * data.itemsize, compression=PNG_ZLIB_LEVEL)
-    rows = data.reshape(data.shape[0], -1).astype(data.dtype.newbyteorder(">"))  # PNG order
-    with open(tmp, "wb") as fh:
-        writer.write_packed(fh, (row.tobytes() for row in rows))
+        # five filters per row): 2-3x faster than the defaults at level 1, files ~10 % larger
+        # (benchmarks/CLI.md)
+        return imagecodecs.png_encode(data, level=PNG_ZLIB_LEVEL,
+                                      strategy=imagecodecs.PNG.STRATEGY.RLE,
+                                      filter=imagecodecs.PNG.FILTER.UP)
+    return imagecodecs.jpeg8_encode(data, level=JPEG_QUALITY)
 
 
 def _write_tiff(tmp: Path, data: np.ndarray) -> None:
