@@ -18,12 +18,13 @@ from .params import (
     make_params,
 )
 from .pipeline import MAP_NAMES, Enhancer, EnhanceResult, enhance
-from .resources import find_protocol
+from .resources import find_protocol, shipped_stimuli
 
 __all__ = [
     "BACKENDS", "MAP_NAMES", "METHODS", "PAPER_TABLE2", "PARAMETER_RANGES", "Display",
     "EnhanceParams", "EnhanceResult", "Enhancer", "FovexpError", "ParameterTable",
     "ViewingGeometry", "enhance", "find_protocol", "load_display", "make_enhancer",
-    "make_params", "parse_yaml", "read_image", "read_yaml", "validation_error", "write_image",
+    "make_params", "parse_yaml", "read_image", "read_yaml", "shipped_stimuli", "validation_error",
+    "write_image",
     "__version__",
 ]

@@ -178,8 +178,10 @@ def build_parser() -> argparse.ArgumentParser:
     add_enhance_parser(sub)
     from .analysis.cli import add_analyze_parser
     from .experiment.cli import add_run_parser
+    from .experiment.stimuli_cli import add_stimuli_parser
 
     add_run_parser(sub)
+    add_stimuli_parser(sub)
     add_analyze_parser(sub)
     return parser
 
