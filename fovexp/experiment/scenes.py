@@ -334,10 +334,12 @@ def _buildings(c: _Canvas, s: _Stream, seed: int, horizon: int, dark: bool) -> N
             break
 
 
-def _ground_coords(c: _Canvas, horizon: int, tilt: float) -> tuple[np.ndarray, ...]:
+def _ground_coords(c: _Canvas, horizon: int, tilt: float, r0: int,
+                   r1: int) -> tuple[np.ndarray, ...]:
     """Texture coordinates of a ground plane seen in perspective (float64, world units =
-    pixels at the bottom row), and the size in px of one world unit on each row."""
-    rows = np.arange(horizon, c.h, dtype=np.float64)
+    pixels at the bottom row) on rows ``r0`` to ``r1``, and the size in px of one world unit on
+    each of these rows."""
+    rows = np.arange(r0, r1, dtype=np.float64)
     dy = rows - (horizon - 1.0)  # 1 at the horizon row
     bottom = float(c.h - horizon)
     per_px = bottom / dy[:, None]  # world units per px across
@@ -355,10 +357,37 @@ def _fade(px_per_unit: np.ndarray, feature_units: float) -> np.ndarray:
     return np.clip(np.floor((size_px - 0.75) * 128.0), 0, 256).astype(np.int64)[:, None]
 
 
+#: rows of the ground drawn at once (bounds the memory of a 4K scene; the pixels do not
+#: depend on it)
+GROUND_STRIP_ROWS = 128
+
+
 def _ground(c: _Canvas, s: _Stream, seed: int, horizon: int, kind: str) -> None:
+    """The ground plane, in strips of rows (every pixel depends on its own coordinates only)."""
+    tilt = s.uniform(0.35, 0.6)
+    colours: list[RGB] = []
+    if kind == "bricks":
+        colours.append((s.integer(140, 180), s.integer(60, 90), s.integer(40, 60)))
+    elif kind == "planks":
+        colours.append((s.integer(150, 190), s.integer(100, 130), s.integer(55, 80)))
+    elif kind == "cobbles":
+        colours.append((s.integer(120, 160), s.integer(115, 150), s.integer(105, 140)))
+    elif kind == "weave":
+        colours.append((s.integer(120, 200), s.integer(30, 80), s.integer(40, 90)))
+        colours.append((s.integer(200, 240), s.integer(170, 210), s.integer(120, 170)))
+    else:
+        colours.append((s.integer(50, 80), s.integer(110, 150), s.integer(30, 50)))
+    for r0 in range(horizon, c.h, GROUND_STRIP_ROWS):
+        r1 = min(c.h, r0 + GROUND_STRIP_ROWS)
+        c.img[r0:r1] = _ground_rows(c, seed, horizon, kind, tilt, colours, r0, r1)
+    c.glow[horizon:] = False
+
+
+def _ground_rows(c: _Canvas, seed: int, horizon: int, kind: str, tilt: float,
+                 colours: list[RGB], r0: int, r1: int) -> np.ndarray:
     u = c.u
-    tx, tz, ppu = _ground_coords(c, horizon, tilt=s.uniform(0.35, 0.6))
-    ys = np.arange(horizon, c.h, dtype=np.int64)[:, None]
+    tx, tz, ppu = _ground_coords(c, horizon, tilt, r0, r1)
+    ys = np.arange(r0, r1, dtype=np.int64)[:, None]
     xs = np.arange(c.w, dtype=np.int64)[None, :]
     grain = _grain(seed + 5, ys, xs, 10)  # pixel-level grain on every surface
 
@@ -373,7 +402,7 @@ def _ground(c: _Canvas, s: _Stream, seed: int, horizon: int, kind: str) -> None:
         col = np.floor(shifted / bw).astype(np.int64)
         fx = shifted - col * bw
         fz = tz - row * bh
-        base: RGB = (s.integer(140, 180), s.integer(60, 90), s.integer(40, 60))
+        base = colours[0]
         level = 176 + _unit(hash2(seed + 7, col, row), 96)  # per brick
         sp = size(2.0)
         speck = _unit(hash2(seed + 8, np.floor(tx / sp).astype(np.int64),
@@ -400,7 +429,7 @@ def _ground(c: _Canvas, s: _Stream, seed: int, horizon: int, kind: str) -> None:
                 d2 = np.where(closer, d1, np.minimum(d2, d))
                 site = np.where(closer, _u32(cx * 7919 + cz).astype(np.int64), site)
                 d1 = np.minimum(d1, d)
-        base = (s.integer(120, 160), s.integer(115, 150), s.integer(105, 140))
+        base = colours[0]
         level = 150 + _unit(hash2(seed + 10, site, 1), 110)
         # joints where the two nearest stones are nearly equidistant (d2 - d1 = 2 * distance
         # to the bisector * the stones' spacing): dark grout of ~3 world units
@@ -422,7 +451,7 @@ def _ground(c: _Canvas, s: _Stream, seed: int, horizon: int, kind: str) -> None:
         wob = a + (b - a) * t
         line = np.floor((tz - plank * pw) * (1.5 / size(1.0)) + wob).astype(np.int64)
         streak = _unit(hash2(seed + 14, line, board), 70) - 35
-        base = (s.integer(150, 190), s.integer(100, 130), s.integer(55, 80))
+        base = colours[0]
         level = 170 + _unit(hash2(seed + 15, board, plank), 70) + (
             streak * _fade(ppu, 0.7) >> 8)
         seam = ((tz - plank * pw) < seam_w) | (((tx + offs) - board * bl) < seam_w)
@@ -432,8 +461,7 @@ def _ground(c: _Canvas, s: _Stream, seed: int, horizon: int, kind: str) -> None:
         t = size(3.0)  # thread width
         ix, iz = np.floor(tx / t).astype(np.int64), np.floor(tz / t).astype(np.int64)
         warp = ((ix + iz) & 3) < 2  # a 2/2 twill
-        c1: RGB = (s.integer(120, 200), s.integer(30, 80), s.integer(40, 90))
-        c2: RGB = (s.integer(200, 240), s.integer(170, 210), s.integer(120, 170))
+        c1, c2 = colours
         thread = np.where(warp, ix, iz + 1_000_003)
         level = 200 + _unit(hash2(seed + 16, thread, 5), 56)
         fade = _fade(ppu, t)
@@ -447,12 +475,11 @@ def _ground(c: _Canvas, s: _Stream, seed: int, horizon: int, kind: str) -> None:
         lean = np.floor(tz * (0.15 / size(1.0))).astype(np.int64)
         colx = xs + lean
         h = hash2(seed + 17, colx, seg)
-        base = (s.integer(50, 80), s.integer(110, 150), s.integer(30, 50))
+        base = colours[0]
         level = 120 + _unit(h, 150)
         level = 195 + ((level - 195) * _fade(ppu, blade * 0.5) >> 8)
         colour = _shade(base, level + grain)
-    c.img[horizon:] = colour
-    c.glow[horizon:] = False
+    return colour
 
 
 def _tree(c: _Canvas, s: _Stream, seed: int, x: int, ground_y: int, size: float) -> None:

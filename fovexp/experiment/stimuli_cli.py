@@ -157,6 +157,7 @@ def read_video_frame(path: Path, at_s: float):  # noqa: ANN201  (numpy array)
 
     def frames(pix_fmt: str):  # noqa: ANN202
         return imageio_ffmpeg.read_frames(str(path), pix_fmt=pix_fmt,
+                                          bpp=6 if pix_fmt == "rgb48le" else 3,
                                           input_params=["-ss", f"{at_s:.6f}"],
                                           output_params=["-frames:v", "1"])
 
