@@ -41,7 +41,7 @@ import numpy as np
 #: the scenes' ids, in protocol order (calibration: 0-4, validation: 5-14)
 N_SCENES = 15
 #: deflate level of the written PNGs (part of the pinned bytes: do not change without re-pinning)
-PNG_LEVEL = 6
+PNG_LEVEL = 3
 #: the reference frame the layout is designed at (the paper's display)
 DESIGN_SIZE = (3840, 2160)
 
