@@ -310,8 +310,9 @@ class ImageCheck:
 class StimulusSet:
     """The shipped scene pins and a stimulus folder's manifest, combined: ids to checked files.
 
-    A lab's id may not be a generated scene's. Nothing is written here except by
-    :meth:`write_manifest` (``fovexp stimuli generate`` and ``add``).
+    A lab's id may not be a generated scene's. Reading it writes nothing; the folder is
+    written by :func:`generate_scenes` and :meth:`write_manifest` (``fovexp stimuli generate``
+    and ``add``).
     """
 
     def __init__(self, folder: Path, manifest_path: Path | None = None, found_by: str = "",
