@@ -19,12 +19,12 @@ _PUBLIC: dict[str, str] = {
     "parse_yaml": "config", "read_yaml": "config",
     "FovexpError": "errors", "validation_error": "errors",
     "Display": "geometry", "ViewingGeometry": "geometry", "load_display": "geometry",
-    "read_image": "io", "write_image": "io",
+    "read_image": "io", "read_samples": "io", "write_bytes_atomic": "io", "write_image": "io",
     "METHODS": "params", "PAPER_TABLE2": "params", "PARAMETER_RANGES": "params",
     "EnhanceParams": "params", "ParameterTable": "params", "make_params": "params",
     "MAP_NAMES": "pipeline", "Enhancer": "pipeline", "EnhanceResult": "pipeline",
     "enhance": "pipeline",
-    "find_protocol": "resources",
+    "find_protocol": "resources", "shipped_stimuli": "resources",
 }
 
 if TYPE_CHECKING:  # the same names for type checkers (tests/test_layers.py holds the
@@ -33,7 +33,7 @@ if TYPE_CHECKING:  # the same names for type checkers (tests/test_layers.py hold
     from .config import parse_yaml, read_yaml
     from .errors import FovexpError, validation_error
     from .geometry import Display, ViewingGeometry, load_display
-    from .io import read_image, write_image
+    from .io import read_image, read_samples, write_bytes_atomic, write_image
     from .params import (
         METHODS,
         PAPER_TABLE2,
@@ -43,14 +43,14 @@ if TYPE_CHECKING:  # the same names for type checkers (tests/test_layers.py hold
         make_params,
     )
     from .pipeline import MAP_NAMES, Enhancer, EnhanceResult, enhance
-    from .resources import find_protocol
+    from .resources import find_protocol, shipped_stimuli
 
 __all__ = [
     "BACKENDS", "MAP_NAMES", "METHODS", "PAPER_TABLE2", "PARAMETER_RANGES", "Display",
     "EnhanceParams", "EnhanceResult", "Enhancer", "FovexpError", "ParameterTable",
     "ViewingGeometry", "enhance", "find_protocol", "load_display", "make_enhancer",
-    "make_params", "parse_yaml", "read_image", "read_yaml", "validation_error", "write_image",
-    "__version__",
+    "make_params", "parse_yaml", "read_image", "read_samples", "read_yaml", "shipped_stimuli",
+    "validation_error", "write_bytes_atomic", "write_image", "__version__",
 ]
 
 

@@ -28,6 +28,8 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
                 "foveate and enhance an image, a folder of frames or a video"),
     "run": ("fovexp.experiment.cli", "add_run_parser",
             "run an experiment protocol with a participant"),
+    "stimuli": ("fovexp.experiment.stimuli_cli", "add_stimuli_parser",
+                "generate scenes, add a lab's frames, check a protocol's images"),
     "analyze": ("fovexp.analysis.cli", "add_analyze_parser",
                 "turn trial logs into the paper's results (Table 2, validation tests)"),
     "compile": ("fovexp.cli", "add_compile_parser",

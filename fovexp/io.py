@@ -51,6 +51,22 @@ def read_image(path: str | Path) -> np.ndarray:
 def read_image_with_depth(path: str | Path) -> tuple[np.ndarray, int]:
     """:func:`read_image` and the file's sample depth: 8 or 16 (float TIFFs count as 16, the
     deepest integer depth they can be written back with)."""
+    raw = read_samples(path)
+    if raw.dtype == np.uint8:
+        img, depth = raw.astype(np.float32) / 255.0, 8
+    elif raw.dtype == np.uint16:
+        img, depth = raw.astype(np.float32) / 65535.0, 16
+    else:
+        img, depth = raw.astype(np.float32), 16
+    if not np.isfinite(img).all():
+        raise FovexpError(f"{path}: contains NaN or Inf pixels")
+    return img, depth
+
+
+def read_samples(path: str | Path) -> np.ndarray:
+    """An image file's samples as stored: uint8 or uint16 (float32 for a float TIFF), grey
+    (H, W), grey + alpha (H, W, 2), RGB (H, W, 3) or RGBA (H, W, 4); PNGs of 1, 2 or 4 bits
+    and palette PNGs come as 8-bit grey or RGB. Anything else is one clear error."""
     path = Path(path)
     kind = IMAGE_SUFFIXES.get(path.suffix.lower())
     if kind is None:
@@ -73,17 +89,11 @@ def read_image_with_depth(path: str | Path) -> tuple[np.ndarray, int]:
     if raw.ndim == 3 and raw.shape[2] not in _CHANNELS:
         raise FovexpError(f"{path}: {raw.shape[2]} channels; expected grey, grey + alpha, RGB "
                           "or RGBA")
-    if raw.dtype == np.uint8:
-        img, depth = raw.astype(np.float32) / 255.0, 8
-    elif raw.dtype == np.uint16:
-        img, depth = raw.astype(np.float32) / 65535.0, 16
-    elif raw.dtype in (np.float32, np.float64):
-        img, depth = raw.astype(np.float32), 16
-    else:
+    if raw.dtype == np.float64:
+        raw = raw.astype(np.float32)
+    if raw.dtype not in (np.uint8, np.uint16, np.float32):
         raise FovexpError(f"{path}: unsupported sample type {raw.dtype}")
-    if not np.isfinite(img).all():
-        raise FovexpError(f"{path}: contains NaN or Inf pixels")
-    return img, depth
+    return raw
 
 
 def _decode(kind: str, data: bytes) -> np.ndarray:
@@ -133,6 +143,20 @@ def atomic_write_bytes(path: Path, write: Callable[[Path], None]) -> None:
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+
+
+def write_bytes_atomic(path: str | Path, data: bytes, sync: bool = True) -> None:
+    """Write ``data`` to ``path`` atomically (:func:`atomic_write_bytes`), fsync'ed before the
+    rename when ``sync`` (files a session relies on: manifests, stimuli)."""
+
+    def write(tmp: Path) -> None:
+        with open(tmp, "wb") as fh:
+            fh.write(data)
+            if sync:
+                fh.flush()
+                os.fsync(fh.fileno())
+
+    atomic_write_bytes(Path(path), write)
 
 
 def write_image(path: str | Path, image: np.ndarray, bit_depth: int = 8) -> None:

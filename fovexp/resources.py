@@ -1,4 +1,4 @@
-"""Where the shipped data are: display profiles, protocols and the stimulus manifest.
+"""Where the shipped data are: display profiles, protocols and the generated scenes' pins.
 
 They live in the project's top-level folders (``protocols/``, ``protocols/displays/``,
 ``stimuli/``) and are installed inside the package as ``fovexp.protocols`` and
@@ -31,7 +31,9 @@ def shipped_displays() -> Path:
 
 
 def shipped_stimuli() -> Path:
-    """The folder of the shipped stimulus manifest."""
+    """The folder of the shipped stimulus data: ``scenes.yaml``, the generated scenes' sha256
+    per resolution (read-only; the scenes themselves go to a lab's stimulus folder,
+    ``fovexp.experiment.stimuli``)."""
     return shipped("fovexp.stimuli")
 
 

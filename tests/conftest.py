@@ -1,1 +1,25 @@
+import os
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
 from engine_helpers import sponza  # noqa: F401  (fixture)
+
+
+@pytest.fixture(scope="session", autouse=True)
+def dry_run_scenes(tmp_path_factory) -> Iterator[Path]:
+    """The generated scenes at the dry run's resolution (480x270, pinned; about a second), in
+    a stimulus folder of this test session's own, named by $FOVEXP_STIMULI for every test and
+    every command a test starts: tests never read or write the clone's stimuli/ folder."""
+    from fovexp.experiment.stimuli import DRY_RUN_SIZE, ENV_VAR, StimulusSet, generate_scenes
+
+    folder = tmp_path_factory.mktemp("stimuli")
+    generate_scenes(StimulusSet(folder), DRY_RUN_SIZE)
+    old = os.environ.get(ENV_VAR)
+    os.environ[ENV_VAR] = str(folder)
+    yield folder
+    if old is None:
+        os.environ.pop(ENV_VAR, None)
+    else:
+        os.environ[ENV_VAR] = old

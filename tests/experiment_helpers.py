@@ -61,7 +61,8 @@ def xvfb_display():
 
 
 def make_workspace(root: Path) -> Path:
-    """A scratch project: ``protocols/`` (copied, editable), ``stimuli/`` (linked), ``results/``.
+    """A scratch project: ``protocols/`` (copied, editable) and ``results/``; the images come
+    from the test session's stimulus folder (``$FOVEXP_STIMULI``, tests/conftest.py).
 
     The shipped protocols name their dependencies as ``<experiment>`` folders of the results
     root: run from ``root`` (or given ``results_root=root / "results"``) they find the dry runs'
@@ -71,13 +72,20 @@ def make_workspace(root: Path) -> Path:
     for p in (REPO / "protocols").glob("*.yaml"):
         shutil.copy(p, root / "protocols" / p.name)
     shutil.copytree(REPO / "protocols" / "displays", root / "protocols" / "displays")
-    (root / "stimuli").symlink_to(REPO / "stimuli")
     (root / "results").mkdir()
     return root
 
 
-def run_cli(args: list[str], cwd: Path, timeout: float = 300) -> subprocess.CompletedProcess:
+def run_cli(args: list[str], cwd: Path, timeout: float = 300,
+            env_update: dict[str, str | None] | None = None) -> subprocess.CompletedProcess:
+    """``python -m fovexp ARGS`` in ``cwd``; ``env_update`` sets (or, with None, removes)
+    environment variables."""
     env = dict(os.environ)
+    for k, v in (env_update or {}).items():
+        if v is None:
+            env.pop(k, None)
+        else:
+            env[k] = v
     env["PYTHONPATH"] = os.pathsep.join([str(REPO), env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
     return subprocess.run([PYTHON, "-m", "fovexp", *args], cwd=cwd, env=env,
                           capture_output=True, text=True, timeout=timeout)

@@ -48,7 +48,11 @@ def add_run_parser(subparsers: Any) -> argparse.ArgumentParser:
                    help="results root; the protocol's dependencies are read from it too "
                         "(default: ./results)")
     p.add_argument("--window", type=_size, default=None, metavar="WxH",
-                   help="window size instead of the display profile's (dry run: 480x270)")
+                   help="window size instead of the display profile's (dry run: 480x270); a "
+                        "real session needs its images at exactly this size")
+    p.add_argument("--stimuli", type=Path, default=None, metavar="DIR",
+                   help="stimulus folder (default: the protocol's, $FOVEXP_STIMULI, ./stimuli, "
+                        "or the user data folder; see fovexp stimuli --help)")
     p.add_argument("--windowed", action="store_true", help="not full screen (pilots)")
     p.add_argument("--backend", choices=BACKENDS, default="auto",
                    help="enhancer backend: cpu, gpu (OpenGL 4.5 compute shaders), or auto: "
@@ -127,6 +131,7 @@ def run_command(args: argparse.Namespace) -> int:
     try:
         from .participant import SimTruth
         from .protocol import load_protocol
+        from .stimuli import DRY_RUN_SIZE
         from .validation import check_participant
 
         check_participant(args.participant)
@@ -147,12 +152,22 @@ def run_command(args: argparse.Namespace) -> int:
         truth = SimTruth.load(args.sim_truth) if args.sim_truth else SimTruth()
         # dependencies come from the same results root; a participant's never from dry runs
         protocol = load_protocol(find_protocol(args.protocol), results_root=args.results,
-                                 real_only=tracker != SIMULATED_TRACKER)
+                                 real_only=tracker != SIMULATED_TRACKER, stimuli=args.stimuli)
+        # Every image's sha256 and size, for the frames this run shows, before any window.
+        frame_size = args.window or (DRY_RUN_SIZE if args.dry_run else protocol.native_size)
+        images = protocol.prepare_images(frame_size, args.dry_run)
+        scaled = sorted({(v.size, v.frame_size) for v in images.values() if v.scaled})
+        if scaled:
+            n = sum(v.scaled for v in images.values())
+            sizes = ", ".join(f"{a[0]}x{a[1]}" for a, _ in scaled)
+            print(f"fovexp run: dry run: {n} of {len(images)} images scaled from {sizes} to "
+                  f"{frame_size[0]}x{frame_size[1]} (box filter; recorded in the session file)",
+                  file=sys.stderr)
         opts = SessionOptions(
             participant=args.participant, results_root=args.results, tracker=tracker,
             dry_run=args.dry_run, resume=args.resume, new_session=args.new_session,
             limit_trials=args.limit_trials, practice_trials=args.practice,
-            window_size=args.window or ((480, 270) if args.dry_run else None),
+            window_size=args.window or (DRY_RUN_SIZE if args.dry_run else None),
             fullscreen=not (args.windowed or args.dry_run),
             skip_display_check=args.skip_display_check, tracker_address=args.tracker_address,
             backend=args.backend, screen=args.screen,

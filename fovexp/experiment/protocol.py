@@ -10,6 +10,11 @@ randomised order, the display profile, and where the parameters that are not adj
 Relative results folders (``fe_results``, ``sk_line_results``, a ``table`` folder) are taken in
 the results root the session writes to; every other relative path (display, stimuli, a table
 YAML) is relative to the protocol file's folder.
+
+Images are named by id (:mod:`.stimuli`); loading checks that every id is known, and
+:meth:`LoadedProtocol.prepare_images` (the CLI right after loading, a :class:`Session` when it is
+created; both before any window) checks every file's sha256 and its size for the frame size
+the session shows.
 """
 
 from __future__ import annotations
@@ -29,7 +34,7 @@ from fovexp import PARAMETER_RANGES, FovexpError, make_params, parse_yaml, valid
 
 from .gaze import BLANKING_RADIUS_DEG, GAZE_TIMEOUT_S, TRACKER_RATE_HZ
 from .quality import MAX_ACCURACY_DEG, MAX_DATA_LOSS, QualityLimits, central_accuracy_limit_deg
-from .stimuli import StimulusSet
+from .stimuli import ImageCheck, Size, StimulusSet
 
 Parameter = Literal["f_e", "s_k", "s_f", "blur_rate"]
 MethodName = Literal["foveated", "contrast", "ours"]
@@ -170,7 +175,10 @@ class Protocol(_Strict):
     #: default: the preset's (exact for paper, release for release)
     geometry: Literal["exact", "linear", "release"] | None = None
     preset: Literal["paper", "release"] = "paper"
-    stimuli: str = "../stimuli/manifest.yaml"
+    #: the stimulus folder (or its manifest.yaml), relative to this file; default: found as
+    #: :func:`fovexp.experiment.stimuli.find_folder` says (``--stimuli``, $FOVEXP_STIMULI,
+    #: ./stimuli, the user data folder)
+    stimuli: str | None = None
     images: list[str] = Field(min_length=1)
     methods: list[MethodName] = Field(min_length=1)
     blur_rates: list[float] | None = None
@@ -295,14 +303,48 @@ class LoadedProtocol:
     text: str
     spec: Protocol
     stimuli: StimulusSet
-    image_paths: dict[str, Path]
     display_name: str
+    display: Any  # fovexp.Display
     #: functions (blur_rate, s_f or None) -> value, for the parameters that are not adjusted
     sources: dict[str, Callable[[float, float | None], float]] = field(default_factory=dict)
     dependency_folders: dict[str, str] = field(default_factory=dict)
     #: what the sources derive from files (tables, earlier results): JSON data per parameter,
     #: stored in the session file and reused by ``--resume``
     derived: dict[str, dict[str, Any]] = field(default_factory=dict)
+    #: the images checked for a frame size (:meth:`prepare_images`)
+    images: dict[str, ImageCheck] = field(default_factory=dict)
+    _images_for: tuple[Size, bool] | None = None
+
+    @property
+    def native_size(self) -> Size:
+        """The display's own resolution: the frame size of a real session."""
+        return int(self.display.width_px), int(self.display.height_px)
+
+    def prepare_images(self, frame_size: Size, dry_run: bool) -> dict[str, ImageCheck]:
+        """Check every image for frames of ``frame_size``: listed, present, unchanged (sha256)
+        and of exactly that size, or (``dry_run``) scaled to it. Raises FovexpError naming the
+        image, its size and the needed size, with the command that fixes it."""
+        key = (tuple(frame_size), bool(dry_run))
+        if self._images_for != key:
+            self.images = self.stimuli.require(self.spec.images, key[0], dry_run,
+                                               f"protocol {self.path}")
+            self._images_for = key  # type: ignore[assignment]
+        return self.images
+
+    @property
+    def image_paths(self) -> dict[str, Path]:
+        """The checked file of each image (after :meth:`prepare_images`)."""
+        return {k: v.path for k, v in self.images.items() if v.path is not None}
+
+    def stimuli_record(self) -> dict[str, Any]:
+        """What a session file keeps of its images: folder, frame size, each file's sha256 and
+        size, and which a dry run scaled."""
+        assert self._images_for is not None, "prepare_images first"
+        size, dry = self._images_for
+        return {"folder": str(self.stimuli.folder), "found_by": self.stimuli.found_by,
+                "frame_size": list(size), "dry_run": dry,
+                "scaled": sorted(k for k, v in self.images.items() if v.scaled),
+                "images": {k: v.record() for k, v in self.images.items()}}
 
     def use_derived(self, derived: dict[str, dict[str, Any]]) -> None:
         """(Re)build the parameter sources from ``derived`` (this protocol's own, or those a
@@ -408,16 +450,8 @@ def _resolve_path(base: Path, rel: str) -> Path:
     return p if p.is_absolute() else (base / p).resolve()
 
 
-def load_protocol(path: str | Path, check_dependencies: bool = True,
-                  results_root: str | Path = "results", real_only: bool = False) -> LoadedProtocol:
-    """Load and validate a protocol, its images and its dependencies, before any window opens.
-
-    Dependency folders are looked up under ``results_root`` (where the session writes; see
-    :class:`ParamSource`). ``real_only`` (a session with a participant, not a dry run) refuses a
-    dependency holding only simulated sessions. Raises :class:`FovexpError` naming the file and
-    the key for an unknown key, an out-of-range value, an image missing from the manifest or
-    disk, or a missing dependency folder.
-    """
+def read_protocol(path: str | Path) -> tuple[bytes, Protocol]:
+    """A protocol file's bytes and its validated content (no file it names is opened)."""
     path = Path(path)
     try:
         raw = path.read_bytes()
@@ -428,27 +462,60 @@ def load_protocol(path: str | Path, check_dependencies: bool = True,
     if not isinstance(data, dict):
         raise FovexpError(f"protocol {path} must be a mapping of keys")
     try:
-        spec = Protocol.model_validate(data)
+        return raw, Protocol.model_validate(data)
     except ValidationError as exc:
         raise validation_error(f"protocol {path}", exc) from None
-    base = path.resolve().parent
 
+
+def protocol_display(path: Path, spec: Protocol) -> tuple[str, Any]:
+    """The display profile a protocol names (a name, or a YAML path relative to it)."""
     from fovexp import load_display
 
     disp = spec.display
     if disp.endswith((".yaml", ".yml")):
-        disp = str(_resolve_path(base, disp))
+        disp = str(_resolve_path(path.resolve().parent, disp))
     try:
-        load_display(disp)
+        return disp, load_display(disp)
     except FovexpError as exc:
         raise FovexpError(f"protocol {path}: display: {exc}") from None
 
-    stim = StimulusSet(_resolve_path(base, spec.stimuli))
-    image_paths = {
-        img: stim.check(img, f"protocol {path}: images[{i}]") for i, img in enumerate(spec.images)
-    }
+
+def protocol_stimuli(path: Path, spec: Protocol,
+                     stimuli: str | Path | None = None) -> StimulusSet:
+    """The stimulus set of a protocol: ``stimuli`` (``--stimuli``) or the folder the protocol
+    names or the default one (:func:`fovexp.experiment.stimuli.find_folder`)."""
+    try:
+        return StimulusSet.find(stimuli, spec.stimuli, path.resolve().parent)
+    except FovexpError as exc:
+        raise FovexpError(f"protocol {path}: stimuli: {exc}") from None
+
+
+def load_protocol(path: str | Path, check_dependencies: bool = True,
+                  results_root: str | Path = "results", real_only: bool = False,
+                  stimuli: str | Path | None = None) -> LoadedProtocol:
+    """Load and validate a protocol, its images and its dependencies, before any window opens.
+
+    Dependency folders are looked up under ``results_root`` (where the session writes; see
+    :class:`ParamSource`). ``real_only`` (a session with a participant, not a dry run) refuses a
+    dependency holding only simulated sessions. ``stimuli``: the stimulus folder (``--stimuli``;
+    default: the protocol's ``stimuli`` key, else :func:`.stimuli.find_folder`). Raises
+    :class:`FovexpError` naming the file and the key for an unknown key, an out-of-range value,
+    an image id that is neither a generated scene nor in the stimulus folder's manifest, or a
+    missing dependency folder. The image files are checked by :meth:`~LoadedProtocol.
+    prepare_images`, for the frame size the session shows.
+    """
+    path = Path(path)
+    raw, spec = read_protocol(path)
+    text = raw.decode("utf-8", errors="replace")
+    base = path.resolve().parent
+    disp, display = protocol_display(path, spec)
+    stim = protocol_stimuli(path, spec, stimuli)
+    for i, img in enumerate(spec.images):
+        if img not in stim:
+            unknown = stim.check(img, (0, 0), dry_run=True).problem
+            raise FovexpError(f"protocol {path}: images[{i}]: {unknown}")
     lp = LoadedProtocol(path=path, sha256=hashlib.sha256(raw).hexdigest(), text=text, spec=spec,
-                        stimuli=stim, image_paths=image_paths, display_name=disp)
+                        stimuli=stim, display_name=disp, display=display)
     deps = _Dependencies(base, Path(results_root), check_dependencies, real_only)
     for name, src in spec.parameters.items():
         snap = _snapshot(path, deps, name, src, lp)

@@ -218,6 +218,12 @@ class Session:
             raise FovexpError("--dry-run uses simulated gaze: leave out --tracker or use "
                               "--tracker simulated")
         self.display = load_display(protocol.display_name)
+        # Every image checked for the frames this session shows, before anything is written:
+        # a real session refuses any size but the window's (the display's own, unless
+        # --window), a dry run scales (recorded in the session file's "stimuli").
+        self.frame_size = tuple(opts.window_size or protocol.native_size)
+        self.images = protocol.prepare_images(self.frame_size, opts.dry_run)
+        self.stimuli_record = protocol.stimuli_record()
         self.folder = Path(opts.results_root) / protocol.experiment / self.participant
         self._info_lock = threading.Lock()
         self._writer: JsonWriter | None = None
@@ -432,6 +438,7 @@ class Session:
                       ("dry run" if opts.dry_run else "not asked")})
         run["screen"] = opts.screen
         self.info["runs"].append(run)
+        self.info["stimuli"] = self.stimuli_record
         self.info["versions"] = _versions()
         if opts.dry_run:
             self.info["simulated_participant"] = {
@@ -927,9 +934,9 @@ class Session:
         return self.protocol.make_params(trial, value, self.seed)
 
     def _load_frame(self, trial: Trial) -> np.ndarray:
-        size = self.screen.size
-        img = load_stimulus(self.protocol.image_paths[trial.image], size)
-        return split_screen(img)
+        img = self.images[trial.image]
+        # a dry run may scale (checked and recorded); a real session's sizes were checked
+        return split_screen(load_stimulus(img.path, self.screen.size, scale=img.scaled))
 
     def _run_trial(self, trial: Trial, attempt: int = 0) -> str:
         """One attempt at a trial; returns ``done``, ``pause`` or ``disconnected``.

@@ -338,7 +338,8 @@ def test_fixation_window_is_physical_whatever_the_enhancers_model(tmp_path: Path
     path.write_text(yaml.safe_dump(data))
     lp = load_protocol(path)
     assert lp.spec.geometry_model == "release"
-    s = Session(lp, SessionOptions(participant="X01", results_root=tmp_path / "results"))
+    s = Session(lp, SessionOptions(participant="X01", results_root=tmp_path / "results",
+                                   window_size=(480, 270)))  # the test session's scenes
     exact = ViewingGeometry.for_image(DISPLAY, DISPLAY.width_px, DISPLAY.height_px, "exact")
     pt = point_at_offset(s.fixation, (0.5, 0.5), 1.25)
     px = exact.gaze_px(pt)

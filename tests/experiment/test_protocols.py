@@ -169,29 +169,22 @@ def test_method_needs_its_parameters(ws: Path) -> None:
         load_protocol(path)
 
 
-def test_changed_image_is_detected(ws: Path, tmp_path: Path) -> None:
-    # A private manifest copy whose image bytes differ from the recorded sha256.
+def test_changed_image_is_detected(ws: Path, tmp_path: Path, dry_run_scenes: Path) -> None:
+    """A lab's frame whose bytes differ from the sha256 its manifest records stops the session
+    before its window (the protocol names the stimulus folder through its manifest)."""
     stim = tmp_path / "stim"
-    stim.mkdir()
-    src = REPO / "stimuli" / "generated" / "scene-00.png"
-    (stim / "scene-00.png").write_bytes(src.read_bytes() + b"\0")
-    man = {"images": [{"id": "scene-00", "path": "scene-00.png", "source": "test",
+    (stim / "frames").mkdir(parents=True)
+    src = dry_run_scenes / "generated" / "480x270" / "scene-00.png"
+    (stim / "frames" / "mine.png").write_bytes(src.read_bytes() + b"\0")
+    man = {"images": [{"id": "mine", "path": "frames/mine.png", "source": "test",
                        "licence": "CC0-1.0", "sha256": "0" * 64}]}
     (stim / "manifest.yaml").write_text(yaml.safe_dump(man))
-    path = edit(ws, "calibration-fe", stimuli=str(stim / "manifest.yaml"), images=["scene-00"])
-    with pytest.raises(FovexpError, match="has sha256"):
-        load_protocol(path)
-
-
-def test_manifest_matches_files() -> None:
-    man = yaml.safe_load((REPO / "stimuli" / "manifest.yaml").read_text())
-    from fovexp.experiment.stimuli import StimulusSet
-
-    s = StimulusSet(REPO / "stimuli" / "manifest.yaml")
-    total = 0
-    for e in man["images"]:
-        total += s.check(e["id"], "test").stat().st_size
-    assert total < 1_000_000  # small enough to live in git
+    path = edit(ws, "calibration-fe", stimuli=str(stim / "manifest.yaml"), images=["mine"])
+    lp = load_protocol(path)
+    assert lp.stimuli.folder == stim and lp.stimuli.found_by == "the protocol's stimuli key"
+    with pytest.raises(FovexpError, match=r"images\[0\]: image 'mine': .*mine\.png has sha256 "
+                                          r".*records 000000000000\.\.\. \(file changed\?\)"):
+        lp.prepare_images((480, 270), dry_run=True)
 
 
 @pytest.mark.parametrize("pid", ["P01", "a_b-3", "X" * 32])

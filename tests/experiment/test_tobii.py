@@ -169,7 +169,8 @@ def test_cli_tobii_without_tracker_stops_before_the_session(tmp_path) -> None:
     if tr.find_all_eyetrackers():
         pytest.skip("a real Tobii tracker is connected")
     r = run_cli(["run", str(REPO / "protocols" / "calibration-fe.yaml"), "--participant", "P01",
-                 "--tracker", "tobii", "--results", str(tmp_path)], cwd=tmp_path)
+                 "--tracker", "tobii", "--results", str(tmp_path), "--window", "480x270"],
+                cwd=tmp_path)
     assert r.returncode == 2, r.stderr
     assert "no Tobii eye tracker found" in r.stderr
     assert not list(tmp_path.rglob("session-*.json")) and not list(tmp_path.rglob("*.csv"))
@@ -221,7 +222,8 @@ def test_display_area_mismatch_stops_before_any_window(tmp_path) -> None:
 
     lp = load_protocol(REPO / "protocols" / "calibration-fe.yaml")
     s = Session(lp, SessionOptions(participant="A01", results_root=tmp_path, tracker="tobii",
-                                   limit_trials=1, practice_trials=0))
+                                   limit_trials=1, practice_trials=0,
+                                   window_size=(480, 270)))  # the scenes the tests generate
     opened = []
     wrong = dict(StandInTracker.AREA, bottom_left=(-609.0, 45.0, 30.0))  # 665 mm high
     with pytest.raises(FovexpError, match=r"665\.0 mm.*685\.0 mm.*displays/lg-oled55cx"):
@@ -299,7 +301,7 @@ def test_session_recovers_from_a_stall_longer_than_the_stall_time(tmp_path) -> N
 
     lp = load_protocol(REPO / "protocols" / "calibration-fe.yaml")
     s = Session(lp, SessionOptions(participant="T01", results_root=tmp_path, tracker="tobii",
-                                   limit_trials=1, practice_trials=0))
+                                   limit_trials=1, practice_trials=0, window_size=(480, 270)))
     dev = StandInTracker()
     g = TobiiGaze(frequency_hz=600, tracker=dev, stall_s=0.1)
     g.start()
@@ -358,7 +360,7 @@ def test_calibration_error_is_a_failure_the_operator_can_retry(tmp_path) -> None
     lp = load_protocol(REPO / "protocols" / "calibration-fe.yaml")
     s = Session(lp, SessionOptions(participant="C01", results_root=tmp_path, tracker="tobii",
                                    limit_trials=1, practice_trials=0, skip_display_check=True,
-                                   window_size=(320, 180)))
+                                   window_size=(480, 270)))
     failures: list[str] = []
 
     def answer(view):
@@ -510,7 +512,7 @@ def test_every_sample_delivered_before_stop_reaches_the_gaze_log(tmp_path) -> No
     lp = load_protocol(REPO / "protocols" / "calibration-fe.yaml")
     s = Session(lp, SessionOptions(participant="G01", results_root=tmp_path, tracker="tobii",
                                    limit_trials=1, practice_trials=0, skip_display_check=True,
-                                   window_size=(320, 180)))
+                                   window_size=(480, 270)))
 
     def answer(text, keys, timeout_s):  # every message stays up a while (samples keep coming)
         if keys[0] == "q":  # a stall on a busy machine: wait for the stream, do not quit
