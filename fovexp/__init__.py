@@ -13,8 +13,10 @@ from .params import (
     METHODS,
     PAPER_TABLE2,
     PARAMETER_RANGES,
+    EngineOptions,
     EnhanceParams,
     ParameterTable,
+    make_options,
     make_params,
 )
 from .pipeline import MAP_NAMES, Enhancer, EnhanceResult, enhance
@@ -22,8 +24,8 @@ from .resources import find_protocol
 
 __all__ = [
     "BACKENDS", "MAP_NAMES", "METHODS", "PAPER_TABLE2", "PARAMETER_RANGES", "Display",
-    "EnhanceParams", "EnhanceResult", "Enhancer", "FovexpError", "ParameterTable",
-    "ViewingGeometry", "enhance", "find_protocol", "load_display", "make_enhancer",
-    "make_params", "parse_yaml", "read_image", "read_yaml", "validation_error", "write_image",
-    "__version__",
+    "EngineOptions", "EnhanceParams", "EnhanceResult", "Enhancer", "FovexpError",
+    "ParameterTable", "ViewingGeometry", "enhance", "find_protocol", "load_display",
+    "make_enhancer", "make_options", "make_params", "parse_yaml", "read_image", "read_yaml",
+    "validation_error", "write_image", "__version__",
 ]
