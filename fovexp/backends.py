@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from .errors import FovexpError
 from .geometry import Display, GeometryModel
-from .params import ParameterTable, get_preset
+from .params import EngineOptions, ParameterTable, get_preset
 from .pipeline import Enhancer
 
 #: Backends :func:`make_enhancer` accepts.
@@ -17,6 +17,7 @@ BACKENDS: tuple[str, ...] = ("auto", "cpu", "gpu")
 def make_enhancer(
     display: Display, preset: str = "paper", geometry: GeometryModel | None = None,
     table: ParameterTable | None = None, backend: str = "auto",
+    options: EngineOptions | None = None,
 ) -> Enhancer:
     """An :class:`Enhancer` on ``backend``: ``"cpu"`` (NumPy/Numba), ``"gpu"`` (OpenGL 4.5
     compute shaders, :class:`fovexp.gpu.GpuEnhancer`; a clear error when there is no context),
@@ -26,19 +27,22 @@ def make_enhancer(
     if backend not in BACKENDS:
         raise FovexpError(f"unknown backend {backend!r} (choose from {', '.join(BACKENDS)})")
     if backend == "cpu" or (backend == "auto" and get_preset(preset).name != "paper"):
-        return Enhancer(display, preset, geometry, table)
+        return Enhancer(display, preset, geometry, table, options)
     from .gpu import GpuEnhancer, create_context, is_software, release_context
 
+    if backend == "auto" and GpuEnhancer.unsupported(options or EngineOptions()):
+        return Enhancer(display, preset, geometry, table, options)
     if backend == "gpu":  # no context (or no moderngl): a FovexpError that says so
-        return GpuEnhancer(display, preset, geometry, table)
+        return GpuEnhancer(display, preset, geometry, table, options=options)
     try:
         ctx = create_context()
     except FovexpError:  # no moderngl, no EGL, no OpenGL 4.5
-        return Enhancer(display, preset, geometry, table)
+        return Enhancer(display, preset, geometry, table, options)
     if is_software(ctx):
         release_context(ctx)
-        return Enhancer(display, preset, geometry, table)
+        return Enhancer(display, preset, geometry, table, options)
     try:  # GpuEnhancer compiles every shader: a driver that cannot falls back to the CPU
-        return GpuEnhancer(display, preset, geometry, table, ctx=ctx, owns_context=True)
+        return GpuEnhancer(display, preset, geometry, table, ctx=ctx, owns_context=True,
+                           options=options)
     except FovexpError:
-        return Enhancer(display, preset, geometry, table)
+        return Enhancer(display, preset, geometry, table, options)
