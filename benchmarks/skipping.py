@@ -72,7 +72,7 @@ def run_group(images, impulses: int, prefoveated: bool, repeats: int) -> dict:
         gaze = (0.5 + 0.001 * (i % 3), 0.5)  # the gaze moves a little every frame
         outputs = {}
         for key, enh in enhancers.items():
-            enh.set_image(frames[key[0]], foveated=prefoveated)
+            enh.set_image(frames[key[0]].copy(), foveated=prefoveated)  # a new frame
             t0 = time.perf_counter()
             res = enh.enhance(gaze, params)
             dt = time.perf_counter() - t0

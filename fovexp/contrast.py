@@ -35,6 +35,7 @@ import math
 import numba
 import numpy as np
 
+from ._parallel import interleave
 from .errors import FovexpError
 from .foveation import _float_array, per_pixel_sigma
 from .pyramids import blocks_reaching, constant_blocks, level_scale
@@ -73,18 +74,19 @@ def _fixed(v):  # pragma: no cover - compiled
 
 
 @numba.njit(parallel=True, cache=True)
-def _sat(img, pad):  # pragma: no cover - compiled
+def _sat(img, pad, y0, y1, x0, x1):  # pragma: no cover - compiled
     """Exact summed-area table (int64, leading zero row and column) of a grey image in fixed
     point (:func:`_fixed`), padded by ``pad`` pixels with symmetric borders
-    (:func:`_symmetric`)."""
+    (:func:`_symmetric`), over rows [y0, y1) and columns [x0, x1) of the padded image (the
+    sums start there: the boxes inside it are the same integers)."""
     h, w = img.shape
-    hp, wp = h + 2 * pad, w + 2 * pad
+    hp, wp = y1 - y0, x1 - x0
     s = np.zeros((hp + 1, wp + 1), dtype=np.int64)
     cols = np.empty(wp, dtype=np.int64)
     for x in range(wp):
-        cols[x] = _symmetric(x - pad, w)
+        cols[x] = _symmetric(x0 + x - pad, w)
     for y in numba.prange(hp):  # row prefix sums, rows in parallel
-        sy = _symmetric(y - pad, h)
+        sy = _symmetric(y0 + y - pad, h)
         run = np.int64(0)
         for x in range(wp):
             run += _fixed(img[sy, cols[x]])
@@ -112,14 +114,17 @@ def check_sat_fits(shape: tuple[int, int], pad: int, max_value: float) -> None:
 
 
 @numba.njit(parallel=True, cache=True)
-def _change(img, sigma, sat, pad, f_e, add_input, skip, block):  # pragma: no cover - compiled
+def _change(img, sigma, sat, oy, ox, pad, f_e, add_input, skip, block):  # pragma: no cover
     """The change of each pixel (plus the input where ``add_input``): per integer level
     ``k`` of the two bracketing its sigma, ``(1 - f_e (1 + k)) (avg_k - in)``, weighted by
     the linear interpolation; exactly 0 where sigma = 0 or where ``skip`` marks the pixel's
-    ``block`` x ``block`` block as flat (the box is one constant: the change is 0)."""
+    ``block`` x ``block`` block as flat (the box is one constant: the change is 0). ``sat``
+    starts at row ``oy``, column ``ox`` of the padded image."""
     h, w = img.shape
     out = np.empty_like(img)
-    for y in numba.prange(h):
+    stride = interleave(h)  # flat rows cost nothing: spread the others over the threads
+    for i in numba.prange(h):
+        y = (i * stride) % h
         for x in range(w):
             s = sigma[y, x]
             v = img[y, x]
@@ -138,8 +143,8 @@ def _change(img, sigma, sat, pad, f_e, add_input, skip, block):  # pragma: no co
                 # width n = box_width_px(k) (k is an integer), MATLAB anchoring:
                 # [x - floor((n - 1) / 2), x + ceil((n - 1) / 2)]
                 n = BOX_WIDTH_PX_PER_LEVEL * k
-                ya = y + pad - (n - 1) // 2
-                xa = x + pad - (n - 1) // 2
+                ya = y + pad - (n - 1) // 2 - oy
+                xa = x + pad - (n - 1) // 2 - ox
                 yb = ya + n
                 xb = xa + n
                 box = sat[yb, xb] - sat[ya, xb] - sat[yb, xa] + sat[ya, xa]
@@ -169,10 +174,12 @@ def _enhance_channels(img: np.ndarray, sigma: np.ndarray, max_sigma: float, f_e:
     pad = sat_pad_px(max_sigma)
     out = np.empty_like(img)
     none, block = _flat_blocks(None, img.shape[:2], max_sigma, False)
+    h, w = img.shape[:2]
     for ch in range(img.shape[2]):
         plane = np.ascontiguousarray(img[..., ch])
         check_sat_fits(plane.shape, pad, float(plane.max()))
-        out[..., ch] = _change(plane, sigma, _sat(plane, pad), pad, f_e, True, none, block)
+        sat = _sat(plane, pad, 0, h + 2 * pad, 0, w + 2 * pad)
+        out[..., ch] = _change(plane, sigma, sat, 0, 0, pad, f_e, True, none, block)
     return out
 
 
@@ -210,4 +217,13 @@ def contrast_change(
     pad = sat_pad_px(max_sigma)
     check_sat_fits(img.shape, pad, float(img.max()))
     flat, block = _flat_blocks(grey_blocks, img.shape, max_sigma, grey_blocks is not None)
-    return _change(img, sigma, _sat(img, pad), pad, np.float64(f_e), False, flat, block)
+    # the table only where the boxes of the pixels computed reach: their bounding box, and
+    # pad around it (in the padded image's coordinates, [y_lo, y_hi + 2 pad])
+    h, w = img.shape
+    rows, cols = np.flatnonzero(~flat.all(axis=1)), np.flatnonzero(~flat.all(axis=0))
+    if rows.size == 0:
+        return np.zeros(img.shape, dtype=img.dtype)
+    y0, y1 = min(rows[0] * block, h), min((rows[-1] + 1) * block, h) + 2 * pad
+    x0, x1 = min(cols[0] * block, w), min((cols[-1] + 1) * block, w) + 2 * pad
+    sat = _sat(img, pad, y0, y1, x0, x1)
+    return _change(img, sigma, sat, y0, x0, pad, np.float64(f_e), False, flat, block)

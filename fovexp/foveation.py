@@ -27,10 +27,11 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from ._parallel import interleave
 from .geometry import arcmin_to_px
 from .pyramids import (
-    block_extremes,
     blocks_reaching,
+    channel_block_extremes,
     constant_blocks,
     gaussian_pyramid,
     gaussian_sigma_px,
@@ -186,12 +187,16 @@ def _foveate_bands(
     n = levels.shape[0]
     out = np.empty_like(img)
     nb = (h + band_h - 1) // band_h
-    for b in numba.prange(nb):
+    stride = interleave(nb)  # bands of the fovea or of flat regions cost little: spread them
+    for i in numba.prange(nb):
+        b = (i * stride) % nb
         y0 = b * band_h
         y1 = min(h, y0 + band_h)
         # bracket index and weight per pixel of the band
         kk = np.empty((y1 - y0, w), dtype=np.int64)
         tt = np.empty((y1 - y0, w), dtype=img.dtype)
+        # per stack level, the columns where it has a non-zero weight (levels k and k + 1)
+        needs = np.zeros((n, w), dtype=np.bool_)
         for y in range(y0, y1):
             for x in range(w):
                 for ch in range(c):
@@ -207,17 +212,11 @@ def _foveate_bands(
                 t = min((s - levels[k]) / (levels[k + 1] - levels[k]), 1.0)
                 kk[y - y0, x] = k
                 tt[y - y0, x] = t
+                needs[k, x] = True
+                needs[k + 1, x] = True
         for lv in range(1, n):
-            # columns where this level has a non-zero weight
-            need = np.zeros(w, dtype=np.bool_)
-            anyneed = False
-            for y in range(y1 - y0):
-                for x in range(w):
-                    k = kk[y, x]
-                    if k == lv or k == lv - 1:
-                        need[x] = True
-                        anyneed = True
-            if not anyneed:
+            need = needs[lv]
+            if not need.any():
                 continue
             m = lvl_m[lv]
             sc = 1 << m
@@ -348,11 +347,10 @@ def _flat_blocks(img: np.ndarray, reach_px: int) -> np.ndarray:
     ``reach_px``."""
     block = level_scale(FLAT_BLOCK_LEVEL)
     radius = blocks_reaching(reach_px, block)
-    flat = None
-    for ch in range(img.shape[2]):
-        lo, hi = block_extremes(img[..., ch], FLAT_BLOCK_LEVEL)
-        f = constant_blocks(lo, hi, radius)
-        flat = f if flat is None else flat & f
+    lo, hi = channel_block_extremes(img, FLAT_BLOCK_LEVEL)
+    flat = constant_blocks(lo[..., 0], hi[..., 0], radius)
+    for ch in range(1, img.shape[2]):
+        flat &= constant_blocks(lo[..., ch], hi[..., ch], radius)
     return flat
 
 

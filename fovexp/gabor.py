@@ -46,6 +46,8 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from ._parallel import interleave
+
 #: Envelope value at which the kernel is truncated (notes section 2).
 KERNEL_TRUNCATION = 0.01
 #: Frequency used in the normalisation's variance (notes section 3.9).
@@ -284,7 +286,9 @@ def _splat(out, xs, ys, amp, kx, ky, row_start, cell, r, a, band, nwin, pad):  #
     height = out.shape[0]
     nb = (height + band - 1) // band
     n_rows = row_start.shape[0] - 1
-    for b in numba.prange(nb):
+    stride = interleave(nb)  # bands without impulses cost nothing: spread the others
+    for i in numba.prange(nb):
+        b = (i * stride) % nb
         y0 = b * band
         y1 = min(height, y0 + band)
         er = np.empty(nwin, dtype=out.dtype)

@@ -484,8 +484,11 @@ class Enhancer:
         reach = amp.laplacian_reach_px(k0, top)
         bx = np.clip(band.x_px, 0, shape[1] - 1).astype(np.int64) // block
         by = np.clip(band.y_px, 0, shape[0] - 1).astype(np.int64) // block
-        flat = pyramids.ConstantRegions(lo, hi).constant(
-            by, bx, pyramids.blocks_reaching(reach, block))
+        radius = pyramids.blocks_reaching(reach, block)
+        flat = np.zeros(len(band.index), dtype=np.bool_)
+        for r in np.unique(radius):  # a few radii: one per bracketing level
+            sel = radius == r
+            flat[sel] = pyramids.constant_blocks(lo, hi, int(r))[by[sel], bx[sel]]
         return band.subset(~flat)
 
     def _imp_frequency(self, band: ImpulseParams, imp, s_f: float) -> np.ndarray:

@@ -182,10 +182,9 @@ def _abs_laplacian_tiles(fine, coarse, need, tile):  # pragma: no cover - compil
     wc = coarse.shape[1]
     th, tw = need.shape
     out = np.zeros((h, w), dtype=fine.dtype)
-    for t in numba.prange(th * tw):
-        ty, tx = t // tw, t % tw
-        if not need[ty, tx]:
-            continue
+    todo = np.flatnonzero(need.ravel())  # the tiles to compute, all of one cost
+    for i in numba.prange(todo.shape[0]):
+        ty, tx = todo[i] // tw, todo[i] % tw
         y0, x0 = ty * tile, tx * tile
         y1, x1 = min(y0 + tile, h), min(x0 + tile, w)
         ya, yb = max(y0 - 1, 0), min(y1 + 1, h)
@@ -257,59 +256,17 @@ def abs_laplacian_reach_px(level: int | np.ndarray) -> int | np.ndarray:
     return 9 * np.left_shift(1, np.asarray(level) - 1) - 2
 
 
-class ConstantRegions:
-    """Which rectangles of blocks of an image hold one constant value, from its block extremes
-    (:func:`block_extremes`): a rectangle is constant when each of its blocks is (min ==
-    max) and neighbouring blocks inside it hold the same value. Three integer summed-area
-    tables of those conditions answer any rectangle in O(1)."""
-
-    def __init__(self, lo: np.ndarray, hi: np.ndarray) -> None:
-        varies = lo != hi
-        right = np.zeros(lo.shape, dtype=bool)  # block differs from its right neighbour
-        right[:, :-1] = lo[:, :-1] != lo[:, 1:]
-        down = np.zeros(lo.shape, dtype=bool)  # ... from the block below it
-        down[:-1, :] = lo[:-1, :] != lo[1:, :]
-        self.shape = lo.shape
-        self._sat = [self._table(a) for a in (varies, right, down)]
-
-    @staticmethod
-    def _table(a: np.ndarray) -> np.ndarray:
-        t = np.zeros((a.shape[0] + 1, a.shape[1] + 1), dtype=np.int64)
-        np.cumsum(np.cumsum(a, axis=0), axis=1, out=t[1:, 1:])
-        return t
-
-    @staticmethod
-    def _sum(t, y0, y1, x0, x1):  # blocks [y0, y1) x [x0, x1); 0 where empty
-        y1 = np.maximum(y1, y0)
-        x1 = np.maximum(x1, x0)
-        return t[y1, x1] - t[y0, x1] - t[y1, x0] + t[y0, x0]
-
-    def constant(self, by: np.ndarray, bx: np.ndarray, radius: np.ndarray | int) -> np.ndarray:
-        """Whether the blocks within ``radius`` blocks of block ``(by, bx)`` (clamped to the
-        grid, as the image's edges clamp) hold one constant."""
-        h, w = self.shape
-        by, bx, radius = np.asarray(by), np.asarray(bx), np.asarray(radius)
-        y0, y1 = np.clip(by - radius, 0, h), np.clip(by + radius + 1, 0, h)
-        x0, x1 = np.clip(bx - radius, 0, w), np.clip(bx + radius + 1, 0, w)
-        varies, right, down = self._sat
-        return (self._sum(varies, y0, y1, x0, x1) + self._sum(right, y0, y1, x0, x1 - 1)
-                + self._sum(down, y0, y1 - 1, x0, x1)) == 0
-
-    def constant_blocks(self, radius: int) -> np.ndarray:
-        """:meth:`constant` for every block of the grid, one ``radius``: a bool (H, W) grid."""
-        by, bx = np.indices(self.shape)
-        return self.constant(by, bx, int(radius))
-
-
 def constant_blocks(lo: np.ndarray, hi: np.ndarray, radius_blocks: int) -> np.ndarray:
     """Blocks of a block-extremes grid (:func:`block_extremes`) around which the image is one
-    constant: ``(2 radius + 1)^2`` blocks centred on each (clamped at the image's edges, as
-    the filters' borders are) with one value (:class:`ConstantRegions`)."""
-    return ConstantRegions(lo, hi).constant_blocks(radius_blocks)
+    constant: the minimum of ``lo`` equals the maximum of ``hi`` over the ``(2 radius + 1)^2``
+    blocks centred on each (clamped at the image's edges, as the image's own borders are)."""
+    size = 2 * int(radius_blocks) + 1
+    return ndimage.minimum_filter(lo, size, mode="nearest") == ndimage.maximum_filter(
+        hi, size, mode="nearest")
 
 
 def blocks_reaching(radius_px: int | np.ndarray, block: int) -> int | np.ndarray:
-    """Block radius (:meth:`ConstantRegions.constant`) that covers ``radius_px`` (whole px)
+    """Block radius (:func:`constant_blocks`) that covers ``radius_px`` (whole px)
     around every pixel of a block: ceil(radius / block), and one block more for the pixel's
     place in its block."""
     return -(-np.asarray(radius_px) // block) + 1
@@ -404,6 +361,33 @@ def window_extremes(
     y = np.ascontiguousarray(y_px, dtype=np.float64).ravel()
     return _window_extremes_at(np.ascontiguousarray(lo), np.ascontiguousarray(hi), x, y,
                                float(radius_px))
+
+
+@numba.njit(parallel=True, cache=True)
+def _channel_block_extremes(img, block):  # pragma: no cover - compiled
+    h, w, c = img.shape
+    bh, bw = (h + block - 1) // block, (w + block - 1) // block
+    lo = np.empty((bh, bw, c), dtype=img.dtype)
+    hi = np.empty((bh, bw, c), dtype=img.dtype)
+    for by in numba.prange(bh):
+        for bx in range(bw):
+            for ch in range(c):  # the block is in cache: one channel at a time, in registers
+                mn = img[by * block, bx * block, ch]
+                mx = mn
+                for y in range(by * block, min(by * block + block, h)):
+                    for x in range(bx * block, min(bx * block + block, w)):
+                        v = img[y, x, ch]
+                        mn = min(mn, v)
+                        mx = max(mx, v)
+                lo[by, bx, ch] = mn
+                hi[by, bx, ch] = mx
+    return lo, hi
+
+
+def channel_block_extremes(image: np.ndarray, level: int) -> tuple[np.ndarray, np.ndarray]:
+    """Like :func:`block_extremes`, but per channel: the minimum and maximum of each channel
+    of an (H, W, C) image over each ``2**level`` square block, (bh, bw, C) each."""
+    return _channel_block_extremes(np.ascontiguousarray(image), level_scale(level))
 
 
 def sample_bilinear(grid: np.ndarray, x_px: np.ndarray, y_px: np.ndarray, level: int) -> np.ndarray:

@@ -32,7 +32,7 @@ float taps2(float c, float p1) { return c + EXPAND_ODD_TAPS[0] * (p1 - c); }
     || defined(ENTRY_STACK_INIT)
 // Skipping (EngineOptions.skip): a work group whose results depend only on a region where the
 // image is one constant (in every channel) writes what its arithmetic gives there (0 for |L|
-// and the contrast change, the input for the foveation: pyramids.ConstantRegions on the CPU).
+// and the contrast change, the input for the foveation: pyramids.constant_blocks on the CPU).
 // The image's TILE_PX x TILE_PX tile extremes (TILE_EXTREMES) tell; the group's invocations
 // share the tiles to look at.
 uniform int skip;
