@@ -121,37 +121,41 @@ def _change(img, sigma, sat, oy, ox, pad, f_e, add_input, skip, block):  # pragm
     ``block`` x ``block`` block as flat (the box is one constant: the change is 0). ``sat``
     starts at row ``oy``, column ``ox`` of the padded image."""
     h, w = img.shape
-    out = np.empty_like(img)
+    # the change is 0 where nothing is computed (flat blocks are not even visited)
+    out = img.copy() if add_input else np.zeros_like(img)
     stride = interleave(h)  # flat rows cost nothing: spread the others over the threads
+    nbx = (w + block - 1) // block
     for i in numba.prange(h):
         y = (i * stride) % h
-        for x in range(w):
-            s = sigma[y, x]
-            v = img[y, x]
-            if s <= 0.0 or skip[y // block, x // block]:
-                out[y, x] = v if add_input else 0.0
+        for bx in range(nbx):
+            if skip[y // block, bx]:
                 continue
-            k0 = int(s)
-            t = np.float64(s) - k0
-            qv = _fixed(v)
-            acc = 0.0
-            for j in range(2):
-                k = k0 + j
-                if k == 0:  # width 0: the pixel itself, no change
+            for x in range(bx * block, min(bx * block + block, w)):
+                s = sigma[y, x]
+                if s <= 0.0:
                     continue
-                wgt = (1.0 - t) if j == 0 else t
-                # width n = box_width_px(k) (k is an integer), MATLAB anchoring:
-                # [x - floor((n - 1) / 2), x + ceil((n - 1) / 2)]
-                n = BOX_WIDTH_PX_PER_LEVEL * k
-                ya = y + pad - (n - 1) // 2 - oy
-                xa = x + pad - (n - 1) // 2 - ox
-                yb = ya + n
-                xb = xa + n
-                box = sat[yb, xb] - sat[ya, xb] - sat[yb, xa] + sat[ya, xa]
-                diff = box - n * n * qv  # exact: n^2 (avg - in), in fixed point
-                acc += wgt * (1.0 - f_e * (1.0 + k)) * (np.float64(diff) / (n * n))
-            change = acc * _SAT_STEP
-            out[y, x] = (np.float64(v) + change) if add_input else change
+                v = img[y, x]
+                k0 = int(s)
+                t = np.float64(s) - k0
+                qv = _fixed(v)
+                acc = 0.0
+                for j in range(2):
+                    k = k0 + j
+                    if k == 0:  # width 0: the pixel itself, no change
+                        continue
+                    wgt = (1.0 - t) if j == 0 else t
+                    # width n = box_width_px(k) (k is an integer), MATLAB anchoring:
+                    # [x - floor((n - 1) / 2), x + ceil((n - 1) / 2)]
+                    n = BOX_WIDTH_PX_PER_LEVEL * k
+                    ya = y + pad - (n - 1) // 2 - oy
+                    xa = x + pad - (n - 1) // 2 - ox
+                    yb = ya + n
+                    xb = xa + n
+                    box = sat[yb, xb] - sat[ya, xb] - sat[yb, xa] + sat[ya, xa]
+                    diff = box - n * n * qv  # exact: n^2 (avg - in), in fixed point
+                    acc += wgt * (1.0 - f_e * (1.0 + k)) * (np.float64(diff) / (n * n))
+                change = acc * _SAT_STEP
+                out[y, x] = (np.float64(v) + change) if add_input else change
     return out
 
 
@@ -161,7 +165,7 @@ FLAT_BLOCK_LEVEL = 3
 
 def _flat_blocks(grey_blocks, shape, max_sigma: float, skip: bool) -> tuple[np.ndarray, int]:
     """Blocks whose every pixel's boxes lie in one constant region (change exactly 0), from
-    the grey image's block extremes ``(lo, hi)`` (or none: no skipping)."""
+    the grey image's block extremes ``(lo, hi)`` (or none: no skipping, one block)."""
     block = level_scale(FLAT_BLOCK_LEVEL)
     if not skip or grey_blocks is None:
         return np.zeros((1, 1), np.bool_), max(int(shape[0]), int(shape[1]), 1)

@@ -153,11 +153,12 @@ class ImpulseParams:
     f_low_cpp: np.ndarray
     f_high_cpp: np.ndarray
     open_: np.ndarray  # bool: F_L < F_H
+    level: np.ndarray  # the continuous Laplacian level l_a |L| is read at (eq. 7)
 
     def subset(self, keep: np.ndarray) -> ImpulseParams:
         return ImpulseParams(self.index[keep], self.x_px[keep], self.y_px[keep],
                              self.sigma_px[keep], self.f_low_cpp[keep], self.f_high_cpp[keep],
-                             self.open_[keep])
+                             self.open_[keep], self.level[keep])
 
 
 @dataclass
@@ -239,8 +240,8 @@ class Enhancer:
         c.stage("foveated", ("linear", "sigma", "already_foveated"), self._foveated)
         c.stage("luma", ("foveated",), colour.luminance)
         # level-3 block extremes of the luminance: where it is flat (skipping only)
-        c.stage("luma_blocks", ("luma",), lambda luma: pyramids.block_extremes(
-            luma, FLAT_BLOCK_LEVEL))
+        c.stage("luma_blocks", ("luma",), lambda luma: tuple(
+            e[..., 0] for e in pyramids.channel_block_extremes(luma[..., None], FLAT_BLOCK_LEVEL)))
         c.stage("pyramid", ("luma",), lambda luma: pyramids.gaussian_pyramid(
             luma, amp.MAX_LAPLACIAN_LEVEL))
         c.stage("abs_laplacian", ("pyramid", "imp_active"), self._abs_laplacian)
@@ -256,7 +257,7 @@ class Enhancer:
         c.stage("imp_active", ("imp_band", "?luma_blocks", "shape"), self._imp_active)
         c.stage("imp_frequency", ("imp_active", "impulses", "s_f"), self._imp_frequency)
         c.stage("imp_laplacian", ("imp_active", "abs_laplacian"), lambda b, lap:
-                self._laplacian_at(lap, b.sigma_px, b.x_px, b.y_px))
+                amp.laplacian_amplitude_at(lap, b.level, b.x_px, b.y_px))
         c.stage("imp_headroom", ("imp_active", "headroom"), lambda b, hr:
                 self._headroom_at(hr, b.x_px, b.y_px))
         c.stage("imp_amplitude", ("imp_active", "imp_laplacian", "imp_headroom", "s_k"),
@@ -370,12 +371,11 @@ class Enhancer:
         return pyramids.smoothed_abs_laplacian(pyr, top, need)
 
     def _laplacian_need(self, pyr, active: ImpulseParams) -> dict[int, np.ndarray]:
-        """Per level k, the tiles of |L_k| that :meth:`_laplacian_at` reads at the active
+        """Per level k, the tiles of |L_k| that the imp_laplacian stage reads at the active
         impulses: the bilinear taps (one more node each side, as a margin) of levels k0 and
         k0 + 1 (:func:`fovexp.amplitude.bracketing_levels`)."""
         top = min(amp.MAX_LAPLACIAN_LEVEL, len(pyr) - 1)
-        k0, _ = amp.bracketing_levels(
-            amp.laplacian_level(active.sigma_px, self.preset.attenuation), max(top, 1))
+        k0, _ = amp.bracketing_levels(active.level, max(top, 1))
         tile = pyramids.ABS_LAPLACIAN_TILE
         need = {}
         for k in range(1, top + 1):
@@ -466,8 +466,13 @@ class Enhancer:
         s, f_lo, f_hi = self._band_at(geom, gaze, sigma_given, sigma, blur_rate,
                                       np.clip(x, 0, geom.width_px - 1),
                                       np.clip(y, 0, geom.height_px - 1))
-        band = ImpulseParams(np.arange(len(imp)), x, y, s, f_lo, f_hi, f_lo < f_hi)
-        return band.subset(band.open_) if self.options.skip else band
+        open_ = f_lo < f_hi
+        band = ImpulseParams(np.arange(len(imp)), x, y, s, f_lo, f_hi, open_,
+                             np.ones(len(imp)))
+        if self.options.skip:
+            band = band.subset(open_)
+        band.level = amp.laplacian_level(band.sigma_px, self.preset.attenuation)
+        return band
 
     def _imp_active(self, band: ImpulseParams, luma_blocks, shape) -> ImpulseParams:
         """The impulses the amplitude, frequency and orientation are evaluated at. When
@@ -479,16 +484,20 @@ class Enhancer:
         lo, hi = luma_blocks()
         block = pyramids.level_scale(FLAT_BLOCK_LEVEL)
         top = max(min(amp.MAX_LAPLACIAN_LEVEL, pyramids.pyramid_depth(shape, 99)), 1)
-        k0, _ = amp.bracketing_levels(amp.laplacian_level(band.sigma_px,
-                                                          self.preset.attenuation), top)
-        reach = amp.laplacian_reach_px(k0, top)
+        k0, _ = amp.bracketing_levels(band.level, top)
+        radius = pyramids.blocks_reaching(amp.laplacian_reach_px(k0, top), block)
+        radii = np.unique(radius)  # a few: one per bracketing level
+        const = pyramids.constant_blocks(lo, hi, int(radii[0]))
+        if not const.any():  # nothing flat even at the smallest reach: nothing to leave out
+            return band
         bx = np.clip(band.x_px, 0, shape[1] - 1).astype(np.int64) // block
         by = np.clip(band.y_px, 0, shape[0] - 1).astype(np.int64) // block
-        radius = pyramids.blocks_reaching(reach, block)
         flat = np.zeros(len(band.index), dtype=np.bool_)
-        for r in np.unique(radius):  # a few radii: one per bracketing level
+        for r in radii:
             sel = radius == r
-            flat[sel] = pyramids.constant_blocks(lo, hi, int(r))[by[sel], bx[sel]]
+            if r != radii[0]:
+                const = pyramids.constant_blocks(lo, hi, int(r))
+            flat[sel] = const[by[sel], bx[sel]]
         return band.subset(~flat)
 
     def _imp_frequency(self, band: ImpulseParams, imp, s_f: float) -> np.ndarray:
@@ -505,10 +514,6 @@ class Enhancer:
         normals = rng.standard_normal((len(imp), frequency.RELEASE_REJECTION_TRIES))
         f[o] = frequency.draw_release(normals[band.index[o]], mu, sig_n, band.f_high_cpp[o])
         return f
-
-    def _laplacian_at(self, lap, sigma, x, y) -> np.ndarray:
-        level = amp.laplacian_level(sigma, self.preset.attenuation)
-        return amp.laplacian_amplitude_at(lap, level, x, y)
 
     def _headroom_at(self, headroom, x, y) -> np.ndarray:
         kind, lo, hi, block = headroom
@@ -592,8 +597,9 @@ class Enhancer:
                     lo, hi, self._kernel_radius_px())).ravel()
             else:
                 limit = self._headroom_at(head, x, y)
-            all_open = ImpulseParams(np.arange(x.size), x, y, s, f_lo, f_hi, f_lo < f_hi)
-            k = self._amplitude(all_open, self._laplacian_at(lap, s, x, y), limit,
+            level = amp.laplacian_level(s, self.preset.attenuation)
+            pixels = ImpulseParams(np.arange(x.size), x, y, s, f_lo, f_hi, f_lo < f_hi, level)
+            k = self._amplitude(pixels, amp.laplacian_amplitude_at(lap, level, x, y), limit,
                                 c.get("s_k"))
             return k.reshape(h, w).astype(self._dtype)
         if name == "orientation_rad":
