@@ -30,6 +30,7 @@ import numpy as np
 from ._parallel import interleave
 from .geometry import arcmin_to_px
 from .pyramids import (
+    FLAT_BLOCK_LEVEL,
     blocks_reaching,
     channel_block_extremes,
     constant_blocks,
@@ -117,7 +118,8 @@ def per_pixel_sigma(
 
 
 def gaussian_kernel(sigma: float, dtype: type = np.float32) -> np.ndarray:
-    """Sampled, normalised 1-D Gaussian truncated at 4 sigma (scipy.ndimage's kernel)."""
+    """Sampled, normalised 1-D Gaussian truncated at 4 sigma (scipy.ndimage's kernel); exactly
+    symmetric (the blur adds its taps in pairs)."""
     r = int(TRUNCATE_SIGMAS * sigma + 0.5)
     d = np.arange(-r, r + 1, dtype=np.float64)
     g = np.exp(-0.5 * d * d / (sigma * sigma))
@@ -127,11 +129,12 @@ def gaussian_kernel(sigma: float, dtype: type = np.float32) -> np.ndarray:
 # The blur and the accumulation are written as "centre + weighted differences" (the same
 # filters, their weights summing to 1): a constant region then comes out exactly as its
 # constant, so the flat regions foveate() skips are exactly those it would leave unchanged.
-# Compiled without fast-math, which could reassociate the form away; the loops have no
-# reductions and vectorise all the same.
+# Compiled with fast-math but no reassociation, which could rewrite the form away (the loops
+# have no reductions: they vectorise without it).
+_NO_REASSOC = {"nnan", "ninf", "nsz", "arcp", "contract", "afn"}
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, fastmath=_NO_REASSOC)
 def _blur_patch(src, ly0, ly1, lx0, lx1, g):  # pragma: no cover - compiled
     """Separable Gaussian of ``src`` (h, w, c) over rows [ly0, ly1), cols [lx0, lx1);
     samples outside ``src`` replicate its border. ``src``'s dtype (float32 or float64)."""
@@ -148,40 +151,41 @@ def _blur_patch(src, ly0, ly1, lx0, lx1, g):  # pragma: no cover - compiled
             sx = min(max(lx0 - r + xx, 0), w - 1)
             for ch in range(c):
                 blk[yy, xx * c + ch] = src[sy, sx, ch]
+    # the kernel is symmetric: taps k and 2r - k in pairs, (a + b) - 2 centre (exactly 0 on a
+    # constant: c + c = 2c)
     tmp = np.empty((ph, n), dtype=src.dtype)
+    twice = np.empty(n, dtype=src.dtype)
     for yy in range(ph):
         for j in range(n):
             tmp[yy, j] = blk[yy + r, j]
-        for k in range(2 * r + 1):
-            if k == r:
-                continue
+            twice[j] = blk[yy + r, j] + blk[yy + r, j]
+        for k in range(r):
             gk = g[k]
             for j in range(n):
-                tmp[yy, j] += gk * (blk[yy + k, j] - blk[yy + r, j])
+                tmp[yy, j] += gk * ((blk[yy + k, j] + blk[yy + 2 * r - k, j]) - twice[j])
     out = np.empty((ph, pw * c), dtype=src.dtype)
     centre = r * c
     for yy in range(ph):
         for j in range(pw * c):
             out[yy, j] = tmp[yy, centre + j]
-        for k in range(2 * r + 1):
-            if k == r:
-                continue
+            twice[j] = tmp[yy, centre + j] + tmp[yy, centre + j]
+        for k in range(r):
             gk = g[k]
-            base = k * c
+            lo, hi = k * c, (2 * r - k) * c
             for j in range(pw * c):
-                out[yy, j] += gk * (tmp[yy, base + j] - tmp[yy, centre + j])
+                out[yy, j] += gk * ((tmp[yy, lo + j] + tmp[yy, hi + j]) - twice[j])
     return out
 
 
-@numba.njit(parallel=True, cache=True)
+@numba.njit(parallel=True, cache=True, fastmath=_NO_REASSOC)
 def _foveate_bands(
-    img, sigma, levels, lvl_m, kbuf, kmeta, pbuf, pmeta, pad, band_h, flat, block
+    img, sigma, levels, lvl_m, kbuf, kmeta, pbuf, pmeta, pad, band_h, flat, shift
 ):  # pragma: no cover - compiled
     """Blur stack evaluated band by band: for each band of rows and each stack level, blur
     only the runs of columns whose sigmas need that level, then accumulate the per-pixel
     linear interpolation between the two levels bracketing each sigma, as the pixel's own
     value plus the weighted differences of the levels from it (the weights sum to 1; level
-    0 is the pixel itself). Pixels whose ``block`` x ``block`` block ``flat`` marks (their
+    0 is the pixel itself). Pixels whose ``2**shift`` square block ``flat`` marks (their
     neighbourhood is one constant) are left as they are: what the blur gives there."""
     h, w, c = img.shape
     n = levels.shape[0]
@@ -202,7 +206,7 @@ def _foveate_bands(
                 for ch in range(c):
                     out[y, x, ch] = img[y, x, ch]
                 s = sigma[y, x]
-                if s <= 0.0 or flat[y // block, x // block]:
+                if s <= 0.0 or flat[y >> shift, x >> shift]:  # (a shift: no division)
                     kk[y - y0, x] = -1
                     tt[y - y0, x] = 0.0
                     continue
@@ -338,10 +342,6 @@ def blur_stack_plan(
     return BlurStackPlan(levels, lvl_m, tuple(kernels), pad)
 
 
-#: Side of the blocks the foveation's flatness test works on (the min/max pyramid's level 3).
-FLAT_BLOCK_LEVEL = 3
-
-
 def _flat_blocks(img: np.ndarray, reach_px: int) -> np.ndarray:
     """8 x 8 blocks around which every channel of ``img`` (H, W, C) is one constant over
     ``reach_px``."""
@@ -359,11 +359,10 @@ def _foveate(
     skip: bool,
 ) -> np.ndarray:
     plan = blur_stack_plan(max_sigma, ratio, min_residual_px, img.dtype.type)
-    block = level_scale(FLAT_BLOCK_LEVEL)
     if skip:
-        flat = _flat_blocks(img, plan.reach_px())
-    else:
-        flat, block = np.zeros((1, 1), np.bool_), max(img.shape[0], img.shape[1])
+        flat, shift = _flat_blocks(img, plan.reach_px()), FLAT_BLOCK_LEVEL
+    else:  # one block, never flat
+        flat, shift = np.zeros((1, 1), np.bool_), 62
     pad, top = plan.pad_px, plan.top
     padded = np.pad(img, ((pad, pad), (pad, pad), (0, 0)), mode="edge") if pad else img
     pyramid = gaussian_pyramid(padded, top)
@@ -382,7 +381,7 @@ def _foveate(
     kbuf = np.concatenate(plan.kernels)
     return _foveate_bands(
         img, sigma, plan.sigmas_px.astype(img.dtype), plan.pyramid_level, kbuf, kmeta, pbuf,
-        pmeta, pad, BAND_ROWS, flat, block,
+        pmeta, pad, BAND_ROWS, flat, shift,
     )
 
 

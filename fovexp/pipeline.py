@@ -38,9 +38,10 @@ from . import amplitude as amp
 from . import colour, frequency, gabor, orientation, pyramids
 from .contrast import contrast_change
 from .errors import FovexpError
-from .foveation import FLAT_BLOCK_LEVEL, foveate, foveate_exact, sigma_px
+from .foveation import foveate, foveate_exact, sigma_px
 from .geometry import Display, GeometryModel, ViewingGeometry
 from .params import EngineOptions, EnhanceParams, ParameterTable, Preset, get_preset
+from .pyramids import FLAT_BLOCK_LEVEL
 
 MAP_NAMES: tuple[str, ...] = (
     "eccentricity_deg", "sigma_px", "f_low_cpp", "f_high_cpp", "amplitude", "orientation_rad",
@@ -240,8 +241,8 @@ class Enhancer:
         c.stage("foveated", ("linear", "sigma", "already_foveated"), self._foveated)
         c.stage("luma", ("foveated",), colour.luminance)
         # level-3 block extremes of the luminance: where it is flat (skipping only)
-        c.stage("luma_blocks", ("luma",), lambda luma: tuple(
-            e[..., 0] for e in pyramids.channel_block_extremes(luma[..., None], FLAT_BLOCK_LEVEL)))
+        c.stage("luma_blocks", ("luma",), lambda luma: tuple(e[..., 0] for e in (
+            pyramids.channel_block_extremes(luma[..., None], FLAT_BLOCK_LEVEL))))
         c.stage("pyramid", ("luma",), lambda luma: pyramids.gaussian_pyramid(
             luma, amp.MAX_LAPLACIAN_LEVEL))
         c.stage("abs_laplacian", ("pyramid", "imp_active"), self._abs_laplacian)

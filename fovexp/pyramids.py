@@ -256,6 +256,11 @@ def abs_laplacian_reach_px(level: int | np.ndarray) -> int | np.ndarray:
     return 9 * np.left_shift(1, np.asarray(level) - 1) - 2
 
 
+#: Level of the blocks the skipping's flatness tests work on (EngineOptions.skip): the 8 x 8
+#: blocks of the min/max pyramid's level 3 (section 4.2).
+FLAT_BLOCK_LEVEL = 3
+
+
 def constant_blocks(lo: np.ndarray, hi: np.ndarray, radius_blocks: int) -> np.ndarray:
     """Blocks of a block-extremes grid (:func:`block_extremes`) around which the image is one
     constant: the minimum of ``lo`` equals the maximum of ``hi`` over the ``(2 radius + 1)^2``

@@ -81,7 +81,7 @@ bool region_needed(ivec2 lo_px, ivec2 hi_px) {
 #ifdef ENTRY_BLUR
 // one pass of a separable Gaussian (foveation._blur_patch): along y, then a second dispatch
 // along x; samples outside the grid replicate its border; the centre plus the weighted
-// differences from it
+// differences from it, the symmetric taps in pairs: (a + b) - 2 centre (foveation._blur_patch)
 LOCAL_2D
 uniform ivec3 grid_hwc;
 uniform int src_offset;
@@ -106,13 +106,17 @@ void main() {
     if (p.x >= w || p.y >= h) return;
     for (int ch = 0; ch < c; ++ch) {
         float centre = src[src_offset + (p.y * w + p.x) * c + ch];
+        float twice = centre + centre;
         float acc = centre;
-        for (int k = -kernel_radius; k <= kernel_radius; ++k) {
-            if (k == 0) continue;
-            ivec2 q = along_y == 1 ? ivec2(p.x, clamp(p.y + k, 0, h - 1))
+        // the kernel is symmetric: taps -k and +k in pairs, outermost first (as the CPU)
+        for (int k = -kernel_radius; k < 0; ++k) {
+            ivec2 a = along_y == 1 ? ivec2(p.x, clamp(p.y + k, 0, h - 1))
                                    : ivec2(clamp(p.x + k, 0, w - 1), p.y);
+            ivec2 b = along_y == 1 ? ivec2(p.x, clamp(p.y - k, 0, h - 1))
+                                   : ivec2(clamp(p.x - k, 0, w - 1), p.y);
             acc += kernels[kernel_offset + k + kernel_radius]
-                 * (src[src_offset + (q.y * w + q.x) * c + ch] - centre);
+                 * ((src[src_offset + (a.y * w + a.x) * c + ch]
+                     + src[src_offset + (b.y * w + b.x) * c + ch]) - twice);
         }
         dst[(p.y * w + p.x) * c + ch] = acc;
     }
