@@ -237,7 +237,7 @@ class Enhancer:
         c.stage("geometry", ("shape", "viewport"), self._geometry)
         c.stage("linear", ("image",), self._linear)
         c.stage("grids", ("geometry", "gaze"), self._grids)
-        c.stage("sigma", ("sigma_given", "grids", "blur_rate"), self._sigma)
+        c.stage("sigma", ("sigma_given", "?grids", "blur_rate"), self._sigma)
         c.stage("foveated", ("linear", "sigma", "already_foveated"), self._foveated)
         c.stage("luma", ("foveated",), colour.luminance)
         # level-3 block extremes of the luminance: where it is flat (skipping only)
@@ -353,9 +353,12 @@ class Enhancer:
         return ecc, np.broadcast_to(geom.ppd(x, y), ecc.shape)
 
     def _sigma(self, given, grids, blur_rate) -> np.ndarray:
+        """The sigma map (px, section 6.2): the one given with the frame, else from the
+        eccentricity and px/deg maps (computed only then)."""
         if given is not None:
             return given
-        return sigma_px(grids[0], grids[1], blur_rate, self.preset.fovea_deg, self._dtype)
+        ecc, ppd = grids()
+        return sigma_px(ecc, ppd, blur_rate, self.preset.fovea_deg, self._dtype)
 
     def _foveated(self, linear, sigma, already_foveated) -> np.ndarray:
         if already_foveated:
@@ -468,12 +471,11 @@ class Enhancer:
                                       np.clip(x, 0, geom.width_px - 1),
                                       np.clip(y, 0, geom.height_px - 1))
         open_ = f_lo < f_hi
-        band = ImpulseParams(np.arange(len(imp)), x, y, s, f_lo, f_hi, open_,
-                             np.ones(len(imp)))
+        index = np.flatnonzero(open_) if self.options.skip else np.arange(len(imp))
         if self.options.skip:
-            band = band.subset(open_)
-        band.level = amp.laplacian_level(band.sigma_px, self.preset.attenuation)
-        return band
+            x, y, s, f_lo, f_hi, open_ = (a[index] for a in (x, y, s, f_lo, f_hi, open_))
+        return ImpulseParams(index, x, y, s, f_lo, f_hi, open_,
+                             amp.laplacian_level(s, self.preset.attenuation))
 
     def _imp_active(self, band: ImpulseParams, luma_blocks, shape) -> ImpulseParams:
         """The impulses the amplitude, frequency and orientation are evaluated at. When
@@ -486,20 +488,18 @@ class Enhancer:
         block = pyramids.level_scale(FLAT_BLOCK_LEVEL)
         top = max(min(amp.MAX_LAPLACIAN_LEVEL, pyramids.pyramid_depth(shape, 99)), 1)
         k0, _ = amp.bracketing_levels(band.level, top)
-        radius = pyramids.blocks_reaching(amp.laplacian_reach_px(k0, top), block)
-        radii = np.unique(radius)  # a few: one per bracketing level
-        const = pyramids.constant_blocks(lo, hi, int(radii[0]))
-        if not const.any():  # nothing flat even at the smallest reach: nothing to leave out
+        levels = np.flatnonzero(np.bincount(k0, minlength=top + 1))  # the k0 present
+        radii = pyramids.blocks_reaching(amp.laplacian_reach_px(levels, top), block)
+        # per bracketing level, the blocks around which the luminance is one constant that far
+        const = np.zeros((top + 1, *lo.shape), dtype=np.bool_)
+        const[levels[0]] = pyramids.constant_blocks(lo, hi, int(radii[0]))
+        if not const[levels[0]].any():  # nothing flat at the smallest reach: nothing is
             return band
+        for k, r in zip(levels[1:], radii[1:], strict=True):
+            const[k] = pyramids.constant_blocks(lo, hi, int(r))
         bx = np.clip(band.x_px, 0, shape[1] - 1).astype(np.int64) // block
         by = np.clip(band.y_px, 0, shape[0] - 1).astype(np.int64) // block
-        flat = np.zeros(len(band.index), dtype=np.bool_)
-        for r in radii:
-            sel = radius == r
-            if r != radii[0]:
-                const = pyramids.constant_blocks(lo, hi, int(r))
-            flat[sel] = const[by[sel], bx[sel]]
-        return band.subset(~flat)
+        return band.subset(~const[k0, by, bx])
 
     def _imp_frequency(self, band: ImpulseParams, imp, s_f: float) -> np.ndarray:
         """The per-impulse frequency draw (section 4.1) where the band is open; 0 elsewhere
