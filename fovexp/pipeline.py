@@ -2,10 +2,11 @@
 
 Stages and what each depends on (a parameter change recomputes only what lies downstream)::
 
-    image ─ linear ─┬─ foveated ─┬─ luma ─ pyramid ─┬─ laplacian ── amplitude ─┐
-                    │            │                   └─ gradients ── orientation┤
-    gaze, blur_rate ┴─ sigma ────┴─ contrast (f_e) ─ headroom ────── K (s_k) ───┤
-    impulses, seed ─ impulses ─ band ─ frequency (s_f) ──────────────────────────┴─ noise ─ output
+    image ─ linear ─┬─ foveated ─┬─ luma ─┬─ pyramid ─┬─ laplacian ──── amplitude ─┐
+                    │            │        │           └─ gradients ─── orientation ┤
+                    │            │        └─ luma_blocks (where it is flat) ─┐     │
+    gaze, blur_rate ┴─ sigma ────┴─ contrast (f_e) ─ headroom ─────────── K (s_k) ─┤
+    impulses, seed ─ impulses ─ band ─ active (not flat) ─ frequency (s_f) ────────┴─ noise ─ output
 
 The noise parameters are evaluated at the impulses only (the paper's per-impulse reading,
 section 4.4). With ``EngineOptions.skip`` (the default) work whose result is known is left
