@@ -21,7 +21,8 @@ _PUBLIC: dict[str, str] = {
     "Display": "geometry", "ViewingGeometry": "geometry", "load_display": "geometry",
     "read_image": "io", "read_samples": "io", "write_bytes_atomic": "io", "write_image": "io",
     "METHODS": "params", "PAPER_TABLE2": "params", "PARAMETER_RANGES": "params",
-    "EnhanceParams": "params", "ParameterTable": "params", "make_params": "params",
+    "EngineOptions": "params", "EnhanceParams": "params", "ParameterTable": "params",
+    "make_options": "params", "make_params": "params",
     "MAP_NAMES": "pipeline", "Enhancer": "pipeline", "EnhanceResult": "pipeline",
     "enhance": "pipeline",
     "find_protocol": "resources", "shipped_stimuli": "resources",
@@ -38,8 +39,10 @@ if TYPE_CHECKING:  # the same names for type checkers (tests/test_layers.py hold
         METHODS,
         PAPER_TABLE2,
         PARAMETER_RANGES,
+        EngineOptions,
         EnhanceParams,
         ParameterTable,
+        make_options,
         make_params,
     )
     from .pipeline import MAP_NAMES, Enhancer, EnhanceResult, enhance
@@ -47,10 +50,11 @@ if TYPE_CHECKING:  # the same names for type checkers (tests/test_layers.py hold
 
 __all__ = [
     "BACKENDS", "MAP_NAMES", "METHODS", "PAPER_TABLE2", "PARAMETER_RANGES", "Display",
-    "EnhanceParams", "EnhanceResult", "Enhancer", "FovexpError", "ParameterTable",
-    "ViewingGeometry", "enhance", "find_protocol", "load_display", "make_enhancer",
-    "make_params", "parse_yaml", "read_image", "read_samples", "read_yaml", "shipped_stimuli",
-    "validation_error", "write_bytes_atomic", "write_image", "__version__",
+    "EngineOptions", "EnhanceParams", "EnhanceResult", "Enhancer", "FovexpError",
+    "ParameterTable", "ViewingGeometry", "enhance", "find_protocol", "load_display",
+    "make_enhancer", "make_options", "make_params", "parse_yaml", "read_image", "read_samples",
+    "read_yaml", "shipped_stimuli", "validation_error", "write_bytes_atomic", "write_image",
+    "__version__",
 ]
 
 

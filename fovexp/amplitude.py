@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .pyramids import sample_bilinear
+from .pyramids import abs_laplacian_reach_px, sample_bilinear
 
 #: The release's amplitude gain (notes section 3.7); part of what Table 2's s_k means.
 RELEASE_AMPLITUDE_GAIN = 3.5722
@@ -52,19 +52,31 @@ def laplacian_level(sigma_px: np.ndarray, attenuation: float) -> np.ndarray:
     return np.maximum(np.nan_to_num(level, nan=1.0, neginf=1.0), 1.0)
 
 
+def bracketing_levels(level: np.ndarray, top: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(k0, t)``: the Laplacian levels ``k0`` and ``k0 + 1`` (at most ``top``, the coarsest
+    built) between which continuous ``level`` lies, and its weight ``t`` on ``k0 + 1`` (eq. 8's
+    interpolation in the log-frequency domain)."""
+    level = np.minimum(np.asarray(level, dtype=np.float64), top)
+    k0 = np.minimum(np.floor(level).astype(np.int64), top - 1) if top > 1 else np.ones_like(
+        level, dtype=np.int64
+    )
+    return k0, np.clip(level - k0, 0.0, 1.0)
+
+
+def laplacian_reach_px(k0: np.ndarray, top: int) -> np.ndarray:
+    """How far (full-resolution px) the image reaches into :func:`laplacian_amplitude_at` at
+    bracketing level ``k0``: the reach of its coarser level (:func:`fovexp.pyramids.
+    abs_laplacian_reach_px`). Where the image is one constant that far, |L| is exactly 0."""
+    return abs_laplacian_reach_px(np.minimum(np.asarray(k0) + 1, top))
+
+
 def laplacian_amplitude_at(
     abs_levels: dict[int, np.ndarray], level: np.ndarray, x_px: np.ndarray, y_px: np.ndarray
 ) -> np.ndarray:
     """``|L|`` at continuous ``level``, interpolated between the two bracketing levels,
     each sampled bilinearly at full-resolution coordinates (level k lives on G_{k-1}'s grid)."""
-    level = np.asarray(level, dtype=np.float64)
-    top = max(abs_levels)
-    level = np.minimum(level, top)
-    k0 = np.minimum(np.floor(level).astype(np.int64), top - 1) if top > 1 else np.ones_like(
-        level, dtype=np.int64
-    )
-    t = np.clip(level - k0, 0.0, 1.0)
-    out = np.zeros(level.shape, dtype=np.float64)
+    k0, t = bracketing_levels(level, max(abs_levels))
+    out = np.zeros(k0.shape, dtype=np.float64)
     for k in np.unique(k0):
         sel = k0 == k
         xs, ys = x_px[sel], y_px[sel]

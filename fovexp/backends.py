@@ -9,7 +9,7 @@ from typing import Any
 
 from .errors import FovexpError
 from .geometry import Display, GeometryModel
-from .params import ParameterTable, get_preset
+from .params import EngineOptions, ParameterTable, get_preset
 from .pipeline import Enhancer
 
 #: Backends :func:`make_enhancer` accepts.
@@ -17,9 +17,10 @@ BACKENDS: tuple[str, ...] = ("auto", "cpu", "gpu")
 
 
 def _cpu(display: Display, preset: str, geometry: GeometryModel | None,
-         table: ParameterTable | None, why: str | None) -> Enhancer:
+         table: ParameterTable | None, options: EngineOptions | None,
+         why: str | None) -> Enhancer:
     """The CPU enhancer; ``why`` (``auto`` fell back to it) becomes its ``fallback_reason``."""
-    enh = Enhancer(display, preset, geometry, table)
+    enh = Enhancer(display, preset, geometry, table, options)
     enh.fallback_reason = why  # type: ignore[attr-defined]
     return enh
 
@@ -32,6 +33,7 @@ def _gpu(enh: Enhancer) -> Enhancer:
 def make_enhancer(
     display: Display, preset: str = "paper", geometry: GeometryModel | None = None,
     table: ParameterTable | None = None, backend: str = "auto", ctx: Any = None,
+    options: EngineOptions | None = None,
 ) -> Enhancer:
     """An :class:`Enhancer` on ``backend``: ``"cpu"`` (NumPy/Numba), ``"gpu"`` (OpenGL 4.5
     compute shaders, :class:`fovexp.gpu.GpuEnhancer`; a clear error when there is no context),
@@ -49,26 +51,31 @@ def make_enhancer(
     if backend not in BACKENDS:
         raise FovexpError(f"unknown backend {backend!r} (choose from {', '.join(BACKENDS)})")
     if backend == "cpu":
-        return _cpu(display, preset, geometry, table, None)
+        return _cpu(display, preset, geometry, table, options, None)
     if backend == "auto" and get_preset(preset).name != "paper":
-        return _cpu(display, preset, geometry, table,
+        return _cpu(display, preset, geometry, table, options,
                     f"the {preset!r} preset runs on the CPU backend only")
     from .gpu import GpuEnhancer, create_context, is_software, release_context, renderer_name
 
+    unsupported = GpuEnhancer.unsupported(options or EngineOptions())
+    if backend == "auto" and unsupported:
+        return _cpu(display, preset, geometry, table, options,
+                    "the GPU backend does not implement the engine options "
+                    + ", ".join(f"{k}={v!r}" for k, v in unsupported.items()))
     if backend == "gpu":  # no context (or no moderngl): a FovexpError that says so
-        return _gpu(GpuEnhancer(display, preset, geometry, table, ctx=ctx))
+        return _gpu(GpuEnhancer(display, preset, geometry, table, ctx=ctx, options=options))
     try:
         gl = create_context(ctx)
     except FovexpError as exc:  # no moderngl, no EGL, no OpenGL 4.5
-        return _cpu(display, preset, geometry, table, f"no GPU: {exc}")
+        return _cpu(display, preset, geometry, table, options, f"no GPU: {exc}")
     if is_software(gl):
         name = renderer_name(gl)
         if ctx is None:
             release_context(gl)
-        return _cpu(display, preset, geometry, table,
+        return _cpu(display, preset, geometry, table, options,
                     f"the OpenGL renderer is software ({name}), slower than the CPU backend")
     try:  # GpuEnhancer compiles every shader: a driver that cannot falls back to the CPU
         return _gpu(GpuEnhancer(display, preset, geometry, table, ctx=gl,
-                                owns_context=ctx is None))
+                                owns_context=ctx is None, options=options))
     except FovexpError as exc:
-        return _cpu(display, preset, geometry, table, f"the GPU backend failed: {exc}")
+        return _cpu(display, preset, geometry, table, options, f"the GPU backend failed: {exc}")

@@ -16,23 +16,27 @@ from .jit import FASTMATH
 #: BT.601 luma weights. The release's Y of YCbCr, normalised as (Y - 16/255) / (219/255), equals
 #: 0.299 R + 0.587 G + 0.114 B (notes section 3.4); its grey for orientation uses the same
 #: weights rounded as MATLAB's rgb2gray (0.2989, 0.5870, 0.1140).
-LUMA_BT601 = np.array([0.299, 0.587, 0.114], dtype=np.float32)
+LUMA_BT601_F64 = np.array([0.299, 0.587, 0.114])
+LUMA_BT601 = LUMA_BT601_F64.astype(np.float32)
 
 #: The release's hybrid transfer (notes section 3.1): ((v + 0.055) / 1.055) ** 2.2.
 _RELEASE_OFFSET = 0.055
 
 
-def linearize(encoded: np.ndarray, gamma: float, transfer: str = "power") -> np.ndarray:
-    """Display-encoded values in [0, 1] to linear light in [0, 1] (float32).
+def linearize(
+    encoded: np.ndarray, gamma: float, transfer: str = "power", dtype: type = np.float32
+) -> np.ndarray:
+    """Display-encoded values in [0, 1] to linear light in [0, 1] (float32, or ``dtype``).
 
     ``power``: ``v ** gamma`` (the display profile's gamma). ``release``: the release's
     ``((v + 0.055) / 1.055) ** 2.2`` (notes section 3.1).
     """
-    out = np.array(encoded, dtype=np.float32)  # a copy: worked on in place below
+    out = np.array(encoded, dtype=dtype)  # a copy: worked on in place below
+    scalar = out.dtype.type
     if transfer == "release":
-        out += np.float32(_RELEASE_OFFSET)
-        out *= np.float32(1.0 / (1.0 + _RELEASE_OFFSET))
-    return np.power(out, np.float32(gamma), out=out)
+        out += scalar(_RELEASE_OFFSET)
+        out *= scalar(1.0 / (1.0 + _RELEASE_OFFSET))
+    return np.power(out, scalar(gamma), out=out)
 
 
 @numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
@@ -51,30 +55,38 @@ def encode(
 ) -> np.ndarray:
     """Inverse of :func:`linearize`, after adding up to two grey (H, W) images (the contrast
     change, the noise) to every channel; values outside [0, 1] are clipped first (a display
-    shows nothing else). One pass adds and clips, then NumPy's vectorised power."""
-    lin = np.asarray(linear, dtype=np.float32)
-    out = np.empty(lin.shape, dtype=np.float32)
+    shows nothing else). One pass adds and clips, then NumPy's vectorised power. Float32, or
+    float64 when ``linear`` is."""
+    lin = np.asarray(linear)
+    if lin.dtype != np.float64:
+        lin = lin.astype(np.float32, copy=False)
+    dtype = lin.dtype
+    scalar = dtype.type
+    out = np.empty(lin.shape, dtype=dtype)
     if grey:
         if len(grey) > 2:
             raise ValueError("encode adds at most two grey images")
-        a = np.ascontiguousarray(grey[0], dtype=np.float32)
-        b = np.ascontiguousarray(grey[1], dtype=np.float32) if len(grey) == 2 else (
+        a = np.ascontiguousarray(grey[0], dtype=dtype)
+        b = np.ascontiguousarray(grey[1], dtype=dtype) if len(grey) == 2 else (
             np.zeros_like(a))
         three = lin.ndim == 3
         _add_grey_clip(np.ascontiguousarray(lin if three else lin[..., None]), a, b,
                        out if three else out[..., None])
     else:
         np.clip(lin, 0.0, 1.0, out=out)
-    np.power(out, np.float32(1.0 / gamma), out=out)
+    np.power(out, scalar(1.0 / gamma), out=out)
     if transfer == "release":
-        out *= np.float32(1.0 + _RELEASE_OFFSET)
-        out -= np.float32(_RELEASE_OFFSET)
+        out *= scalar(1.0 + _RELEASE_OFFSET)
+        out -= scalar(_RELEASE_OFFSET)
         np.clip(out, 0.0, 1.0, out=out)
     return out
 
 
 def luminance(linear: np.ndarray) -> np.ndarray:
-    """Linear luma ``0.299 R + 0.587 G + 0.114 B`` of an (H, W, 3) image; grey passes through."""
+    """Linear luma ``0.299 R + 0.587 G + 0.114 B`` of an (H, W, 3) image; grey passes through.
+    Float32, or float64 (with the weights in float64) when ``linear`` is."""
+    dtype = np.float64 if np.asarray(linear).dtype == np.float64 else np.float32
     if linear.ndim == 2:
-        return np.asarray(linear, dtype=np.float32)
-    return np.tensordot(linear, LUMA_BT601, axes=([-1], [0])).astype(np.float32, copy=False)
+        return np.asarray(linear, dtype=dtype)
+    weights = LUMA_BT601_F64 if dtype == np.float64 else LUMA_BT601
+    return np.tensordot(linear, weights, axes=([-1], [0])).astype(dtype, copy=False)

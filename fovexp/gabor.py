@@ -5,26 +5,32 @@ The noise is a sum of Gabor kernels placed at random impulses::
     n(x) = sum_i w_i K_i g_i(x - x_i),
     g_i(d) = exp(-pi a^2 |d|^2) cos(2 pi F_i (d_x cos t_i + d_y sin t_i))
 
-with weights ``w_i`` uniform in (-1, 1), and each impulse's frequency ``F_i``, amplitude ``K_i``
-and carrier direction ``t_i = omega_i - pi/2`` read at the impulse's own position. The kernel
-frequency width is ``a`` (0.06 cycles/px in the paper); the kernel is truncated where its
-envelope reaches 1 %, radius ``r = sqrt(-ln 0.01 / pi) / a`` (20.2 px).
+with weights ``w_i`` uniform in (-1, 1) (or +-1: ``EngineOptions.weights``), and each
+impulse's frequency ``F_i``, amplitude ``K_i`` and carrier direction ``t_i = omega_i - pi/2``
+read at the impulse's own position. The kernel frequency width is ``a`` (0.06 cycles/px in the
+paper); the kernel is truncated where its envelope reaches 1 %, radius
+``r = sqrt(-ln 0.01 / pi) / a`` (20.2 px; the cut is ``EngineOptions.kernel_truncation``).
 
 Impulses: the plane is cut into cells of side ``r``; each cell's random stream is seeded from its
 coordinates (modulo a period of 256 cells) and the seed, and holds a Poisson number of impulses
 with mean ``lambda r^2 = N / pi`` for ``N`` impulses per kernel (``lambda = N / (pi r^2)``), so
-every pixel lies inside about N kernels. The impulses depend only on the image size, N, a and
-the seed: every frame of a sequence has the same ones (section 4.4).
+every pixel lies inside about N kernels. ``EngineOptions`` offers faster variants with the same
+density: a jittered count (floor(m) or floor(m) + 1 impulses, mean m), and cells smaller than
+r (side ``cell_scale r``, mean ``m = N cell_scale^2 / pi``) that the synthesis culls more
+finely. The impulses depend only on the image size, N, a, these options and the seed: every
+frame of a sequence has the same ones (section 4.4).
 
 Normalisation (notes 3.9): the sum is divided by ``6 sqrt(V)`` with ``V`` the variance of the
 sum for K = 1 at F = 0.0625 cycles/px (notes section 2)::
 
-    V = lambda (1/3) (1 / (4 a^2)) (1 + exp(-2 pi F^2 / a^2))
+    V = lambda E[w^2] (1 / (4 a^2)) (1 + exp(-2 pi F^2 / a^2)),   E[w^2] = 1/3 (uniform), 1 (+-1)
 
 so that the noise's local standard deviation is ``K / 6`` whatever the impulse count, as in the
-release (its measured std / K is 0.164 for 12 and 64 impulses). The release also subtracts the
-global mean of the noise; that would shift the fovea, where the noise is zero, so it is not done
-here (the weights are symmetric: the expected mean is 0).
+release (its measured std / K is 0.164 for 12 and 64 impulses). V holds for any arrangement of
+impulses with density lambda and independent zero-mean weights (Campbell's theorem: the cross
+terms vanish), Poisson or jittered. The release also subtracts the global mean of the noise;
+that would shift the fovea, where the noise is zero, so it is not done here (the weights are
+symmetric: the expected mean is 0).
 
 Synthesis: each kernel is separable as the real part of a product of two complex 1-D factors,
 ``exp(-pi a^2 d_x^2 + i 2 pi F cos(t) d_x) * exp(-pi a^2 d_y^2 + i 2 pi F sin(t) d_y)``;
@@ -40,6 +46,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from ._parallel import interleave
 from .jit import FASTMATH
 
 #: Envelope value at which the kernel is truncated (notes section 2).
@@ -60,12 +67,23 @@ CELL_BORDER = 1
 CELL_ORIGIN_PX = -0.5
 
 
-def kernel_radius_px(gabor_a_cpp: float) -> float:
-    """Truncation radius ``sqrt(-ln 0.01 / pi) / a`` (20.2 px at a = 0.06, 15.1 at 0.08)."""
-    return math.sqrt(-math.log(KERNEL_TRUNCATION) / math.pi) / gabor_a_cpp
+#: Mean square E[w^2] of the impulse weights: uniform in (-1, 1), or +-1 (notes section 2).
+WEIGHT_MEAN_SQUARE: dict[str, float] = {"uniform": 1.0 / 3.0, "sign": 1.0}
 
 
-@numba.njit(cache=True, nogil=True, fastmath=FASTMATH)
+def kernel_radius_px(gabor_a_cpp: float, truncation: float = KERNEL_TRUNCATION) -> float:
+    """Truncation radius ``sqrt(-ln t / pi) / a``, t = 0.01 (notes 2): 20.2 px at a = 0.06,
+    15.1 at 0.08."""
+    return math.sqrt(-math.log(truncation) / math.pi) / gabor_a_cpp
+
+
+def cell_size_px(gabor_a_cpp: float, cell_scale: float = 1.0) -> float:
+    """Side of the impulse cells: ``cell_scale`` times the kernel radius at the paper's
+    truncation (Lagae et al.: the radius), whatever truncation the synthesis then uses."""
+    return cell_scale * kernel_radius_px(gabor_a_cpp)
+
+
+@numba.njit(cache=True, fastmath=FASTMATH, nogil=True)
 def cell_counts(width_px: int, height_px: int, cell_px: float) -> tuple[int, int]:
     """Cells per row and per column of the grid the impulses are drawn on (borders included);
     compiled, so that :func:`_generate` uses it too."""
@@ -84,11 +102,13 @@ def impulse_density(impulses_per_kernel: int, gabor_a_cpp: float) -> float:
     return impulses_per_kernel / (math.pi * r * r)
 
 
-def normalisation(impulses_per_kernel: int, gabor_a_cpp: float) -> float:
-    """Factor that makes the local std ``K / 6``: ``1 / (6 sqrt(V))`` (notes 3.9)."""
+def normalisation(impulses_per_kernel: int, gabor_a_cpp: float, weights: str = "uniform") -> float:
+    """Factor that makes the local std ``K / 6``: ``1 / (6 sqrt(V))`` (notes 3.9), V with the
+    weights' mean square."""
     a = gabor_a_cpp
     lam = impulse_density(impulses_per_kernel, a)
-    v = lam / 3.0 / (4.0 * a * a) * (1.0 + math.exp(-2.0 * math.pi * NORMALISATION_F_CPP**2 / a**2))
+    v = lam * WEIGHT_MEAN_SQUARE[weights] / (4.0 * a * a) * (
+        1.0 + math.exp(-2.0 * math.pi * NORMALISATION_F_CPP**2 / a**2))
     return 1.0 / (NOISE_STD_DIVISOR * math.sqrt(v))
 
 
@@ -98,16 +118,17 @@ class Impulses:
 
     x_px: np.ndarray  # float64
     y_px: np.ndarray  # float64
-    weight: np.ndarray  # float32, uniform in (-1, 1)
+    weight: np.ndarray  # float32, uniform in (-1, 1), or +-1 (``weights == "sign"``)
     quantile: np.ndarray  # float64, uniform in (0, 1): the frequency draw's quantile
     cell_px: float
     seed: int
+    weights: str = "uniform"
 
     def __len__(self) -> int:
         return int(self.x_px.size)
 
 
-@numba.njit(cache=True, nogil=True, fastmath=FASTMATH)
+@numba.njit(cache=True, fastmath=FASTMATH, nogil=True)
 def _splitmix(state):  # pragma: no cover - compiled
     state = (state + np.uint64(0x9E3779B97F4A7C15)) & np.uint64(0xFFFFFFFFFFFFFFFF)
     z = state
@@ -120,15 +141,15 @@ def _splitmix(state):  # pragma: no cover - compiled
     return state, z ^ (z >> np.uint64(31))
 
 
-@numba.njit(cache=True, nogil=True, fastmath=FASTMATH)
+@numba.njit(cache=True, fastmath=FASTMATH, nogil=True)
 def _uniform(state):  # pragma: no cover - compiled
     state, z = _splitmix(state)
     # 53 random bits, strictly inside (0, 1)
     return state, ((z >> np.uint64(11)) + 0.5) * (1.0 / 9007199254740992.0)
 
 
-@numba.njit(cache=True, nogil=True, fastmath=FASTMATH)
-def _generate(width, height, cell, mean_count, seed, period):  # pragma: no cover - compiled
+@numba.njit(cache=True, fastmath=FASTMATH, nogil=True)
+def _generate(width, height, cell, mean_count, seed, period, jittered, sign):  # pragma: no cover
     x0 = -CELL_BORDER
     y0 = -CELL_BORDER
     nx, ny = cell_counts(width, height, cell)
@@ -149,14 +170,16 @@ def _generate(width, height, cell, mean_count, seed, period):  # pragma: no cove
                 + np.uint64(cy % period)
             )
             state, _ = _splitmix(key)
-            # Poisson count (Knuth): multiply uniforms until below exp(-mean)
             count = 0
             state, u = _uniform(state)
-            p = u
-            while p > limit:
-                count += 1
-                state, u = _uniform(state)
-                p *= u
+            if jittered:  # floor(m) or floor(m) + 1 impulses, mean m
+                count = int(mean_count) + (1 if u < mean_count - int(mean_count) else 0)
+            else:  # Poisson count (Knuth): multiply uniforms until below exp(-mean)
+                p = u
+                while p > limit:
+                    count += 1
+                    state, u = _uniform(state)
+                    p *= u
             for _ in range(count):
                 state, ux = _uniform(state)
                 state, uy = _uniform(state)
@@ -166,19 +189,27 @@ def _generate(width, height, cell, mean_count, seed, period):  # pragma: no cove
                     xs[n] = (cx + ux) * cell + CELL_ORIGIN_PX
                     ys[n] = (cy + uy) * cell + CELL_ORIGIN_PX
                     ws[n] = 2.0 * uw - 1.0
+                    if sign:  # the sign of the uniform weight: the same stream, +-1
+                        ws[n] = 1.0 if ws[n] >= 0.0 else -1.0
                     qs[n] = uq
                     n += 1
     return xs[:n], ys[:n], ws[:n], qs[:n]
 
 
 def generate_impulses(
-    width_px: int, height_px: int, impulses_per_kernel: int, gabor_a_cpp: float, seed: int
+    width_px: int, height_px: int, impulses_per_kernel: int, gabor_a_cpp: float, seed: int,
+    count: str = "poisson", weights: str = "uniform", cell_scale: float = 1.0,
 ) -> Impulses:
-    """The impulses of a ``width x height`` image (deterministic from the seed)."""
-    cell = kernel_radius_px(gabor_a_cpp)
-    mean_count = impulses_per_kernel / math.pi  # lambda * cell^2
-    xs, ys, ws, qs = _generate(width_px, height_px, cell, mean_count, seed, CELL_PERIOD)
-    return Impulses(xs, ys, ws, qs, cell, seed)
+    """The impulses of a ``width x height`` image (deterministic from the seed): a
+    ``"poisson"`` or ``"jittered"`` count per cell, ``"uniform"`` or ``"sign"`` weights, cells
+    of side ``cell_scale`` kernel radii (:class:`fovexp.params.EngineOptions`)."""
+    if count not in ("poisson", "jittered") or weights not in WEIGHT_MEAN_SQUARE:
+        raise ValueError(f"unknown impulse count {count!r} or weights {weights!r}")
+    cell = cell_size_px(gabor_a_cpp, cell_scale)
+    mean_count = impulse_density(impulses_per_kernel, gabor_a_cpp) * cell * cell  # N s^2 / pi
+    xs, ys, ws, qs = _generate(width_px, height_px, cell, mean_count, seed, CELL_PERIOD,
+                               count == "jittered", weights == "sign")
+    return Impulses(xs, ys, ws, qs, cell, seed, weights)
 
 
 #: Kernel window width is rounded up to this many pixels so that the per-row loop has a
@@ -188,12 +219,13 @@ WINDOW_MULTIPLE = 16
 
 @numba.njit(cache=True, fastmath=FASTMATH, nogil=True)
 def _splat_band(
-    out, y0, y1, pad, xs, ys, amp, kx, ky, lo, hi, r, a, nwin, er, ei
+    out, y0, y1, pad, xs, ys, amp, kx, ky, lo, hi, r, a, nwin, er, ei, cs
 ):  # pragma: no cover - compiled
     """Add the kernels of impulses ``lo..hi`` to rows [y0, y1) of ``out`` (band-local rows,
     columns shifted by ``pad``). The kernel is truncated to the square of half-side ``r``
     (its envelope is at most 1 % on the square's edges), so each row is one fixed-width
-    multiply-add over ``nwin`` pixels."""
+    multiply-add over ``nwin`` pixels, in ``out``'s dtype (``cs`` holds the row's factor
+    in it)."""
     pa2 = math.pi * a * a
     step_q = math.exp(-2.0 * pa2)
     rr = int(math.ceil(r))
@@ -233,8 +265,9 @@ def _splat_band(
         rs = math.sin(ky[i])
         xo = x0 + pad
         for y in range(ya, yb + 1):
-            cr = np.float32(env * c)
-            ci = np.float32(env * s)
+            cs[0] = env * c
+            cs[1] = env * s
+            cr, ci = cs[0], cs[1]
             yo = y - y0
             for j in range(nwin):
                 out[yo, xo + j] += cr * er[j] - ci * ei[j]
@@ -243,28 +276,33 @@ def _splat_band(
             c, s = c * rc - s * rs, s * rc + c * rs
 
 
-@numba.njit(parallel=True, cache=True, nogil=True, fastmath=FASTMATH)
-def _splat(height, width, xs, ys, amp, kx, ky, row_start, cell, r, a, band):  # pragma: no cover
+def _window(r: float) -> tuple[int, int]:
+    """(nwin, pad): the kernel row's fixed width and the columns padded on each side."""
     rr = int(math.ceil(r))
-    nwin = ((2 * rr + 2 + WINDOW_MULTIPLE - 1) // WINDOW_MULTIPLE) * WINDOW_MULTIPLE
-    pad = rr + 1
-    out = np.zeros((height, width + 2 * pad + nwin), dtype=np.float32)
+    return ((2 * rr + 2 + WINDOW_MULTIPLE - 1) // WINDOW_MULTIPLE) * WINDOW_MULTIPLE, rr + 1
+
+
+@numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
+def _splat(out, xs, ys, amp, kx, ky, row_start, cell, r, a, band, nwin, pad):  # pragma: no cover
+    height = out.shape[0]
     nb = (height + band - 1) // band
     n_rows = row_start.shape[0] - 1
-    for b in numba.prange(nb):
+    stride = interleave(nb)  # bands without impulses cost nothing: spread the others
+    for i in numba.prange(nb):
+        b = (i * stride) % nb
         y0 = b * band
         y1 = min(height, y0 + band)
-        er = np.empty(nwin, dtype=np.float32)
-        ei = np.empty(nwin, dtype=np.float32)
+        er = np.empty(nwin, dtype=out.dtype)
+        ei = np.empty(nwin, dtype=out.dtype)
+        cs = np.empty(2, dtype=out.dtype)
         # cell rows (cell_index) whose kernels can reach the band, one more each side
         j0 = max(int(math.floor((y0 - r - CELL_ORIGIN_PX) / cell)) + CELL_BORDER - 1, 0)
         j1 = min(int(math.floor((y1 - 1 + r - CELL_ORIGIN_PX) / cell)) + CELL_BORDER + 1,
                  n_rows - 1)
         _splat_band(
             out[y0:y1], y0, y1, pad, xs, ys, amp, kx, ky, row_start[j0], row_start[j1 + 1],
-            r, a, nwin, er, ei,
+            r, a, nwin, er, ei, cs,
         )
-    return out[:, pad : pad + width]
 
 
 def synthesize(
@@ -275,20 +313,25 @@ def synthesize(
     carrier_rad: np.ndarray,
     impulses_per_kernel: int,
     gabor_a_cpp: float,
+    truncation: float = KERNEL_TRUNCATION,
+    skip: bool = True,
+    dtype: np.dtype | type = np.float32,
 ) -> np.ndarray:
-    """Sum the Gabor kernels of ``impulses`` into an (H, W) float32 noise image.
+    """Sum the Gabor kernels of ``impulses`` into an (H, W) noise image of ``dtype``.
 
     ``amplitude`` is K per impulse (in the release's units: the local std is K / 6),
     ``frequency_cpp`` F per impulse, ``carrier_rad`` the carrier direction t per impulse.
-    Impulses with zero amplitude (empty band, no headroom) cost nothing.
+    The kernels are cut where their envelope is ``truncation``. With ``skip``, impulses with
+    zero amplitude (empty band, flat surround, no headroom) cost nothing; without, every
+    impulse is summed (adding exact zeros: the same result, for measuring the saving).
     """
     h, w = shape
     amp = impulses.weight * np.asarray(amplitude, np.float64) * normalisation(
-        impulses_per_kernel, gabor_a_cpp
+        impulses_per_kernel, gabor_a_cpp, impulses.weights
     )
-    keep = np.flatnonzero(amp != 0.0)
+    keep = np.flatnonzero(amp != 0.0) if skip else np.arange(amp.size)
     if keep.size == 0:
-        return np.zeros(shape, dtype=np.float32)
+        return np.zeros(shape, dtype=dtype)
     xs, ys = impulses.x_px[keep], impulses.y_px[keep]
     k = 2.0 * np.pi * np.asarray(frequency_cpp, np.float64)[keep]
     t = np.asarray(carrier_rad, np.float64)[keep]
@@ -297,8 +340,9 @@ def synthesize(
     rows = cell_index(ys, cell)
     n_rows = cell_counts(w, h, cell)[1]
     row_start = np.searchsorted(rows, np.arange(n_rows + 1)).astype(np.int64)
-    out = _splat(
-        h, w, xs, ys, amp[keep], k * np.cos(t), k * np.sin(t), row_start, cell,
-        kernel_radius_px(gabor_a_cpp), gabor_a_cpp, BAND_ROWS,
-    )
-    return np.ascontiguousarray(out)
+    r = kernel_radius_px(gabor_a_cpp, truncation)
+    nwin, pad = _window(r)
+    out = np.zeros((h, w + 2 * pad + nwin), dtype=dtype)
+    _splat(out, xs, ys, amp[keep], k * np.cos(t), k * np.sin(t), row_start, cell, r,
+           gabor_a_cpp, BAND_ROWS, nwin, pad)
+    return np.ascontiguousarray(out[:, pad : pad + w])

@@ -28,19 +28,23 @@ GRADIENT_EPS = 1e-5
 
 
 def sobel_gradients(grey_level: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(G_x, G_y)``: Sobel derivatives along x (right) and y (down), replicated borders."""
-    g = np.asarray(grey_level, dtype=np.float32)
+    """``(G_x, G_y)``: Sobel derivatives along x (right) and y (down), replicated borders
+    (float32, or float64 when the level is)."""
+    g = np.asarray(grey_level)
+    if g.dtype != np.float64:
+        g = g.astype(np.float32)
     return ndimage.sobel(g, axis=1, mode="nearest"), ndimage.sobel(g, axis=0, mode="nearest")
 
 
 def orientation_at(
     gx: np.ndarray, gy: np.ndarray, x_px: np.ndarray, y_px: np.ndarray,
-    level: int = ORIENTATION_LEVEL,
+    level: int = ORIENTATION_LEVEL, dtype: type = np.float32,
 ) -> np.ndarray:
     """``omega`` (rad) at full-resolution points: G_x, G_y interpolated bicubically (Keys,
     :func:`fovexp.pyramids.sample_cubic`) from their level grid, then
-    ``atan2(G_y, G_x) - pi/2``; ``-pi/2`` where ``|G| < GRADIENT_EPS`` (a flat area)."""
+    ``atan2(G_y, G_x) - pi/2``; ``-pi/2`` where ``|G| < GRADIENT_EPS`` (a flat area).
+    Float32 (or ``dtype``)."""
     gxs = sample_cubic(gx, x_px, y_px, level)
     gys = sample_cubic(gy, x_px, y_px, level)
     flat = np.hypot(gxs, gys) < GRADIENT_EPS
-    return (np.where(flat, 0.0, np.arctan2(gys, gxs)) - 0.5 * np.pi).astype(np.float32)
+    return (np.where(flat, 0.0, np.arctan2(gys, gxs)) - 0.5 * np.pi).astype(dtype)

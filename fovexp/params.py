@@ -82,6 +82,71 @@ def get_preset(name: str) -> Preset:
         raise FovexpError(f"unknown preset {name!r} (choose from {', '.join(PRESETS)})") from None
 
 
+class EngineOptions(BaseModel):
+    """How the engine computes the method, not what the method is: implementation choices
+    that trade run time against accuracy, and the exact counterparts the fast choices are
+    measured against. The defaults are the enhancer as the paper describes it and this
+    package runs it; an enhancer keeps its options for life (``Enhancer(..., options=...)``).
+
+    ``skip``
+        Leave out work whose result is known: impulses whose band is empty (F_L >= F_H,
+        section 4.1) and impulses, tiles of |L| (section 4.2) and of the contrast change whose
+        neighbourhood is flat (constant luminance: |L| and the change are exactly 0 there), and
+        tiles of the foveation whose input is constant. Exact by construction: the output is
+        bit for bit the same with ``skip=False`` (the no-skip switch, tested).
+    ``foveation``
+        ``"pyramid"``: the blur stack (:func:`fovexp.foveation.foveate`); ``"exact"``: the
+        per-pixel spatially varying convolution (:func:`fovexp.foveation.foveate_exact`,
+        slow: the reference).
+    ``extremes``
+        Clipping control's N_min, N_max (section 4.2). ``"pyramid"``: the min/max pyramid's
+        level-3 blocks, widened to every block the kernel reaches (the preset's neighbourhood);
+        ``"exact"``: the true min and max over the pixels each impulse's truncated kernel
+        covers. Paper preset only (the release preset keeps its 25 x 25 box).
+    ``dtype``
+        Floating-point type of every image stage (``"float64"``: the reference; the result's
+        arrays then are float64 too).
+    ``kernel_truncation``
+        Envelope value at which the Gabor kernel is cut (section 4.4; notes 2: 0.01, radius
+        20.2 px at a = 0.06). The impulse cells keep the 0.01 radius, so the impulses stay the
+        same whatever the truncation.
+    ``impulse_count``
+        Impulses per cell: ``"poisson"`` (Lagae et al. 2009, the release) or ``"jittered"``:
+        floor(m) or floor(m) + 1 with probability frac(m), mean m = N / pi cell areas the
+        same (the noise's variance depends only on the density: its std stays K / 6).
+    ``weights``
+        Impulse weights: ``"uniform"`` in (-1, 1) (E[w^2] = 1/3), or ``"sign"``: +-1
+        (E[w^2] = 1); the normalisation follows E[w^2], so the noise's std stays K / 6.
+    ``cell_scale``
+        Side of the impulse cells as a fraction of the kernel radius (1: Lagae et al.'s cell);
+        smaller cells at the same density let the synthesis cull more finely.
+    """
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    skip: bool = True
+    foveation: Literal["pyramid", "exact"] = "pyramid"
+    extremes: Literal["pyramid", "exact"] = "pyramid"
+    dtype: Literal["float32", "float64"] = "float32"
+    kernel_truncation: float = Field(default=0.01, ge=1e-6, le=0.5)
+    impulse_count: Literal["poisson", "jittered"] = "poisson"
+    weights: Literal["uniform", "sign"] = "uniform"
+    cell_scale: float = Field(default=1.0, ge=0.25, le=1.0)
+
+    def non_default(self) -> dict[str, object]:
+        """The options that differ from the defaults, by name."""
+        default = EngineOptions()
+        return {k: v for k, v in self.model_dump().items() if getattr(default, k) != v}
+
+
+def make_options(**kwargs: object) -> EngineOptions:
+    """Build :class:`EngineOptions`, turning validation errors into one clear line."""
+    try:
+        return EngineOptions(**kwargs)  # type: ignore[arg-type]
+    except ValidationError as exc:
+        raise validation_error("engine option", exc) from None
+
+
 #: Accepted ranges, one definition for every place a parameter is read (CLI, tables, protocols):
 #: blur-rate in arcmin/deg, f_e, s_k, s_f unitless; wide enough for any calibration, narrow
 #: enough to catch a unit mistake.

@@ -2,15 +2,27 @@
 
 Stages and what each depends on (a parameter change recomputes only what lies downstream)::
 
-    image ─ linear ─┬─ foveated ─┬─ luma ─ pyramid ─┬─ laplacian ── amplitude ─┐
-                    │            │                   └─ gradients ── orientation┤
-    gaze, blur_rate ┴─ sigma ────┴─ contrast (f_e) ─ headroom ────── K (s_k) ───┤
-    impulses, seed ─ impulses ─ band ─ frequency (s_f) ──────────────────────────┴─ noise ─ output
+    image ─ linear ─┬─ foveated ─┬─ luma ─┬─ pyramid ─┬─ laplacian ──── amplitude ─┐
+                    │            │        │           └─ gradients ─── orientation ┤
+                    │            │        └─ luma_blocks (where it is flat) ─┐     │
+    gaze, blur_rate ┴─ sigma ────┴─ contrast (f_e) ─ headroom ─────────── K (s_k) ─┤
+    impulses, seed ─ impulses ─ band ─ active (not flat) ─ frequency (s_f) ────────┴─ noise ─ output
 
 The noise parameters are evaluated at the impulses only (the paper's per-impulse reading,
-section 4.4), and only at impulses whose band is open: nothing is computed for the fovea and
-its surround. Full-resolution maps of the parameters are computed on demand
-(:meth:`EnhanceResult.map`), by the same functions evaluated on the pixel grid.
+section 4.4). With ``EngineOptions.skip`` (the default) work whose result is known is left
+out, exactly: impulses whose band is empty (F_L >= F_H: the fovea and its surround, section
+4.1) and impulses whose |L| neighbourhood is one constant luminance (flat regions: |L|, hence K,
+is exactly 0 there, section 4.2) get no amplitude, frequency or orientation and add no noise;
+|L| is computed only on the tiles such impulses read; the contrast change is not computed on
+blocks whose boxes are flat (it is exactly 0); the foveation leaves flat regions as they are.
+The arithmetic of each stage is written so that these results are exact (pyramids and blurs
+as "centre + weighted differences", an integer summed-area table), so the output is the same
+bit for bit with ``skip=False`` (tested). Full-resolution maps of the parameters are computed
+on demand (:meth:`EnhanceResult.map`), by the same functions evaluated on the pixel grid.
+
+Stages that do not depend on the image (geometry, grids, sigma, impulses, per-impulse band)
+are kept across the frames of a sequence as across parameter steps: :meth:`Enhancer.set_image`
+invalidates only what depends on the image.
 """
 
 from __future__ import annotations
@@ -27,9 +39,10 @@ from . import amplitude as amp
 from . import colour, frequency, gabor, orientation, pyramids
 from .contrast import contrast_change
 from .errors import FovexpError
-from .foveation import foveate, sigma_px
+from .foveation import foveate, foveate_exact, sigma_px
 from .geometry import Display, GeometryModel, ViewingGeometry
-from .params import EnhanceParams, ParameterTable, Preset, get_preset
+from .params import EngineOptions, EnhanceParams, ParameterTable, Preset, get_preset
+from .pyramids import FLAT_BLOCK_LEVEL
 
 MAP_NAMES: tuple[str, ...] = (
     "eccentricity_deg", "sigma_px", "f_low_cpp", "f_high_cpp", "amplitude", "orientation_rad",
@@ -60,8 +73,9 @@ def with_alpha(colour: np.ndarray, alpha: np.ndarray | None) -> np.ndarray:
     return np.concatenate([c, alpha[..., None].astype(c.dtype, copy=False)], axis=2)
 
 
-def check_image(image: np.ndarray, what: str = "image") -> np.ndarray:
-    """Validate a display-encoded float image: (H, W) or (H, W, 3), finite, in [0, 1]."""
+def check_image(image: np.ndarray, what: str = "image", dtype: type = np.float32) -> np.ndarray:
+    """Validate a display-encoded float image: (H, W) or (H, W, 3), finite, in [0, 1];
+    returned as ``dtype``."""
     a = np.asarray(image)
     if a.ndim == 3 and a.shape[2] == 1:
         a = a[..., 0]
@@ -82,7 +96,7 @@ def check_image(image: np.ndarray, what: str = "image") -> np.ndarray:
     lo, hi = float(a.min()), float(a.max())
     if lo < 0.0 or hi > 1.0:
         raise FovexpError(f"{what} values must lie in [0, 1], found [{lo:.4g}, {hi:.4g}]")
-    return a.astype(np.float32, copy=False)
+    return a.astype(dtype, copy=False)
 
 
 class _StageCache:
@@ -157,7 +171,9 @@ def _same(a: Any, b: Any) -> bool:
 
 @dataclass
 class ImpulseParams:
-    """Per-impulse noise parameters, for the impulses whose band is open."""
+    """Per-impulse band (section 4.1) of the impulses the later stages evaluate: those whose
+    band is open (and, for ``imp_active``, whose neighbourhood is not flat) when skipping;
+    every impulse without skipping, ``open_`` telling which have an open band."""
 
     index: np.ndarray  # into the Impulses arrays
     x_px: np.ndarray
@@ -165,6 +181,13 @@ class ImpulseParams:
     sigma_px: np.ndarray
     f_low_cpp: np.ndarray
     f_high_cpp: np.ndarray
+    open_: np.ndarray  # bool: F_L < F_H
+    level: np.ndarray  # the continuous Laplacian level l_a |L| is read at (eq. 7)
+
+    def subset(self, keep: np.ndarray) -> ImpulseParams:
+        return ImpulseParams(self.index[keep], self.x_px[keep], self.y_px[keep],
+                             self.sigma_px[keep], self.f_low_cpp[keep], self.f_high_cpp[keep],
+                             self.open_[keep], self.level[keep])
 
 
 @dataclass
@@ -205,7 +228,9 @@ class Enhancer:
     """Foveation simulation, contrast enhancement and noise enhancement of frames.
 
     One enhancer per display (and image size); it keeps the stages of the last frame so that
-    a parameter change recomputes only what depends on it.
+    a parameter change recomputes only what depends on it. ``options``
+    (:class:`~fovexp.params.EngineOptions`) are the implementation choices, fixed for the
+    enhancer's life.
     """
 
     #: which implementation runs the stages ("cpu": NumPy/Numba; "gpu": fovexp.gpu)
@@ -213,10 +238,19 @@ class Enhancer:
 
     def __init__(
         self, display: Display, preset: str = "paper", geometry: GeometryModel | None = None,
-        table: ParameterTable | None = None,
+        table: ParameterTable | None = None, options: EngineOptions | None = None,
     ) -> None:
         self.display = display
         self.preset: Preset = get_preset(preset)
+        self.options: EngineOptions = options if options is not None else EngineOptions()
+        if not isinstance(self.options, EngineOptions):
+            raise FovexpError(f"options must be EngineOptions, not {type(options).__name__}")
+        if self.options.extremes == "exact" and self.preset.minmax != "pyramid":
+            raise FovexpError(
+                f"extremes='exact' replaces the min/max pyramid of the paper preset; the "
+                f"{self.preset.name} preset uses its own {self.preset.minmax_box_px} px box"
+            )
+        self._dtype = np.dtype(self.options.dtype).type
         if self.preset.name == "release" and geometry not in (None, "release"):
             raise FovexpError(
                 f"the release preset has its own geometry; geometry {geometry!r} is for the paper"
@@ -231,34 +265,39 @@ class Enhancer:
         self._define_stages()
 
     def _define_stages(self) -> None:
-        c, p = self._c, self.preset
+        c = self._c
         c.stage("geometry", ("shape", "viewport"), self._geometry)
         c.stage("linear", ("image",), self._linear)
-        c.stage("grids", ("geometry", "gaze"), lambda geom, gaze:
-                geom.eccentricity_and_ppd_maps(geom.gaze_px(gaze)))
-        c.stage("sigma", ("sigma_given", "grids", "blur_rate"), self._sigma)
+        c.stage("grids", ("geometry", "gaze"), self._grids)
+        c.stage("sigma", ("sigma_given", "?grids", "blur_rate"), self._sigma)
         c.stage("foveated", ("linear", "sigma", "already_foveated"), self._foveated)
         c.stage("luma", ("foveated",), colour.luminance)
+        # level-3 block extremes of the luminance: where it is flat (skipping only)
+        c.stage("luma_blocks", ("luma",), lambda luma: tuple(e[..., 0] for e in (
+            pyramids.channel_block_extremes(luma[..., None], FLAT_BLOCK_LEVEL))))
         c.stage("pyramid", ("luma",), lambda luma: pyramids.gaussian_pyramid(
             luma, amp.MAX_LAPLACIAN_LEVEL))
-        c.stage("abs_laplacian", ("pyramid",), self._abs_laplacian)
+        c.stage("abs_laplacian", ("pyramid", "imp_active"), self._abs_laplacian)
+        c.stage("abs_laplacian_full", ("pyramid",), lambda pyr: (
+            pyramids.smoothed_abs_laplacian(pyr, len(pyr) - 1)))  # the maps'
         c.stage("gradients", ("pyramid",), lambda pyr: orientation.sobel_gradients(
             pyr[orientation.ORIENTATION_LEVEL]))
-        c.stage("contrast", ("luma", "sigma", "f_e"), self._contrast)
+        c.stage("contrast", ("luma", "sigma", "f_e", "?luma_blocks"), self._contrast)
         c.stage("headroom", ("foveated", "luma", "contrast"), self._headroom)
-        c.stage("impulses", ("shape", "n_impulses", "seed"), lambda shape, n, seed:
-                gabor.generate_impulses(shape[1], shape[0], n, p.gabor_a_cpp, seed))
+        c.stage("impulses", ("shape", "n_impulses", "seed"), self._impulses)
         c.stage("imp_band", ("impulses", "geometry", "gaze", "sigma_given", "sigma",
                              "blur_rate"), self._imp_band)
-        c.stage("imp_frequency", ("imp_band", "impulses", "s_f"), self._imp_frequency)
-        c.stage("imp_laplacian", ("imp_band", "abs_laplacian"), lambda b, lap:
-                self._laplacian_at(lap, b.sigma_px, b.x_px, b.y_px))
-        c.stage("imp_headroom", ("imp_band", "headroom"), lambda b, hr:
+        c.stage("imp_active", ("imp_band", "?luma_blocks", "shape"), self._imp_active)
+        c.stage("imp_frequency", ("imp_active", "impulses", "s_f"), self._imp_frequency)
+        c.stage("imp_laplacian", ("imp_active", "abs_laplacian"), lambda b, lap:
+                amp.laplacian_amplitude_at(lap, b.level, b.x_px, b.y_px))
+        c.stage("imp_headroom", ("imp_active", "headroom"), lambda b, hr:
                 self._headroom_at(hr, b.x_px, b.y_px))
-        c.stage("imp_amplitude", ("imp_laplacian", "imp_headroom", "s_k"), self._amplitude)
-        c.stage("imp_orientation", ("imp_band", "gradients"), lambda b, g:
-                orientation.orientation_at(g[0], g[1], b.x_px, b.y_px))
-        c.stage("noise", ("shape", "impulses", "imp_band", "imp_amplitude", "imp_frequency",
+        c.stage("imp_amplitude", ("imp_active", "imp_laplacian", "imp_headroom", "s_k"),
+                self._amplitude)
+        c.stage("imp_orientation", ("imp_active", "gradients"), lambda b, g:
+                orientation.orientation_at(g[0], g[1], b.x_px, b.y_px, dtype=self._dtype))
+        c.stage("noise", ("shape", "impulses", "imp_active", "imp_amplitude", "imp_frequency",
                           "imp_orientation", "n_impulses"), self._noise)
         c.stage("output", ("method", "foveated", "?contrast", "?noise"), self._compose)
 
@@ -278,12 +317,12 @@ class Enhancer:
         experiment runner enhances just the processed half of its split screen this way.
         """
         colour, alpha = split_alpha(image)
-        img = check_image(colour)
+        img = check_image(colour, dtype=self._dtype)
         if alpha is not None:
             alpha = check_image(alpha, "alpha channel")
         sigma_given = None
         if sigma_px is not None:
-            sigma_given = np.asarray(sigma_px, dtype=np.float32)
+            sigma_given = np.asarray(sigma_px, dtype=self._dtype)
             if sigma_given.shape != img.shape[:2]:
                 raise FovexpError(
                     f"sigma map has shape {sigma_given.shape}, the image {img.shape[:2]}"
@@ -336,42 +375,99 @@ class Enhancer:
         return 2.2 if self.preset.transfer == "release" else self.display.gamma
 
     def _linear(self, image: np.ndarray) -> np.ndarray:
-        return colour.linearize(image, self._gamma(), self.preset.transfer)
+        return colour.linearize(image, self._gamma(), self.preset.transfer, self._dtype)
 
     def _encode(self, linear: np.ndarray) -> np.ndarray:
         return colour.encode(linear, self._gamma(), self.preset.transfer)
 
+    def _grids(self, geom: ViewingGeometry, gaze) -> tuple[np.ndarray, np.ndarray]:
+        """Eccentricity and px/deg of every pixel: float32 maps, or in float64 the same
+        formulas evaluated in float64."""
+        gaze_px = geom.gaze_px(gaze)
+        if self._dtype == np.float32:
+            return geom.eccentricity_and_ppd_maps(gaze_px)
+        x, y = geom.grid()
+        ecc = geom.eccentricity_deg(x, y, gaze_px)
+        return ecc, np.broadcast_to(geom.ppd(x, y), ecc.shape)
+
     def _sigma(self, given, grids, blur_rate) -> np.ndarray:
+        """The sigma map (px, section 6.2): the one given with the frame, else from the
+        eccentricity and px/deg maps (computed only then)."""
         if given is not None:
             return given
-        return sigma_px(grids[0], grids[1], blur_rate, self.preset.fovea_deg)
+        ecc, ppd = grids()
+        return sigma_px(ecc, ppd, blur_rate, self.preset.fovea_deg, self._dtype)
 
     def _foveated(self, linear, sigma, already_foveated) -> np.ndarray:
-        return linear if already_foveated else foveate(linear, sigma)
+        if already_foveated:
+            return linear
+        if self.options.foveation == "exact":
+            return foveate_exact(linear, sigma)
+        return foveate(linear, sigma, skip=self.options.skip)
 
-    def _abs_laplacian(self, pyr: list[np.ndarray]) -> dict[int, np.ndarray]:
-        return pyramids.smoothed_abs_laplacian(pyr, len(pyr) - 1)
+    def _abs_laplacian(self, pyr: list[np.ndarray], active: ImpulseParams) -> dict[int, np.ndarray]:
+        """|L_k| of every level (section 4.2); when skipping, only on the tiles the active
+        impulses' samples read (:func:`_laplacian_need`), the others left 0."""
+        top = len(pyr) - 1
+        need = self._laplacian_need(pyr, active) if self.options.skip else None
+        return pyramids.smoothed_abs_laplacian(pyr, top, need)
 
-    def _contrast(self, luma, sigma, f_e) -> np.ndarray:
+    def _laplacian_need(self, pyr, active: ImpulseParams) -> dict[int, np.ndarray]:
+        """Per level k, the tiles of |L_k| that the imp_laplacian stage reads at the active
+        impulses: the bilinear taps (one more node each side, as a margin) of levels k0 and
+        k0 + 1 (:func:`fovexp.amplitude.bracketing_levels`)."""
+        top = min(amp.MAX_LAPLACIAN_LEVEL, len(pyr) - 1)
+        k0, _ = amp.bracketing_levels(active.level, max(top, 1))
+        tile = pyramids.ABS_LAPLACIAN_TILE
+        need = {}
+        for k in range(1, top + 1):
+            grid = pyr[k - 1]
+            mask = np.zeros(pyramids.tile_grid(grid.shape), dtype=np.bool_)
+            sel = (k0 == k) | (k0 + 1 == k)
+            if sel.any():
+                scale = float(pyramids.level_scale(k - 1))
+                for coord, n, axis in ((active.y_px[sel], grid.shape[0], 0),
+                                       (active.x_px[sel], grid.shape[1], 1)):
+                    node = np.floor(np.asarray(coord) / scale).astype(np.int64)
+                    lo = np.clip(node - 1, 0, n - 1) // tile
+                    hi = np.clip(node + 2, 0, n - 1) // tile
+                    if axis == 0:
+                        ty0, ty1 = lo, hi
+                    else:
+                        tx0, tx1 = lo, hi
+                for ty in (ty0, ty1):  # the taps span at most two tiles each way
+                    for tx in (tx0, tx1):
+                        mask[ty, tx] = True
+            need[k] = mask
+        return need
+
+    def _contrast(self, luma, sigma, f_e, luma_blocks) -> np.ndarray:
         """The change of luminance the contrast enhancement makes (grey, linear). The method
         processes luminance only (section 4.5): like the noise, this change is added to
-        every channel of the foveated image."""
-        return contrast_change(luma, sigma, f_e)
+        every channel of the foveated image. Skipping leaves out the blocks whose boxes are
+        flat (the change is exactly 0 there)."""
+        return contrast_change(luma, sigma, f_e, luma_blocks() if self.options.skip else None)
 
-    def _headroom(self, foveated, luma, delta) -> tuple[np.ndarray, np.ndarray, int]:
+    def _headroom(self, foveated, luma, delta) -> tuple[str, np.ndarray, np.ndarray, int]:
         """Local minimum and maximum of the image the noise is added to (section 4.2).
 
         Paper preset: two departures from the release, both measured (docs/STATUS.md). The
         noise is added to every colour channel, so the extremes are taken over the channels
-        too (on grey, saturated colours clip: 5 % of the noisy pixels of Sponza). And an
+        too (on grey, saturated colours clip: 5 % of the noisy Sponza pixels). And an
         impulse's kernel reaches r = 20 px, past its own 8 x 8 block, so the level-3 min/max
         blocks are widened to every block the kernel can reach (the paper chose level 3 to
         match the kernel's support). What is left is the noise's tail beyond 3 std.
-        Release preset: grey and a 25 x 25 box, as the release does (notes 3.8)."""
+        ``EngineOptions(extremes="exact")``: per pixel over the channels, reduced later over
+        exactly the pixels each impulse's kernel covers (:func:`fovexp.pyramids.
+        window_extremes`). Release preset: grey and a 25 x 25 box, as the release does
+        (notes 3.8)."""
         p = self.preset
+        if p.minmax == "pyramid" and self.options.extremes == "exact":
+            lo, hi = pyramids.block_extremes(foveated, 0, add=delta)
+            return "exact", lo, hi, 1
         if p.minmax == "pyramid":
             block = pyramids.level_scale(p.minmax_level)
-            reach = 2 * int(np.ceil(gabor.kernel_radius_px(p.gabor_a_cpp) / block)) + 1
+            reach = 2 * int(np.ceil(self._kernel_radius_px() / block)) + 1
             lo, hi = pyramids.block_extremes(foveated, p.minmax_level, add=delta)
             lo = ndimage.minimum_filter(lo, reach, mode="nearest")
             hi = ndimage.maximum_filter(hi, reach, mode="nearest")
@@ -380,7 +476,16 @@ class Enhancer:
             lo = ndimage.minimum_filter(grey, p.minmax_box_px, mode="nearest")
             hi = ndimage.maximum_filter(grey, p.minmax_box_px, mode="nearest")
             block = 1
-        return lo, hi, block
+        return "blocks", lo, hi, block
+
+    def _kernel_radius_px(self) -> float:
+        """The Gabor kernel's truncation radius (section 4.4; the option's truncation)."""
+        return gabor.kernel_radius_px(self.preset.gabor_a_cpp, self.options.kernel_truncation)
+
+    def _impulses(self, shape, n, seed) -> gabor.Impulses:
+        o = self.options
+        return gabor.generate_impulses(shape[1], shape[0], n, self.preset.gabor_a_cpp, seed,
+                                       o.impulse_count, o.weights, o.cell_scale)
 
     def _band_at(self, geom, gaze, sigma_given, sigma, blur_rate, x, y):
         """F_L, F_H and sigma at points (section 4.1): sigma exactly from the geometry when
@@ -388,44 +493,83 @@ class Enhancer:
         ecc = geom.eccentricity_deg(x, y, geom.gaze_px(gaze))
         ppd = geom.ppd(x, y)
         if sigma_given is None:
-            s = sigma_px(ecc, ppd, blur_rate, self.preset.fovea_deg).astype(np.float64)
+            s = sigma_px(ecc, ppd, blur_rate, self.preset.fovea_deg, self._dtype)
+            s = s.astype(np.float64)
         else:
             s = pyramids.sample_bilinear(sigma, x, y, 0).astype(np.float64)
         f_lo, f_hi = frequency.frequency_band_cpp(ecc, ppd, s)
         return s, f_lo, f_hi
 
     def _imp_band(self, imp, geom, gaze, sigma_given, sigma, blur_rate) -> ImpulseParams:
+        """The band at each impulse (section 4.1); when skipping, only the impulses whose band
+        is open are kept (the others have no noise)."""
         x, y = imp.x_px, imp.y_px
         # impulses whose kernel cannot reach the image are dropped with the others
         s, f_lo, f_hi = self._band_at(geom, gaze, sigma_given, sigma, blur_rate,
                                       np.clip(x, 0, geom.width_px - 1),
                                       np.clip(y, 0, geom.height_px - 1))
-        open_ = np.flatnonzero(f_lo < f_hi)
-        return ImpulseParams(open_, x[open_], y[open_], s[open_], f_lo[open_], f_hi[open_])
+        open_ = f_lo < f_hi
+        index = np.flatnonzero(open_) if self.options.skip else np.arange(len(imp))
+        if self.options.skip:
+            x, y, s, f_lo, f_hi, open_ = (a[index] for a in (x, y, s, f_lo, f_hi, open_))
+        return ImpulseParams(index, x, y, s, f_lo, f_hi, open_,
+                             amp.laplacian_level(s, self.preset.attenuation))
+
+    def _imp_active(self, band: ImpulseParams, luma_blocks, shape) -> ImpulseParams:
+        """The impulses the amplitude, frequency and orientation are evaluated at. When
+        skipping, those whose |L| samples read only a constant region of the luminance are
+        left out: |L| is exactly 0 there, and so is K (section 4.2;
+        :func:`fovexp.amplitude.laplacian_reach_px`). Judged on the level-3 block extremes."""
+        if not self.options.skip or len(band.index) == 0:
+            return band
+        lo, hi = luma_blocks()
+        block = pyramids.level_scale(FLAT_BLOCK_LEVEL)
+        top = max(min(amp.MAX_LAPLACIAN_LEVEL, pyramids.pyramid_depth(shape, 99)), 1)
+        k0, _ = amp.bracketing_levels(band.level, top)
+        levels = np.flatnonzero(np.bincount(k0, minlength=top + 1))  # the k0 present
+        radii = pyramids.blocks_reaching(amp.laplacian_reach_px(levels, top), block)
+        # per bracketing level, the blocks around which the luminance is one constant that far
+        const = np.zeros((top + 1, *lo.shape), dtype=np.bool_)
+        const[levels[0]] = pyramids.constant_blocks(lo, hi, int(radii[0]))
+        if not const[levels[0]].any():  # nothing flat at the smallest reach: nothing is
+            return band
+        for k, r in zip(levels[1:], radii[1:], strict=True):
+            const[k] = pyramids.constant_blocks(lo, hi, int(r))
+        bx = np.clip(band.x_px, 0, shape[1] - 1).astype(np.int64) // block
+        by = np.clip(band.y_px, 0, shape[0] - 1).astype(np.int64) // block
+        return band.subset(~const[k0, by, bx])
 
     def _imp_frequency(self, band: ImpulseParams, imp, s_f: float) -> np.ndarray:
-        mu, sig_n = frequency.lognormal_params(band.f_low_cpp, band.f_high_cpp, s_f)
+        """The per-impulse frequency draw (section 4.1) where the band is open; 0 elsewhere
+        (no noise there)."""
+        f = np.zeros(len(band.index))
+        o = band.open_
+        mu, sig_n = frequency.lognormal_params(band.f_low_cpp[o], band.f_high_cpp[o], s_f)
         if self.preset.frequency_draw == "truncated":
-            return frequency.draw_truncated(imp.quantile[band.index], mu, sig_n, band.f_high_cpp)
+            f[o] = frequency.draw_truncated(imp.quantile[band.index[o]], mu, sig_n,
+                                            band.f_high_cpp[o])
+            return f
         rng = np.random.default_rng(imp.seed)
         normals = rng.standard_normal((len(imp), frequency.RELEASE_REJECTION_TRIES))
-        return frequency.draw_release(normals[band.index], mu, sig_n, band.f_high_cpp)
-
-    def _laplacian_at(self, lap, sigma, x, y) -> np.ndarray:
-        level = amp.laplacian_level(sigma, self.preset.attenuation)
-        return amp.laplacian_amplitude_at(lap, level, x, y)
+        f[o] = frequency.draw_release(normals[band.index[o]], mu, sig_n, band.f_high_cpp[o])
+        return f
 
     def _headroom_at(self, headroom, x, y) -> np.ndarray:
-        lo, hi, block = headroom
+        kind, lo, hi, block = headroom
+        if kind == "exact":
+            lo_w, hi_w = pyramids.window_extremes(lo, hi, self._kernel_radius_px(), x, y)
+            return amp.headroom_limit(lo_w, hi_w)
         xc = np.clip(x, 0, None)
         yc = np.clip(y, 0, None)
         return amp.headroom_limit(
             pyramids.sample_nearest(lo, xc, yc, block), pyramids.sample_nearest(hi, xc, yc, block)
         )
 
-    def _amplitude(self, lap_amp, limit, s_k) -> np.ndarray:
-        k = s_k * amp.RELEASE_AMPLITUDE_GAIN * lap_amp
-        return np.minimum(k, limit)
+    def _amplitude(self, band: ImpulseParams, lap_amp, limit, s_k) -> np.ndarray:
+        """K (eq. 8, with the release's gain), reduced by the clipping control; 0 where the
+        band is closed."""
+        k = np.minimum(s_k * amp.RELEASE_AMPLITUDE_GAIN * lap_amp, limit)
+        return np.where(band.open_, k, 0.0)
 
     def _noise(self, shape, imp, band, k, f, omega, n) -> np.ndarray:
         full = np.zeros(len(imp))
@@ -434,7 +578,8 @@ class Enhancer:
         full[band.index] = k
         freq[band.index] = f
         carrier[band.index] = omega - 0.5 * np.pi
-        return gabor.synthesize(shape, imp, full, freq, carrier, n, self.preset.gabor_a_cpp)
+        return gabor.synthesize(shape, imp, full, freq, carrier, n, self.preset.gabor_a_cpp,
+                                self.options.kernel_truncation, self.options.skip, self._dtype)
 
     def _compose(self, method, foveated, contrast, noise) -> np.ndarray:
         """The displayed frame: the grey contrast change and noise are added to every channel
@@ -463,7 +608,7 @@ class Enhancer:
         if name in ("foveated", "contrast"):
             return self._encode(self._linear_image(name))
         if name in ("noise", "amplitude") and self._c.get("method") != "ours":
-            return np.zeros(self._c.get("shape"), np.float32)  # no noise: K = 0 everywhere
+            return np.zeros(self._c.get("shape"), self._dtype)  # no noise: K = 0 everywhere
         return self._read_map(name)
 
     # The read hooks: each backend supplies these three.
@@ -491,16 +636,26 @@ class Enhancer:
         x, y = xx.ravel(), yy.ravel()
         if name == "orientation_rad":
             gx, gy = c.get("gradients")
-            return orientation.orientation_at(gx, gy, x, y).reshape(h, w)
+            return orientation.orientation_at(gx, gy, x, y, dtype=self._dtype).reshape(h, w)
         s, f_lo, f_hi = self._band_at(geom, c.get("gaze"), c.get("sigma_given"), c.get("sigma"),
                                       c.get("blur_rate"), x, y)
         if name == "f_low_cpp":
-            return f_lo.reshape(h, w).astype(np.float32)
+            return f_lo.reshape(h, w).astype(self._dtype)
         if name == "f_high_cpp":
-            return f_hi.reshape(h, w).astype(np.float32)
-        k = self._amplitude(self._laplacian_at(c.get("abs_laplacian"), s, x, y),
-                            self._headroom_at(c.get("headroom"), x, y), c.get("s_k"))
-        return np.where(f_lo < f_hi, k, 0.0).reshape(h, w).astype(np.float32)
+            return f_hi.reshape(h, w).astype(self._dtype)
+        # amplitude, with the method "ours" (Enhancer._map)
+        lap = c.get("abs_laplacian_full" if self.options.skip else "abs_laplacian")
+        kind, lo, hi, _ = head = c.get("headroom")
+        if kind == "exact":  # every pixel's window: the separable filter
+            limit = amp.headroom_limit(*pyramids.window_extremes(
+                lo, hi, self._kernel_radius_px())).ravel()
+        else:
+            limit = self._headroom_at(head, x, y)
+        level = amp.laplacian_level(s, self.preset.attenuation)
+        pixels = ImpulseParams(np.arange(x.size), x, y, s, f_lo, f_hi, f_lo < f_hi, level)
+        k = self._amplitude(pixels, amp.laplacian_amplitude_at(lap, level, x, y), limit,
+                            c.get("s_k"))
+        return k.reshape(h, w).astype(self._dtype)
 
 
 def enhance(

@@ -1,3 +1,4 @@
+
 """Image pyramids (paper sections 4.2, 4.3; notes sections 3.5, 3.7, 3.8).
 
 Gaussian and Laplacian pyramids use the 5-tap binomial kernel [1, 4, 6, 4, 1] / 16 with
@@ -14,6 +15,8 @@ Min/max pyramids (paper section 4.2): level ``l`` holds the minimum (maximum) of
 
 from __future__ import annotations
 
+import math
+
 import numba
 import numpy as np
 from scipy import ndimage
@@ -28,9 +31,10 @@ BINOMIAL_5 = np.array([1.0, 4.0, 6.0, 4.0, 1.0], dtype=np.float32) / 16.0
 EXPAND_EVEN_TAPS = 2 * BINOMIAL_5[0::2]
 EXPAND_ODD_TAPS = 2 * BINOMIAL_5[1::2]
 # float32 scalars for the compiled loops (the kernels are symmetric)
-_REDUCE_OUTER, _REDUCE_INNER, _REDUCE_CENTRE = BINOMIAL_5[0], BINOMIAL_5[1], BINOMIAL_5[2]
-_EXPAND_SIDE, _EXPAND_CENTRE = EXPAND_EVEN_TAPS[0], EXPAND_EVEN_TAPS[1]
+_REDUCE_OUTER, _REDUCE_INNER = BINOMIAL_5[0], BINOMIAL_5[1]
+_EXPAND_SIDE = EXPAND_EVEN_TAPS[0]
 _EXPAND_HALF = EXPAND_ODD_TAPS[0]
+_NINE = np.float32(9.0)
 
 
 def level_scale(level: int) -> int:
@@ -46,60 +50,92 @@ def gaussian_sigma_px(level: int) -> float:
     return float(np.sqrt((4.0**level - 1.0) / 3.0))
 
 
+# The reduce and expand loops are written as "centre + weighted differences" (mathematically
+# the same filters): a constant region then gives exactly its constant on every level, so
+# |L| is exactly 0 there and the flat regions the enhancer skips are exactly those whose result
+# is 0 (EngineOptions.skip). They are compiled without fast-math (no reassociation may undo
+# the form); they vectorise all the same, having no reductions. Any float dtype: the
+# constants are exact dyadic fractions, exact in float32 and float64 alike.
+
+
+@numba.njit(cache=True, inline="always", fastmath=FASTMATH, nogil=True)
+def _taps5(c, m2, m1, p1, p2):  # pragma: no cover - compiled
+    """BINOMIAL_5 at centre ``c``: ``c + k0 ((m2 - c) + (p2 - c)) + k1 ((m1 - c) + (p1 - c))``."""
+    return c + (_REDUCE_OUTER * ((m2 - c) + (p2 - c)) + _REDUCE_INNER * ((m1 - c) + (p1 - c)))
+
+
+@numba.njit(cache=True, inline="always", fastmath=FASTMATH, nogil=True)
+def _taps3(c, m1, p1):  # pragma: no cover - compiled
+    """EXPAND_EVEN_TAPS at centre ``c``: ``c + side ((m1 - c) + (p1 - c))``."""
+    return c + _EXPAND_SIDE * ((m1 - c) + (p1 - c))
+
+
+@numba.njit(cache=True, inline="always", fastmath=FASTMATH, nogil=True)
+def _taps2(c, p1):  # pragma: no cover - compiled
+    """EXPAND_ODD_TAPS from ``c``: ``c + half (p1 - c)``."""
+    return c + _EXPAND_HALF * (p1 - c)
+
+
 @numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
 def _reduce_2d(img: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
     h, w = img.shape
     ho, wo = (h + 1) // 2, (w + 1) // 2
-    out = np.empty((ho, wo), dtype=np.float32)
-    k0, k1, k2 = _REDUCE_OUTER, _REDUCE_INNER, _REDUCE_CENTRE
+    out = np.empty((ho, wo), dtype=img.dtype)
     for i in numba.prange(ho):
         r = 2 * i
         rm2, rm1 = max(r - 2, 0), max(r - 1, 0)
         rp1, rp2 = min(r + 1, h - 1), min(r + 2, h - 1)
-        row = np.empty(w, dtype=np.float32)
+        row = np.empty(w, dtype=img.dtype)
         for x in range(w):
-            row[x] = (
-                k0 * (img[rm2, x] + img[rp2, x]) + k1 * (img[rm1, x] + img[rp1, x])
-                + k2 * img[r, x]
-            )
+            row[x] = _taps5(img[r, x], img[rm2, x], img[rm1, x], img[rp1, x], img[rp2, x])
         for j in range(wo):
             c = 2 * j
-            out[i, j] = (
-                k0 * (row[max(c - 2, 0)] + row[min(c + 2, w - 1)])
-                + k1 * (row[max(c - 1, 0)] + row[min(c + 1, w - 1)])
-                + k2 * row[c]
-            )
+            out[i, j] = _taps5(row[c], row[max(c - 2, 0)], row[max(c - 1, 0)],
+                               row[min(c + 1, w - 1)], row[min(c + 2, w - 1)])
     return out
+
+
+@numba.njit(cache=True, inline="always", fastmath=FASTMATH, nogil=True)
+def _expand_row(a, y, x0, x1, row):  # pragma: no cover - compiled
+    """The vertical pass of :func:`expand` for output row ``y``: ``row[x]`` for the columns
+    ``x0 <= x < x1`` of ``a``."""
+    h = a.shape[0]
+    i = y // 2
+    if y % 2 == 0:
+        im1, ip1 = max(i - 1, 0), min(i + 1, h - 1)
+        for x in range(x0, x1):
+            row[x] = _taps3(a[i, x], a[im1, x], a[ip1, x])
+    else:
+        ip1 = min(i + 1, h - 1)
+        for x in range(x0, x1):
+            row[x] = _taps2(a[i, x], a[ip1, x])
+
+
+@numba.njit(cache=True, inline="always", fastmath=FASTMATH, nogil=True)
+def _expand_at(row, x, w):  # pragma: no cover - compiled
+    """The horizontal pass of :func:`expand` at output column ``x`` (``w`` columns in ``row``)."""
+    j = x // 2
+    if x % 2 == 0:
+        return _taps3(row[j], row[max(j - 1, 0)], row[min(j + 1, w - 1)])
+    return _taps2(row[j], row[min(j + 1, w - 1)])
 
 
 @numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
 def _expand_2d(a: np.ndarray, ho: int, wo: int) -> np.ndarray:  # pragma: no cover - compiled
     h, w = a.shape
-    out = np.empty((ho, wo), dtype=np.float32)
+    out = np.empty((ho, wo), dtype=a.dtype)
     for y in numba.prange(ho):
-        i = y // 2
-        row = np.empty(w, dtype=np.float32)
-        if y % 2 == 0:
-            im1, ip1 = max(i - 1, 0), min(i + 1, h - 1)
-            for x in range(w):
-                row[x] = _EXPAND_SIDE * (a[im1, x] + a[ip1, x]) + _EXPAND_CENTRE * a[i, x]
-        else:
-            ip1 = min(i + 1, h - 1)
-            for x in range(w):
-                row[x] = _EXPAND_HALF * (a[i, x] + a[ip1, x])
+        row = np.empty(w, dtype=a.dtype)
+        _expand_row(a, y, 0, w, row)
         for x in range(wo):
-            j = x // 2
-            if x % 2 == 0:
-                out[y, x] = _EXPAND_SIDE * (row[max(j - 1, 0)] + row[min(j + 1, w - 1)]) + (
-                    _EXPAND_CENTRE * row[j]
-                )
-            else:
-                out[y, x] = _EXPAND_HALF * (row[j] + row[min(j + 1, w - 1)])
+            out[y, x] = _expand_at(row, x, w)
     return out
 
 
 def _per_channel(fn, image: np.ndarray, *args: int) -> np.ndarray:
-    image = np.ascontiguousarray(image, dtype=np.float32)
+    image = np.ascontiguousarray(image)
+    if image.dtype not in (np.float32, np.float64):
+        image = image.astype(np.float32)
     if image.ndim == 2:
         return fn(image, *args)
     return np.stack(
@@ -110,7 +146,8 @@ def _per_channel(fn, image: np.ndarray, *args: int) -> np.ndarray:
 def reduce(image: np.ndarray) -> np.ndarray:
     """One Gaussian-pyramid step: binomial filter (replicated borders), keep every second sample.
 
-    Works on (H, W) or (H, W, C) float32 images.
+    Works on (H, W) or (H, W, C) float32 or float64 images (the result has their dtype);
+    a constant region gives exactly its constant.
     """
     return _per_channel(_reduce_2d, image)
 
@@ -135,30 +172,112 @@ def gaussian_pyramid(image: np.ndarray, levels: int) -> list[np.ndarray]:
     return pyr
 
 
+#: Side (level pixels) of the tiles :func:`smoothed_abs_laplacian` computes or leaves out.
+ABS_LAPLACIAN_TILE = 32
+
+
 @numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
-def _abs_diff_box3(fine, up):  # pragma: no cover - compiled
+def _abs_laplacian_tiles(fine, coarse, need, tile):  # pragma: no cover - compiled
+    """``|fine - expand(coarse)|`` smoothed by a 3 x 3 mean (borders replicated), on the
+    ``tile`` x ``tile`` tiles where ``need`` is true; 0 elsewhere. A tile is computed with
+    a one-pixel border of the difference, so each value is the same whichever tiles run."""
     h, w = fine.shape
-    out = np.empty((h, w), dtype=np.float32)
-    for y in numba.prange(h):
-        for x in range(w):
-            acc = np.float32(0.0)
-            for dy in range(-1, 2):
-                yy = min(max(y + dy, 0), h - 1)
-                for dx in range(-1, 2):
-                    xx = min(max(x + dx, 0), w - 1)
-                    acc += abs(fine[yy, xx] - up[yy, xx])
-            out[y, x] = acc / np.float32(9.0)
+    wc = coarse.shape[1]
+    th, tw = need.shape
+    out = np.zeros((h, w), dtype=fine.dtype)
+    todo = np.flatnonzero(need.ravel())  # the tiles to compute, all of one cost
+    for i in numba.prange(todo.shape[0]):
+        ty, tx = todo[i] // tw, todo[i] % tw
+        y0, x0 = ty * tile, tx * tile
+        y1, x1 = min(y0 + tile, h), min(x0 + tile, w)
+        ya, yb = max(y0 - 1, 0), min(y1 + 1, h)
+        xa, xb = max(x0 - 1, 0), min(x1 + 1, w)
+        # coarse columns the expansion of columns [xa, xb) reads
+        ca, cb = max(xa // 2 - 1, 0), min((xb - 1) // 2 + 2, wc)
+        row = np.empty(wc, dtype=fine.dtype)
+        diff = np.empty((yb - ya, xb - xa), dtype=fine.dtype)
+        for y in range(ya, yb):
+            _expand_row(coarse, y, ca, cb, row)
+            for x in range(xa, xb):
+                diff[y - ya, x - xa] = abs(fine[y, x] - _expand_at(row, x, wc))
+        for y in range(y0, y1):
+            for x in range(x0, x1):
+                # the sum starts from its first term (0 + a == a), in the dtype of the image
+                acc = diff[max(y - 1, 0) - ya, max(x - 1, 0) - xa]
+                for dy in range(-1, 2):
+                    yy = min(max(y + dy, 0), h - 1) - ya
+                    for dx in range(-1, 2):
+                        if dy != -1 or dx != -1:
+                            acc += diff[yy, min(max(x + dx, 0), w - 1) - xa]
+                out[y, x] = acc / _NINE
     return out
 
 
-def smoothed_abs_laplacian(gaussian: list[np.ndarray], levels: int) -> dict[int, np.ndarray]:
-    """``|L_k|`` smoothed by a 3 x 3 mean on its own grid (notes 3.7), ``k = 1..levels``,
-    in one fused pass per level."""
+def pyramid_depth(shape: tuple[int, int], levels: int) -> int:
+    """How many levels past G_0 :func:`gaussian_pyramid` builds for an image of ``shape``."""
+    h, w = int(shape[0]), int(shape[1])
+    n = 0
+    while n < levels and min(h, w) >= 2:
+        h, w, n = (h + 1) // 2, (w + 1) // 2, n + 1
+    return n
+
+
+def tile_grid(shape: tuple[int, int], tile: int = ABS_LAPLACIAN_TILE) -> tuple[int, int]:
+    """Tiles per column and per row of an (H, W) grid cut into ``tile`` x ``tile`` tiles."""
+    return -(-int(shape[0]) // tile), -(-int(shape[1]) // tile)
+
+
+def smoothed_abs_laplacian(
+    gaussian: list[np.ndarray], levels: int, need: dict[int, np.ndarray] | None = None
+) -> dict[int, np.ndarray]:
+    """``|L_k|`` smoothed by a 3 x 3 mean on its own grid (notes 3.7), ``k = 1..levels``, in
+    one fused pass per level: ``|G_{k-1} - expand(G_k)|`` then the mean.
+
+    ``need[k]`` (bool, :func:`tile_grid` of level k's grid) limits level k to the tiles that
+    are read (the enhancer's skipping); the others are left 0. A tile's values are the same
+    whichever tiles are computed. With the exact pyramid arithmetic, a tile whose
+    neighbourhood of G_0 is constant (:func:`abs_laplacian_reach_px`) is exactly 0 anyway."""
     out = {}
     for k in range(1, min(levels, len(gaussian) - 1) + 1):
-        fine = np.ascontiguousarray(gaussian[k - 1], dtype=np.float32)
-        out[k] = _abs_diff_box3(fine, expand(gaussian[k], fine.shape[:2]))
+        fine = np.ascontiguousarray(gaussian[k - 1])
+        coarse = np.ascontiguousarray(gaussian[k])
+        mask = need.get(k) if need is not None else None
+        if mask is None:
+            mask = np.ones(tile_grid(fine.shape), dtype=np.bool_)
+        out[k] = _abs_laplacian_tiles(fine, coarse, mask, ABS_LAPLACIAN_TILE)
     return out
+
+
+def abs_laplacian_reach_px(level: int | np.ndarray) -> int | np.ndarray:
+    """How far (full-resolution px) the image reaches into a bilinear sample of the smoothed
+    ``|L_level|`` (:func:`smoothed_abs_laplacian`, :func:`sample_bilinear`): the sample at
+    ``p`` depends only on G_0 within ``p +- (9 s - 2)``, ``s = 2**(level - 1)``: node ``j``
+    of G_{k-1} depends on G_0 within ``s j +- 2 (s - 1)`` (the reduces), the expansion and the
+    3 x 3 mean on G_{k-1} within ``j - 6 .. j + 5``, the bilinear taps lie within ``p +- s``.
+    Clamped borders read inside the same window. So a sample whose window of G_0 is constant
+    is exactly 0."""
+    return 9 * np.left_shift(1, np.asarray(level) - 1) - 2
+
+
+#: Level of the blocks the skipping's flatness tests work on (EngineOptions.skip): the 8 x 8
+#: blocks of the min/max pyramid's level 3 (section 4.2).
+FLAT_BLOCK_LEVEL = 3
+
+
+def constant_blocks(lo: np.ndarray, hi: np.ndarray, radius_blocks: int) -> np.ndarray:
+    """Blocks of a block-extremes grid (:func:`block_extremes`) around which the image is one
+    constant: the minimum of ``lo`` equals the maximum of ``hi`` over the ``(2 radius + 1)^2``
+    blocks centred on each (clamped at the image's edges, as the image's own borders are)."""
+    size = 2 * int(radius_blocks) + 1
+    return ndimage.minimum_filter(lo, size, mode="nearest") == ndimage.maximum_filter(
+        hi, size, mode="nearest")
+
+
+def blocks_reaching(radius_px: int | np.ndarray, block: int) -> int | np.ndarray:
+    """Block radius (:func:`constant_blocks`) that covers ``radius_px`` (whole px)
+    around every pixel of a block: ceil(radius / block), and one block more for the pixel's
+    place in its block."""
+    return -(-np.asarray(radius_px) // block) + 1
 
 
 def laplacian_levels(gaussian: list[np.ndarray], levels: int) -> dict[int, np.ndarray]:
@@ -170,7 +289,7 @@ def laplacian_levels(gaussian: list[np.ndarray], levels: int) -> dict[int, np.nd
     return out
 
 
-@numba.njit(parallel=True, cache=True, nogil=True, fastmath=FASTMATH)
+@numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
 def _block_extremes(img, add, block):  # pragma: no cover - compiled
     h, w, c = img.shape
     bh, bw = (h + block - 1) // block, (w + block - 1) // block
@@ -202,17 +321,89 @@ def block_extremes(
     block is the same number, computed here in one pass (edge blocks are the partial ones).
     """
     img = np.ascontiguousarray(image if image.ndim == 3 else image[..., None])
-    grey = np.zeros(img.shape[:2], img.dtype) if add is None else np.ascontiguousarray(
-        add, dtype=img.dtype)
+    if add is None:  # a zero image broadcast (no memory): a stride-0 view
+        grey = np.broadcast_to(np.zeros(1, img.dtype).reshape(1, 1), img.shape[:2])
+    else:
+        grey = np.ascontiguousarray(add, dtype=img.dtype)
     return _block_extremes(img, grey, level_scale(level))
 
 
+@numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
+def _window_extremes_at(lo, hi, xs, ys, r):  # pragma: no cover - compiled
+    # min and max are exact in any order: fast-math only lets the reductions vectorise
+    h, w = lo.shape
+    n = xs.shape[0]
+    out_lo = np.empty(n, dtype=lo.dtype)
+    out_hi = np.empty(n, dtype=hi.dtype)
+    for i in numba.prange(n):
+        x0 = min(max(int(math.ceil(xs[i] - r)), 0), w - 1)
+        x1 = max(min(int(math.floor(xs[i] + r)), w - 1), x0)
+        y0 = min(max(int(math.ceil(ys[i] - r)), 0), h - 1)
+        y1 = max(min(int(math.floor(ys[i] + r)), h - 1), y0)
+        mn = lo[y0, x0]
+        mx = hi[y0, x0]
+        for y in range(y0, y1 + 1):
+            for x in range(x0, x1 + 1):
+                mn = min(mn, lo[y, x])
+                mx = max(mx, hi[y, x])
+        out_lo[i] = mn
+        out_hi[i] = mx
+    return out_lo, out_hi
+
+
+def window_extremes(
+    lo: np.ndarray, hi: np.ndarray, radius_px: float, x_px: np.ndarray | None = None,
+    y_px: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Exact neighbourhood extremes: the minimum of ``lo`` and the maximum of ``hi`` (H, W)
+    over the pixels a square of half-side ``radius_px`` centred on each point covers, clipped
+    to the image: at the points ``(x_px, y_px)``, or at every pixel (an (H, W) map; at an
+    integer point the square covers ``2 floor(r) + 1`` pixels, a separable min/max filter).
+    The exact counterpart of the min/max pyramid's blocks (section 4.2;
+    ``EngineOptions.extremes``)."""
+    if x_px is None:
+        size = 2 * int(math.floor(radius_px)) + 1
+        return (ndimage.minimum_filter(lo, size, mode="nearest"),
+                ndimage.maximum_filter(hi, size, mode="nearest"))
+    x = np.ascontiguousarray(x_px, dtype=np.float64).ravel()
+    y = np.ascontiguousarray(y_px, dtype=np.float64).ravel()
+    return _window_extremes_at(np.ascontiguousarray(lo), np.ascontiguousarray(hi), x, y,
+                               float(radius_px))
+
+
+@numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
+def _channel_block_extremes(img, block):  # pragma: no cover - compiled
+    h, w, c = img.shape
+    bh, bw = (h + block - 1) // block, (w + block - 1) // block
+    lo = np.empty((bh, bw, c), dtype=img.dtype)
+    hi = np.empty((bh, bw, c), dtype=img.dtype)
+    for by in numba.prange(bh):
+        for bx in range(bw):
+            for ch in range(c):  # the block is in cache: one channel at a time, in registers
+                mn = img[by * block, bx * block, ch]
+                mx = mn
+                for y in range(by * block, min(by * block + block, h)):
+                    for x in range(bx * block, min(bx * block + block, w)):
+                        v = img[y, x, ch]
+                        mn = min(mn, v)
+                        mx = max(mx, v)
+                lo[by, bx, ch] = mn
+                hi[by, bx, ch] = mx
+    return lo, hi
+
+
+def channel_block_extremes(image: np.ndarray, level: int) -> tuple[np.ndarray, np.ndarray]:
+    """Like :func:`block_extremes`, but per channel: the minimum and maximum of each channel
+    of an (H, W, C) image over each ``2**level`` square block, (bh, bw, C) each."""
+    return _channel_block_extremes(np.ascontiguousarray(image), level_scale(level))
+
+
 def sample_bilinear(grid: np.ndarray, x_px: np.ndarray, y_px: np.ndarray, level: int) -> np.ndarray:
-    """Bilinear sample of a level-``level`` grid at full-resolution coordinates (borders held)."""
+    """Bilinear sample of a level-``level`` grid at full-resolution coordinates (borders held),
+    in the grid's dtype."""
     s = float(level_scale(level))
     return ndimage.map_coordinates(
-        grid, [np.asarray(y_px) / s, np.asarray(x_px) / s], order=1, mode="nearest"
-    ).astype(np.float32, copy=False)
+        grid, [np.asarray(y_px) / s, np.asarray(x_px) / s], order=1, mode="nearest")
 
 
 def sample_nearest(grid: np.ndarray, x_px: np.ndarray, y_px: np.ndarray, block: int) -> np.ndarray:
@@ -227,7 +418,7 @@ def sample_nearest(grid: np.ndarray, x_px: np.ndarray, y_px: np.ndarray, block: 
 KEYS_A = -0.5
 
 
-@numba.njit(cache=True, inline="always", nogil=True, fastmath=FASTMATH)
+@numba.njit(cache=True, inline="always", fastmath=FASTMATH, nogil=True)
 def _keys_weight(t):  # pragma: no cover - compiled
     """Keys' cubic-convolution kernel W(t), a = KEYS_A (interpolating: W(0) = 1, W(+-1) = 0)."""
     t = abs(t)
@@ -239,7 +430,7 @@ def _keys_weight(t):  # pragma: no cover - compiled
     return 0.0
 
 
-@numba.njit(parallel=True, cache=True, nogil=True, fastmath=FASTMATH)
+@numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
 def _sample_cubic(grid, u, v):  # pragma: no cover - compiled
     h, w = grid.shape
     out = np.empty(u.shape[0])
@@ -267,6 +458,9 @@ def sample_cubic(grid: np.ndarray, x_px: np.ndarray, y_px: np.ndarray, level: in
     x = np.asarray(x_px, dtype=np.float64)
     y = np.asarray(y_px, dtype=np.float64)
     x, y = np.broadcast_arrays(x, y)
-    out = _sample_cubic(np.ascontiguousarray(grid, dtype=np.float32), x.ravel() / s,
+    grid = np.ascontiguousarray(grid)
+    if grid.dtype != np.float64:
+        grid = grid.astype(np.float32)
+    out = _sample_cubic(grid, x.ravel() / s,
                         y.ravel() / s)
     return out.reshape(x.shape)

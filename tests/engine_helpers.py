@@ -58,3 +58,18 @@ def band_power_fraction(res, ecc_deg: float, row: int = 540, size: int = 96, sla
     assert lo < hi
     inside = (fr >= lo - slack) & (fr <= hi + slack)
     return power[inside].sum() / power.sum(), inside.mean()
+
+
+def mixed_scene(height: int = 540, width: int = 960, seed: int = 3, rgb: bool = True):
+    """A frame that mixes what skipping must get right: texture, black borders, a flat colour
+    patch, flat grey and white regions, their edges off the 8 px blocks and 16 and 32 px tiles
+    the skipping works on (so tiles cut through edges), and a constant-luminance patch that
+    is not grey."""
+    img = textured_image(height, width, seed=seed, rgb=True)
+    h, w = height, width
+    img[:, : max(1, w * 37 // 960)] = 0.0  # black borders
+    img[:, w - max(1, w * 29 // 960):] = 0.0
+    img[h * 100 // 540: h * 333 // 540, w * 203 // 960: w * 517 // 960] = (0.4, 0.35, 0.3)
+    img[h * 301 // 540:, w * 601 // 960: w * 899 // 960] = 0.5
+    img[h * 21 // 540: h * 91 // 540, w * 701 // 960: w * 949 // 960] = 1.0
+    return img if rgb else img.mean(axis=2).astype(np.float32)

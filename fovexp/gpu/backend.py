@@ -29,12 +29,12 @@ import numpy as np
 
 from .. import gabor
 from ..amplitude import MAX_LAPLACIAN_LEVEL
-from ..contrast import sat_pad_px
+from ..contrast import check_sat_fits, sat_pad_px
 from ..errors import FovexpError
 from ..foveation import blur_stack_plan
 from ..geometry import Display, GeometryModel, ViewingGeometry
 from ..orientation import ORIENTATION_LEVEL
-from ..params import ParameterTable, get_preset
+from ..params import EngineOptions, ParameterTable, get_preset
 from ..pipeline import POINT_MAPS, Enhancer, EnhanceResult
 from ..pyramids import level_scale
 from .programs import (
@@ -161,11 +161,18 @@ class GpuEnhancer(Enhancer):
     """
 
     backend = "gpu"
+    #: The :class:`EngineOptions` this backend implements other than at their defaults.
+    SUPPORTED_OPTIONS: frozenset[str] = frozenset({"skip"})
+
+    @classmethod
+    def unsupported(cls, options: EngineOptions) -> dict[str, object]:
+        """The options (name: value) this backend does not implement."""
+        return {k: v for k, v in options.non_default().items() if k not in cls.SUPPORTED_OPTIONS}
 
     def __init__(
         self, display: Display, preset: str = "paper", geometry: GeometryModel | None = None,
         table: ParameterTable | None = None, ctx: Any = None, profile: bool | str = False,
-        owns_context: bool | None = None,
+        owns_context: bool | None = None, options: EngineOptions | None = None,
     ) -> None:
         if profile not in PROFILE_MODES:
             raise FovexpError(f"profile must be one of {', '.join(map(repr, PROFILE_MODES))}, "
@@ -174,6 +181,13 @@ class GpuEnhancer(Enhancer):
             raise FovexpError(
                 f"the GPU backend implements the paper preset, not {preset!r}: the release "
                 "preset runs on the CPU backend (backend='cpu')"
+            )
+        bad = self.unsupported(options or EngineOptions())
+        if bad:
+            name, value = next(iter(bad.items()))
+            raise FovexpError(
+                f"the GPU backend does not implement the engine option {name}={value!r}: it "
+                "runs on the CPU backend (backend='cpu')"
             )
         #: release the context in close() (default: when this enhancer created it)
         self._owns_context = ctx is None if owns_context is None else owns_context
@@ -197,7 +211,7 @@ class GpuEnhancer(Enhancer):
                 self._programs.compile_all()
                 if self.profile == "gpu":
                     self._timer = _DispatchTimer.for_context(self.ctx, self._programs)
-            super().__init__(display, preset, geometry, table)
+            super().__init__(display, preset, geometry, table, options)
             if self._timer is not None:
                 self._c.clock = self._timer.clock
                 self.timing_method = self._timer.method
@@ -438,9 +452,13 @@ class GpuEnhancer(Enhancer):
         bracket = self._buffer("BRACKET", h * w * 2 * _F4)
         fov = self._buffer("FOVEATED", h * w * c * _F4)
         sigma = self._buffers["SIGMA"]
+        tx, ty, _ = self._groups_2d(h, w)
+        flags = self._buffer("FLAT_FLAGS", tx * ty * 4)
+        flat_bufs, skip = self._flat_tiles("LINEAR_TILES", linear, c)
         self._run("foveation.glsl", "STACK_INIT", self._groups_2d(h, w),
                   {"LINEAR": linear, "SIGMA": sigma, "LEVELS": levels, "BRACKET": bracket,
-                   "FOVEATED": fov}, image_hwc=(h, w, c), n_levels=int(plan.sigmas_px.size))
+                   "FOVEATED": fov, "FLAT_FLAGS": flags, **flat_bufs}, image_hwc=(h, w, c),
+                  n_levels=int(plan.sigmas_px.size), reach_px=plan.reach_px(), **skip)
         largest = max(grids[int(m)].height * grids[int(m)].width for m in plan.pyramid_level)
         tmp = self._buffer("BLUR_TMP", largest * c * _F4, max_sigma)
         out = self._buffer("BLUR_OUT", largest * c * _F4, max_sigma)
@@ -460,12 +478,14 @@ class GpuEnhancer(Enhancer):
             groups = self._groups_2d(g.height, g.width)
             for along_y, (a, b, off) in ((1, (src, tmp, g.offset)), (0, (tmp, out, 0))):
                 self._run("foveation.glsl", "BLUR", groups, {"BLUR_SRC": a, "BLUR_DST": b,
-                          "KERNELS": kbuf, "TILES": tiles}, grid_hwc=(g.height, g.width, c),
+                          "KERNELS": kbuf, "TILES": tiles, "FLAT_FLAGS": flags},
+                          grid_hwc=(g.height, g.width, c),
                           src_offset=off, kernel_offset=k_offset, kernel_radius=radius,
                           along_y=along_y, **level)
             k_offset += plan.kernels[lv].size
             self._run("foveation.glsl", "STACK_ACCUMULATE", self._groups_2d(h, w),
-                      {"BLUR_DST": out, "BRACKET": bracket, "FOVEATED": fov, "TILES": tiles},
+                      {"BLUR_DST": out, "BRACKET": bracket, "FOVEATED": fov, "TILES": tiles,
+                       "FLAT_FLAGS": flags, "LINEAR": linear},
                       image_hwc=(h, w, c), stack_level=lv, level_hw=(g.height, g.width), **level)
         return fov
 
@@ -486,7 +506,34 @@ class GpuEnhancer(Enhancer):
         pyr = self._buffer("LUMA_PYR", (last.offset + last.height * last.width) * _F4)
         self._run("colour.glsl", "LUMINANCE", self._groups_2d(h, w),
                   {"FOVEATED": fov, "LUMA_PYR": pyr}, image_hwc=(h, w, c))
+        self._flat_tiles("LUMA_TILES", pyr, 1)  # the luminance is level 0 of its pyramid
         return grids
+
+    def _flat_tiles(self, name: str, image: Any, channels: int) -> tuple[dict, dict]:
+        """With skipping (EngineOptions.skip), each tile's extremes of ``image`` (H, W,
+        ``channels``) into buffer ``name``, which the early exits read; the buffer and
+        uniforms to bind them with (an unused buffer and skip = 0 without skipping)."""
+        h, w, _ = self._hwc()
+        tx, ty, _ = self._groups_2d(h, w)
+        if not self.options.skip:
+            return self._no_skip()
+        tiles = self._buffer(name, tx * ty * channels * 2 * _F4)
+        self._run("pyramids.glsl", "TILE_EXTREMES", (tx, ty, 1),
+                  {"TILE_SRC": image, "FLAT_TILES": tiles}, image_hwc=(h, w, channels))
+        return {"FLAT_TILES": tiles}, dict(skip=1, flat_tiles_hwc=(ty, tx, channels))
+
+    def _no_skip(self) -> tuple[dict, dict]:
+        return {"FLAT_TILES": self._buffer("UNUSED", 16)}, dict(skip=0, flat_tiles_hwc=(1, 1, 1))
+
+    def _skip_uniforms(self) -> tuple[dict[str, Any], dict[str, Any]]:
+        """The luminance's tile extremes (made by the luma stage) and the uniforms of the
+        stages' early exits (EngineOptions.skip)."""
+        h, w, _ = self._hwc()
+        tx, ty, _ = self._groups_2d(h, w)
+        if not self.options.skip:
+            return self._no_skip()
+        return ({"FLAT_TILES": self._buffers["LUMA_TILES"]},
+                dict(skip=1, flat_tiles_hwc=(ty, tx, 1)))
 
     def _gpu_pyramid(self, grids: list[_Grid]) -> list[_Grid]:
         pyr = self._buffers["LUMA_PYR"]
@@ -511,14 +558,19 @@ class GpuEnhancer(Enhancer):
         lap = self._buffer("ABSLAP", total * _F4)
         tmp = self._buffer("LAP_TMP", grids[0].height * grids[0].width * _F4)
         pyr = self._buffers["LUMA_PYR"]
+        skip_bufs, skip = self._skip_uniforms()
         for k in range(1, top + 1):
             f, co = grids[k - 1], grids[k]
             groups = self._groups_2d(f.height, f.width)
-            self._run("pyramids.glsl", "ABS_LAPLACIAN", groups, {"LUMA_PYR": pyr, "LAP_TMP": tmp},
+            self._run("pyramids.glsl", "ABS_LAPLACIAN", groups,
+                      {"LUMA_PYR": pyr, "LAP_TMP": tmp, **skip_bufs},
                       fine_hw=(f.height, f.width), fine_offset=f.offset,
-                      coarse_hw=(co.height, co.width), coarse_offset=co.offset)
-            self._run("pyramids.glsl", "BOX3", groups, {"LAP_TMP": tmp, "ABSLAP": lap},
-                      grid_hw=(f.height, f.width), dst_offset=int(offsets[k]))
+                      coarse_hw=(co.height, co.width), coarse_offset=co.offset,
+                      level_scale=level_scale(k - 1), **skip)
+            self._run("pyramids.glsl", "BOX3", groups, {"LAP_TMP": tmp, "ABSLAP": lap,
+                                                        **skip_bufs},
+                      grid_hw=(f.height, f.width), dst_offset=int(offsets[k]),
+                      level_scale=level_scale(k - 1), **skip)
         return dict(lap_top=top, lap_offset=offsets, lap_size_wh=sizes)
 
     def _gpu_gradients(self, grids: list[_Grid]) -> dict[str, Any]:
@@ -530,11 +582,13 @@ class GpuEnhancer(Enhancer):
         return dict(gradient_size_wh=(g.width, g.height))
 
     def _gpu_sat(self, grids: list[_Grid], max_sigma: float) -> int | None:
-        """contrast._sat: the summed-area table (float64) of the padded luminance."""
+        """contrast._sat: the exact summed-area table (64-bit fixed point) of the padded
+        luminance."""
         if max_sigma <= 0.0:
             return None
         h, w, _ = self._hwc()
         pad = sat_pad_px(max_sigma)
+        check_sat_fits((h, w), pad, 1.0)  # linear luminance: at most 1
         hp, wp = h + 2 * pad, w + 2 * pad
         sat = self._buffer("SAT", (hp + 1) * (wp + 1) * 8, max_sigma)
         pyr = self._buffers["LUMA_PYR"]
@@ -551,10 +605,11 @@ class GpuEnhancer(Enhancer):
         if pad is None:  # no blur anywhere: no change
             delta.clear()
             return delta
+        skip_bufs, skip = self._skip_uniforms()
         self._run("contrast.glsl", "CONTRAST_CHANGE", self._groups_2d(h, w),
                   {"LUMA_PYR": self._buffers["LUMA_PYR"], "SIGMA": self._buffers["SIGMA"],
-                   "SAT": self._buffers["SAT"], "CONTRAST": delta},
-                  image_hw=(h, w), pad_px=pad, f_e=float(f_e))
+                   "SAT": self._buffers["SAT"], "CONTRAST": delta, **skip_bufs},
+                  image_hw=(h, w), pad_px=pad, f_e=float(f_e), **skip)
         return delta
 
     def _gpu_headroom(self, fov: Any, delta: Any) -> dict[str, Any]:
@@ -631,7 +686,8 @@ class GpuEnhancer(Enhancer):
                   {"IMPULSES": b["IMPULSES"], "CELLS": b["CELLS"], "IMP_PARAMS": b["IMP_PARAMS"],
                    "NOISE": noise},
                   image_hw=(h, w), gabor_a_cpp=a, kernel_radius_px=gabor.kernel_radius_px(a),
-                  cell_px=imp.impulses.cell_px, cell_count_xy=imp.cells_xy)
+                  cell_px=imp.impulses.cell_px, cell_count_xy=imp.cells_xy,
+                  skip=int(self.options.skip))
         return noise
 
     def _gpu_output(self, method: str, fov: Any, contrast, noise) -> Any:

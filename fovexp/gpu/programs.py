@@ -25,7 +25,7 @@ import numpy as np
 from ..acuity import THIBOS_ECC_DEG, THIBOS_T_HIGH_CPD, THIBOS_T_LOW_CPD
 from ..amplitude import MAX_LAPLACIAN_LEVEL, RELEASE_AMPLITUDE_GAIN
 from ..colour import LUMA_BT601
-from ..contrast import BOX_WIDTH_PX_PER_LEVEL
+from ..contrast import BOX_WIDTH_PX_PER_LEVEL, SAT_FRACTION_BITS
 from ..errors import FovexpError
 from ..frequency import CUTOFF_SIGMAS_F, NYQUIST_CPP
 from ..gabor import CELL_BORDER, CELL_ORIGIN_PX
@@ -41,8 +41,13 @@ BINDINGS: dict[str, int] = {name: i for i, name in enumerate((
     "IMAGE", "LINEAR", "SIGMA", "SIGMA_MAX", "BLUR_SRC", "BLUR_DST", "KERNELS", "LEVELS",
     "BRACKET", "FOVEATED", "REDUCE_SRC", "REDUCE_DST", "LUMA_PYR", "LAP_TMP", "ABSLAP",
     "GRADIENTS", "SAT", "CONTRAST", "EXTREMES", "HEADROOM", "IMPULSES", "QUANTILES", "CELLS",
-    "IMP_PARAMS", "NOISE", "OUTPUT", "MAP", "TILES",
+    "IMP_PARAMS", "NOISE", "OUTPUT", "MAP", "TILES", "TILE_SRC", "FLAT_TILES", "FLAT_FLAGS",
 ))}
+
+#: OpenGL extensions a shader file needs, declared in its programs' header. The contrast's
+#: exact summed-area table sums 64-bit integers (llvmpipe, NVIDIA, AMD and Intel's Mesa and
+#: Windows drivers have GL_ARB_gpu_shader_int64).
+EXTENSIONS: dict[str, tuple[str, ...]] = {"contrast.glsl": ("GL_ARB_gpu_shader_int64",)}
 
 #: Fields of the per-impulse record the impulse stage writes and the synthesis reads.
 IMPULSE_FIELDS: tuple[str, ...] = ("AMP", "KX", "KY", "K", "F", "OMEGA", "F_LOW", "F_HIGH")
@@ -71,13 +76,15 @@ def _floats(values: np.ndarray) -> str:
     return ", ".join(f"{float(v):.9g}" for v in np.ravel(values))
 
 
-def _header(entry: str) -> str:
+def _header(entry: str, extensions: tuple[str, ...] = ()) -> str:
     lines = [
         "#version 450",
+        *(f"#extension {name} : require" for name in extensions),
         f"#define ENTRY_{entry} 1",
         f"#define LOCAL_2D layout(local_size_x = {LOCAL_2D[0]}, local_size_y = {LOCAL_2D[1]}) in;",
         f"#define LOCAL_1D layout(local_size_x = {LOCAL_1D}) in;",
         f"#define LOCAL_2D_SIZE {LOCAL_2D[0] * LOCAL_2D[1]}",
+        f"#define GROUP_2D ivec2({LOCAL_2D[0]}, {LOCAL_2D[1]})",  # gl_WorkGroupSize, in functions
         f"#define TILE_PX {LOCAL_2D[0]}",
         *(f"#define B_{name} {i}" for name, i in BINDINGS.items()),
         f"#define IMP_STRIDE {len(IMPULSE_FIELDS)}",
@@ -93,6 +100,8 @@ def _header(entry: str) -> str:
         f"const vec3 EXPAND_EVEN_TAPS = vec3({_floats(EXPAND_EVEN_TAPS)});",
         f"const vec2 EXPAND_ODD_TAPS = vec2({_floats(EXPAND_ODD_TAPS)});",
         f"const int BOX_WIDTH_PX_PER_LEVEL = {BOX_WIDTH_PX_PER_LEVEL};",
+        f"const double SAT_SCALE = {float(2**SAT_FRACTION_BITS)!r}LF;",
+        f"const double SAT_STEP = {float(2.0**-SAT_FRACTION_BITS)!r}LF;",
         f"const float ARCMIN_PER_DEG = {ARCMIN_PER_DEG!r};",
         f"const float CELL_ORIGIN_PX = {CELL_ORIGIN_PX!r};",
         f"const int CELL_BORDER = {CELL_BORDER};",
@@ -125,7 +134,7 @@ def shader_source(file: str, entry: str) -> str:
         text = path.read_text()
         return _INCLUDE.sub(lambda m: expand(m.group(1)), text)
 
-    return _header(entry) + expand(file)
+    return _header(entry, EXTENSIONS.get(file, ())) + expand(file)
 
 
 def create_context(ctx: Any = None) -> Any:
@@ -145,6 +154,10 @@ def create_context(ctx: Any = None) -> Any:
             raise FovexpError(f"no OpenGL 4.5 context through EGL: {exc}") from None
     if ctx.version_code < 450:
         raise FovexpError(f"the GPU backend needs OpenGL 4.5, this context has {ctx.version_code}")
+    missing = [e for names in EXTENSIONS.values() for e in names if e not in ctx.extensions]
+    if missing:
+        raise FovexpError(f"the GPU backend needs {', '.join(sorted(set(missing)))}, which this "
+                          f"driver lacks ({renderer_name(ctx)})")
     bindings = int(ctx.info.get("GL_MAX_SHADER_STORAGE_BUFFER_BINDINGS") or 0)
     if bindings < len(BINDINGS):
         raise FovexpError(f"the GPU backend binds {len(BINDINGS)} storage buffers, this driver "
@@ -238,7 +251,8 @@ def max_work_groups(ctx: Any) -> tuple[int, int, int]:
 #: Every compute entry, by file: what Programs.compile_all builds.
 ENTRIES: dict[str, tuple[str, ...]] = {
     "foveation.glsl": ("SIGMA", "BLUR", "STACK_INIT", "STACK_ACCUMULATE"),
-    "pyramids.glsl": ("REDUCE", "ABS_LAPLACIAN", "BOX3", "BLOCK_EXTREMES", "EXTREMES_FILTER"),
+    "pyramids.glsl": ("REDUCE", "ABS_LAPLACIAN", "BOX3", "BLOCK_EXTREMES", "EXTREMES_FILTER",
+                      "TILE_EXTREMES"),
     "contrast.glsl": ("SAT_ROWS", "SAT_COLS", "CONTRAST_CHANGE"),
     "orientation.glsl": ("SOBEL",),
     "gabor.glsl": ("NOISE",),

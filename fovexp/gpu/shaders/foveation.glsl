@@ -1,9 +1,13 @@
 // Foveation: fovexp/foveation.py. The sigma map (paper section 6.2) and the fast blur stack:
 // Gaussian blurs at fixed sigmas, each on the pyramid level its plan names (the plan is
 // foveation.blur_stack_plan, computed once in Python for both backends), and per pixel the
-// linear interpolation between the two stack levels that bracket its sigma.
+// linear interpolation between the two stack levels that bracket its sigma, as the pixel's
+// own value plus the weighted differences of the levels from it, and the blurs as "centre +
+// weighted differences" (the CPU's arithmetic): a constant region comes out as its constant,
+// so the flat tiles skipping leaves alone are exactly those the blur would leave unchanged.
 
 #include "geometry.glsl"
+#include "pyramids.glsl"
 
 uniform float blur_rate_arcmin_per_deg;
 uniform float fovea_deg;
@@ -45,16 +49,18 @@ void main() {
 // Work a stack level does not need is skipped by whole work groups: the sigma pass records
 // each TILE_PX x TILE_PX tile's sigma range, and a pixel uses stack level l only if its sigma
 // lies in (need_lo, need_hi] = (sigma_{l-1}, sigma_{l+1}] (the CPU backend skips the same
-// pixels by runs of columns).
+// pixels by runs of columns); no pixel of a tile STACK_INIT found flat uses any level.
 uniform float need_lo;
 uniform float need_hi;
 uniform ivec2 tile_grid_wh;
 layout(std430, binding = B_TILES) readonly buffer Tiles { vec2 tiles[]; };
+layout(std430, binding = B_FLAT_FLAGS) readonly buffer FlatFlags { uint flat_flags[]; };
 shared uint group_needed;
 
 bool tile_needed(ivec2 t) {
-    vec2 r = tiles[t.y * tile_grid_wh.x + t.x];
-    return r.y > need_lo && r.x <= need_hi;
+    int i = t.y * tile_grid_wh.x + t.x;
+    vec2 r = tiles[i];
+    return flat_flags[i] == 0u && r.y > need_lo && r.x <= need_hi;
 }
 
 // whether any tile meeting the full-resolution rectangle [lo_px, hi_px] needs this level;
@@ -74,7 +80,8 @@ bool region_needed(ivec2 lo_px, ivec2 hi_px) {
 
 #ifdef ENTRY_BLUR
 // one pass of a separable Gaussian (foveation._blur_patch): along y, then a second dispatch
-// along x; samples outside the grid replicate its border
+// along x; samples outside the grid replicate its border; the centre plus the weighted
+// differences from it, the symmetric taps in pairs: (a + b) - 2 centre (foveation._blur_patch)
 LOCAL_2D
 uniform ivec3 grid_hwc;
 uniform int src_offset;
@@ -98,11 +105,18 @@ void main() {
     int h = grid_hwc.x, w = grid_hwc.y, c = grid_hwc.z;
     if (p.x >= w || p.y >= h) return;
     for (int ch = 0; ch < c; ++ch) {
-        float acc = 0.0;
-        for (int k = -kernel_radius; k <= kernel_radius; ++k) {
-            ivec2 q = along_y == 1 ? ivec2(p.x, clamp(p.y + k, 0, h - 1))
+        float centre = src[src_offset + (p.y * w + p.x) * c + ch];
+        float twice = centre + centre;
+        float acc = centre;
+        // the kernel is symmetric: taps -k and +k in pairs, outermost first (as the CPU)
+        for (int k = -kernel_radius; k < 0; ++k) {
+            ivec2 a = along_y == 1 ? ivec2(p.x, clamp(p.y + k, 0, h - 1))
                                    : ivec2(clamp(p.x + k, 0, w - 1), p.y);
-            acc += kernels[kernel_offset + k + kernel_radius] * src[src_offset + (q.y * w + q.x) * c + ch];
+            ivec2 b = along_y == 1 ? ivec2(p.x, clamp(p.y - k, 0, h - 1))
+                                   : ivec2(clamp(p.x - k, 0, w - 1), p.y);
+            acc += kernels[kernel_offset + k + kernel_radius]
+                 * ((src[src_offset + (a.y * w + a.x) * c + ch]
+                     + src[src_offset + (b.y * w + b.x) * c + ch]) - twice);
         }
         dst[(p.y * w + p.x) * c + ch] = acc;
     }
@@ -110,24 +124,33 @@ void main() {
 #endif
 
 #ifdef ENTRY_STACK_INIT
-// each pixel's bracketing stack levels (k, t); level 0 (the image itself) accumulated here
+// each pixel's bracketing stack levels (k, t), and the pixel's own value (level 0, the image
+// itself, adds nothing more). Skipping: a group whose tile and reach_px around it are one
+// constant in every channel leaves its pixels as they are (what the blur gives there) and
+// flags its tile, so that no stack level blurs or accumulates for it.
 LOCAL_2D
 uniform ivec3 image_hwc;
 uniform int n_levels;
+uniform int reach_px;             // foveation.BlurStackPlan.reach_px
 layout(std430, binding = B_LINEAR) readonly buffer Linear { float linear[]; };
 layout(std430, binding = B_SIGMA) readonly buffer Sigma { float sigma[]; };
 layout(std430, binding = B_LEVELS) readonly buffer Levels { float levels[]; };
 layout(std430, binding = B_BRACKET) writeonly buffer Bracket { vec2 bracket[]; };
 layout(std430, binding = B_FOVEATED) writeonly buffer Foveated { float foveated[]; };
+layout(std430, binding = B_FLAT_FLAGS) writeonly buffer FlatFlags { uint flat_flags[]; };
 void main() {
+    ivec2 g0 = ivec2(gl_WorkGroupID.xy) * GROUP_2D;
+    bool is_flat = skip == 1 && region_constant(g0 - reach_px, g0 + GROUP_2D - 1 + reach_px);
+    if (gl_LocalInvocationIndex == 0u)
+        flat_flags[gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x] = is_flat ? 1u : 0u;
     ivec2 p = ivec2(gl_GlobalInvocationID.xy);
     int h = image_hwc.x, w = image_hwc.y, c = image_hwc.z;
     if (p.x >= w || p.y >= h) return;
     int i = p.y * w + p.x;
     float s = sigma[i];
-    if (s <= 0.0) {  // untouched, bit for bit
+    for (int ch = 0; ch < c; ++ch) foveated[i * c + ch] = linear[i * c + ch];
+    if (s <= 0.0 || is_flat) {  // untouched, bit for bit
         bracket[i] = vec2(-1.0, 0.0);
-        for (int ch = 0; ch < c; ++ch) foveated[i * c + ch] = linear[i * c + ch];
         return;
     }
     int k = -1;  // numpy.searchsorted(levels, s) - 1
@@ -135,13 +158,12 @@ void main() {
     k = min(k, n_levels - 2);
     float t = min((s - levels[k]) / (levels[k + 1] - levels[k]), 1.0);
     bracket[i] = vec2(float(k), t);
-    for (int ch = 0; ch < c; ++ch) foveated[i * c + ch] = k == 0 ? (1.0 - t) * linear[i * c + ch] : 0.0;
 }
 #endif
 
 #ifdef ENTRY_STACK_ACCUMULATE
-// add stack level `stack_level` (blurred on a pyramid level, sampled bilinearly) to the pixels
-// whose sigma it brackets
+// add stack level `stack_level` (blurred on a pyramid level, sampled bilinearly), less the
+// pixel's own value, weighted, to the pixels whose sigma it brackets
 LOCAL_2D
 uniform ivec3 image_hwc;
 uniform int stack_level;
@@ -151,6 +173,7 @@ uniform ivec2 level_hw;
 layout(std430, binding = B_BLUR_DST) readonly buffer Blurred { float blurred[]; };
 layout(std430, binding = B_BRACKET) readonly buffer Bracket { vec2 bracket[]; };
 layout(std430, binding = B_FOVEATED) buffer Foveated { float foveated[]; };
+layout(std430, binding = B_LINEAR) readonly buffer Linear { float linear[]; };
 void main() {
     if (!tile_needed(ivec2(gl_WorkGroupID.xy))) return;  // the group is one tile
     ivec2 p = ivec2(gl_GlobalInvocationID.xy);
@@ -171,10 +194,11 @@ void main() {
     float w00 = wgt * (1.0 - a.y) * (1.0 - a.x), w01 = wgt * (1.0 - a.y) * a.x;
     float w10 = wgt * a.y * (1.0 - a.x), w11 = wgt * a.y * a.x;
     for (int ch = 0; ch < c; ++ch) {
-        foveated[i * c + ch] += w00 * blurred[(i0.y * lw + i0.x) * c + ch]
-                              + w01 * blurred[(i0.y * lw + i1.x) * c + ch]
-                              + w10 * blurred[(i1.y * lw + i0.x) * c + ch]
-                              + w11 * blurred[(i1.y * lw + i1.x) * c + ch];
+        float v = linear[i * c + ch];
+        foveated[i * c + ch] += w00 * (blurred[(i0.y * lw + i0.x) * c + ch] - v)
+                              + w01 * (blurred[(i0.y * lw + i1.x) * c + ch] - v)
+                              + w10 * (blurred[(i1.y * lw + i0.x) * c + ch] - v)
+                              + w11 * (blurred[(i1.y * lw + i1.x) * c + ch] - v);
     }
 }
 #endif

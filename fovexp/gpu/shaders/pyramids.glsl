@@ -20,9 +20,94 @@ int nearest_index(vec2 p_px, int block, ivec2 size_wh) {
     return q.y * size_wh.x + q.x;
 }
 
+// pyramids._taps5 / _taps3 / _taps2: the binomial filters as "centre + weighted differences",
+// in the CPU's order of operations, so that a constant region gives exactly its constant
+float taps5(float c, float m2, float m1, float p1, float p2) {
+    return c + (BINOMIAL_5[0] * ((m2 - c) + (p2 - c)) + BINOMIAL_5[1] * ((m1 - c) + (p1 - c)));
+}
+float taps3(float c, float m1, float p1) { return c + EXPAND_EVEN_TAPS[0] * ((m1 - c) + (p1 - c)); }
+float taps2(float c, float p1) { return c + EXPAND_ODD_TAPS[0] * (p1 - c); }
+
+#if defined(ENTRY_ABS_LAPLACIAN) || defined(ENTRY_BOX3) || defined(ENTRY_CONTRAST_CHANGE) \
+    || defined(ENTRY_STACK_INIT)
+// Skipping (EngineOptions.skip): a work group whose results depend only on a region where the
+// image is one constant (in every channel) writes what its arithmetic gives there (0 for |L|
+// and the contrast change, the input for the foveation: pyramids.constant_blocks on the CPU).
+// The image's TILE_PX x TILE_PX tile extremes (TILE_EXTREMES) tell; the group's invocations
+// share the tiles to look at.
+uniform int skip;
+uniform ivec3 flat_tiles_hwc;     // tiles per column, per row, channels
+layout(std430, binding = B_FLAT_TILES) readonly buffer FlatTiles { vec2 flat_tiles[]; };
+shared uint group_varies;
+
+// whether the image is one constant over the full-resolution rectangle [lo_px, hi_px]
+// (clamped to the image) in each channel; a uniform result: call it from every invocation
+bool region_constant(ivec2 lo_px, ivec2 hi_px) {
+    if (gl_LocalInvocationIndex == 0u) group_varies = 0u;
+    barrier();
+    ivec2 wh = ivec2(flat_tiles_hwc.y, flat_tiles_hwc.x);
+    int c = flat_tiles_hwc.z;
+    ivec2 t0 = clamp(lo_px / TILE_PX, ivec2(0), wh - 1);
+    ivec2 t1 = clamp(hi_px / TILE_PX, ivec2(0), wh - 1);
+    int nx = t1.x - t0.x + 1, n = nx * (t1.y - t0.y + 1) * c;
+    for (int t = int(gl_LocalInvocationIndex); t < n; t += LOCAL_2D_SIZE) {
+        int ch = t % c, q = t / c;
+        float ref = flat_tiles[(t0.y * wh.x + t0.x) * c + ch].x;
+        vec2 e = flat_tiles[((t0.y + q / nx) * wh.x + t0.x + q % nx) * c + ch];
+        if (e.x != ref || e.y != ref) atomicOr(group_varies, 1u);
+    }
+    barrier();
+    return group_varies == 0u;
+}
+
+// whether this group's samples of a level-(k-1) grid (scale s = 2^(k-1)) read only a constant
+// region: sample j depends on G_0 within s j +- 2 (s - 1), and reads samples j - margin ..
+// j + margin of that grid (pyramids.abs_laplacian_reach_px)
+bool group_flat(int level_scale, int margin) {
+    if (skip == 0) return false;
+    ivec2 g0 = ivec2(gl_WorkGroupID.xy) * GROUP_2D;
+    ivec2 g1 = g0 + GROUP_2D - 1;
+    int reach = 2 * (level_scale - 1);
+    return region_constant((g0 - margin) * level_scale - reach, (g1 + margin) * level_scale + reach);
+}
+#endif
+
+#ifdef ENTRY_TILE_EXTREMES
+// min and max of each channel of an image (the luminance, the linear image) over each
+// TILE_PX x TILE_PX tile
+LOCAL_2D
+uniform ivec3 image_hwc;
+layout(std430, binding = B_TILE_SRC) readonly buffer TileSrc { float tile_src[]; };
+layout(std430, binding = B_FLAT_TILES) writeonly buffer FlatTiles { vec2 flat_tiles[]; };
+shared float tile_lo[LOCAL_2D_SIZE];
+shared float tile_hi[LOCAL_2D_SIZE];
+void main() {
+    ivec2 p = min(ivec2(gl_GlobalInvocationID.xy), ivec2(image_hwc.y, image_hwc.x) - 1);
+    uint i = gl_LocalInvocationIndex;
+    int c = image_hwc.z;
+    for (int ch = 0; ch < c; ++ch) {
+        float v = tile_src[(p.y * image_hwc.y + p.x) * c + ch];  // edge tiles repeat pixels
+        tile_lo[i] = v;
+        tile_hi[i] = v;
+        barrier();
+        for (uint half_n = LOCAL_2D_SIZE / 2; half_n > 0u; half_n /= 2u) {
+            if (i < half_n) {
+                tile_lo[i] = min(tile_lo[i], tile_lo[i + half_n]);
+                tile_hi[i] = max(tile_hi[i], tile_hi[i + half_n]);
+            }
+            barrier();
+        }
+        if (i == 0u) flat_tiles[(gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x) * c + ch] =
+            vec2(tile_lo[0], tile_hi[0]);
+        barrier();
+    }
+}
+#endif
+
 #ifdef ENTRY_REDUCE
-// pyramids.reduce: 5-tap binomial filter, replicated borders, every second sample. The source
-// may carry a virtual replicated border of src_pad px (level 0 of the foveation pyramid).
+// pyramids.reduce: 5-tap binomial filter, replicated borders, every second sample; down the
+// columns first, then along the row (pyramids._reduce_2d). The source may carry a virtual
+// replicated border of src_pad px (level 0 of the foveation pyramid).
 LOCAL_2D
 uniform ivec3 src_hwc;
 uniform int src_offset;
@@ -36,56 +121,53 @@ void main() {
     if (p.x >= dst_hw.y || p.y >= dst_hw.x) return;
     int h = src_hwc.x, w = src_hwc.y, c = src_hwc.z;
     int hv = h + 2 * src_pad, wv = w + 2 * src_pad;
+    int rows[5];
+    for (int d = -2; d <= 2; ++d) rows[d + 2] = clamp(clamp(2 * p.y + d, 0, hv - 1) - src_pad, 0, h - 1);
     for (int ch = 0; ch < c; ++ch) {
-        float acc = 0.0;
-        for (int dx = -2; dx <= 2; ++dx) {
-            int x = clamp(clamp(2 * p.x + dx, 0, wv - 1) - src_pad, 0, w - 1);
-            float col = 0.0;
-            for (int dy = -2; dy <= 2; ++dy) {
-                int y = clamp(clamp(2 * p.y + dy, 0, hv - 1) - src_pad, 0, h - 1);
-                col += BINOMIAL_5[dy + 2] * src[src_offset + (y * w + x) * c + ch];
-            }
-            acc += BINOMIAL_5[dx + 2] * col;
+        float col[5];
+        for (int d = -2; d <= 2; ++d) {
+            int x = clamp(clamp(2 * p.x + d, 0, wv - 1) - src_pad, 0, w - 1);
+            int o = src_offset + x * c + ch;
+            col[d + 2] = taps5(src[o + rows[2] * w * c], src[o + rows[0] * w * c],
+                               src[o + rows[1] * w * c], src[o + rows[3] * w * c],
+                               src[o + rows[4] * w * c]);
         }
-        dst[dst_offset + (p.y * dst_hw.y + p.x) * c + ch] = acc;
+        dst[dst_offset + (p.y * dst_hw.y + p.x) * c + ch] = taps5(col[2], col[0], col[1], col[3], col[4]);
     }
 }
 #endif
 
 #ifdef ENTRY_ABS_LAPLACIAN
-// |L_k| = |G_{k-1} - expand(G_k)| (pyramids.expand's polyphase taps, borders replicated);
-// the 3 x 3 mean of the next entry smooths it (pyramids.smoothed_abs_laplacian)
+// |L_k| = |G_{k-1} - expand(G_k)| (pyramids._expand_row and _expand_at: down the columns,
+// then along the row, borders replicated); the 3 x 3 mean of the next entry smooths it
+// (pyramids.smoothed_abs_laplacian)
 LOCAL_2D
 uniform ivec2 fine_hw;
 uniform int fine_offset;
 uniform ivec2 coarse_hw;
 uniform int coarse_offset;
+uniform int level_scale;          // full-resolution px per sample of G_{k-1}
 layout(std430, binding = B_LUMA_PYR) readonly buffer Pyr { float pyr[]; };
 layout(std430, binding = B_LAP_TMP) writeonly buffer Tmp { float tmp[]; };
-void expand_taps(int y, int n, out ivec3 idx, out vec3 wts) {
-    int i = y / 2;
-    if (y % 2 == 0) {
-        idx = ivec3(max(i - 1, 0), i, min(i + 1, n - 1));
-        wts = EXPAND_EVEN_TAPS;
-    } else {
-        idx = ivec3(i, min(i + 1, n - 1), i);
-        wts = vec3(EXPAND_ODD_TAPS, 0.0);
-    }
+// the expansion down column `col` of the coarse grid at fine row y
+float expand_column(int y, int col) {
+    int i = y / 2, n = coarse_hw.x, cw = coarse_hw.y;
+    float c = pyr[coarse_offset + i * cw + col];
+    float p1 = pyr[coarse_offset + min(i + 1, n - 1) * cw + col];
+    if (y % 2 == 1) return taps2(c, p1);
+    return taps3(c, pyr[coarse_offset + max(i - 1, 0) * cw + col], p1);
 }
 void main() {
+    // the expansion reads samples y - 5 .. y + 4 of G_{k-1}
+    bool is_flat = group_flat(level_scale, 5);
     ivec2 p = ivec2(gl_GlobalInvocationID.xy);
     if (p.x >= fine_hw.y || p.y >= fine_hw.x) return;
-    ivec3 iy, ix;
-    vec3 wy, wx;
-    expand_taps(p.y, coarse_hw.x, iy, wy);
-    expand_taps(p.x, coarse_hw.y, ix, wx);
-    float up = 0.0;
-    for (int b = 0; b < 3; ++b) {
-        float row = 0.0;
-        for (int a = 0; a < 3; ++a) row += wy[a] * pyr[coarse_offset + iy[a] * coarse_hw.y + ix[b]];
-        up += wx[b] * row;
-    }
-    tmp[p.y * fine_hw.y + p.x] = abs(pyr[fine_offset + p.y * fine_hw.y + p.x] - up);
+    int i = p.y * fine_hw.y + p.x;
+    if (is_flat) { tmp[i] = 0.0; return; }
+    int j = p.x / 2, cw = coarse_hw.y;
+    float c = expand_column(p.y, j), p1 = expand_column(p.y, min(j + 1, cw - 1));
+    float up = p.x % 2 == 1 ? taps2(c, p1) : taps3(c, expand_column(p.y, max(j - 1, 0)), p1);
+    tmp[i] = abs(pyr[fine_offset + i] - up);
 }
 #endif
 
@@ -94,12 +176,15 @@ void main() {
 LOCAL_2D
 uniform ivec2 grid_hw;
 uniform int dst_offset;
+uniform int level_scale;
 layout(std430, binding = B_LAP_TMP) readonly buffer Tmp { float tmp[]; };
 layout(std430, binding = B_ABSLAP) writeonly buffer AbsLap { float abs_lap[]; };
 void main() {
+    bool is_flat = group_flat(level_scale, 6);  // one sample more than ABS_LAPLACIAN's
     ivec2 p = ivec2(gl_GlobalInvocationID.xy);
     int h = grid_hw.x, w = grid_hw.y;
     if (p.x >= w || p.y >= h) return;
+    if (is_flat) { abs_lap[dst_offset + p.y * w + p.x] = 0.0; return; }
     float acc = 0.0;
     for (int dy = -1; dy <= 1; ++dy)
         for (int dx = -1; dx <= 1; ++dx)
