@@ -22,7 +22,7 @@ _PUBLIC: dict[str, str] = {
     "read_image": "io", "read_samples": "io", "write_bytes_atomic": "io", "write_image": "io",
     "METHODS": "params", "PAPER_TABLE2": "params", "PARAMETER_RANGES": "params",
     "EngineOptions": "params", "EnhanceParams": "params", "ParameterTable": "params",
-    "make_options": "params", "make_params": "params",
+    "check_parameter": "params", "make_options": "params", "make_params": "params",
     "MAP_NAMES": "pipeline", "Enhancer": "pipeline", "EnhanceResult": "pipeline",
     "enhance": "pipeline",
     "find_protocol": "resources", "shipped_stimuli": "resources",
@@ -42,6 +42,7 @@ if TYPE_CHECKING:  # the same names for type checkers (tests/test_layers.py hold
         EngineOptions,
         EnhanceParams,
         ParameterTable,
+        check_parameter,
         make_options,
         make_params,
     )
@@ -51,10 +52,10 @@ if TYPE_CHECKING:  # the same names for type checkers (tests/test_layers.py hold
 __all__ = [
     "BACKENDS", "MAP_NAMES", "METHODS", "PAPER_TABLE2", "PARAMETER_RANGES", "Display",
     "EngineOptions", "EnhanceParams", "EnhanceResult", "Enhancer", "FovexpError",
-    "ParameterTable", "ViewingGeometry", "enhance", "find_protocol", "load_display",
-    "make_enhancer", "make_options", "make_params", "parse_yaml", "read_image", "read_samples",
-    "read_yaml", "shipped_stimuli", "validation_error", "write_bytes_atomic", "write_image",
-    "__version__",
+    "ParameterTable", "ViewingGeometry", "check_parameter", "enhance", "find_protocol",
+    "load_display", "make_enhancer", "make_options", "make_params", "parse_yaml", "read_image",
+    "read_samples", "read_yaml", "shipped_stimuli", "validation_error", "write_bytes_atomic",
+    "write_image", "__version__",
 ]
 
 

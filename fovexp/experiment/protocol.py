@@ -30,7 +30,14 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from fovexp import PARAMETER_RANGES, FovexpError, make_params, parse_yaml, validation_error
+from fovexp import (
+    PARAMETER_RANGES,
+    FovexpError,
+    check_parameter,
+    make_params,
+    parse_yaml,
+    validation_error,
+)
 
 from .gaze import BLANKING_RADIUS_DEG, GAZE_TIMEOUT_S, TRACKER_RATE_HZ
 from .quality import MAX_ACCURACY_DEG, MAX_DATA_LOSS, QualityLimits, central_accuracy_limit_deg
@@ -43,18 +50,13 @@ MethodName = Literal["foveated", "contrast", "ours"]
 #: (this project's choice; the paper says only that the test half updated "in real-time").
 DEFAULT_MAX_STEP_MS = 100.0
 
-#: Parameters whose accepted range (:data:`fovexp.PARAMETER_RANGES`) is open at its low end.
-OPEN_AT_LOW: frozenset[str] = frozenset({"s_f"})
-
-
 def check_in_range(name: str, value: float) -> str | None:
-    """Why ``value`` is outside what the enhancer accepts for ``name`` (None: it is inside)."""
-    lo, hi = PARAMETER_RANGES[name]
-    if name in OPEN_AT_LOW:
-        if not lo < value <= hi:
-            return f"{value} is outside what {name} allows ({lo}, {hi}]"
-    elif not lo <= value <= hi:
-        return f"{value} is outside what {name} allows [{lo}, {hi}]"
+    """Why ``value`` is outside what the enhancer accepts for ``name`` (None: it is inside):
+    the enhancer's own check (:func:`fovexp.check_parameter`), worded for a protocol file."""
+    try:
+        check_parameter(name, value)
+    except ValueError as exc:
+        return f"{value} is outside what {name} allows: {exc}"
     return None
 
 

@@ -2,8 +2,6 @@
 live impulse exit early) is exact, as on the CPU: the output with it is the output without it,
 bit for bit, and within the CPU parity tolerances of tests/gpu/test_backend.py."""
 
-import os
-
 import numpy as np
 import pytest
 
@@ -12,21 +10,6 @@ from fovexp import EngineOptions, EnhanceParams, Enhancer, FovexpError, load_dis
 from engine_helpers import mixed_scene
 
 LG = load_display("lg-oled55cx")
-
-
-@pytest.fixture(scope="module")
-def ctx():
-    from fovexp.gpu import create_context, detach_thread, release_context
-
-    try:
-        ctx = create_context()
-    except FovexpError as exc:
-        if os.environ.get("FOVEXP_REQUIRE_GPU_BACKEND"):
-            raise
-        pytest.skip(f"no OpenGL 4.5 context: {exc}")
-    yield ctx
-    release_context(ctx)
-    detach_thread()
 
 
 @pytest.mark.parametrize("set_kw,gaze", [({}, (0.5, 0.5)), ({"foveated": True}, (0.35, 0.6))])
