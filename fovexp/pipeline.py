@@ -343,6 +343,15 @@ class Enhancer:
         image: np.ndarray | None = None,
     ) -> EnhanceResult:
         """Process the current frame (or ``image``, set first) for ``gaze`` and ``params``."""
+        params = self._prepare(gaze, params, image)
+        out = with_alpha(self._output(), self._alpha)
+        return EnhanceResult(out, params, dict(self._c.timings_s), self, self._version)
+
+    def _prepare(
+        self, gaze: tuple[float, float], params: EnhanceParams | None, image: np.ndarray | None,
+    ) -> EnhanceParams:
+        """:meth:`enhance` up to the output: the frame, gaze and parameters checked and set on
+        the stage graph (nothing computed yet); the resolved parameters."""
         if image is not None:
             self.set_image(image)
         if not self._c.has_input("image"):
@@ -360,8 +369,7 @@ class Enhancer:
             s_f=params.s_f, n_impulses=params.impulses, seed=params.seed, method=params.method,
         )
         self._version += 1
-        out = with_alpha(self._output(), self._alpha)
-        return EnhanceResult(out, params, dict(self._c.timings_s), self, self._version)
+        return params
 
     def _output(self) -> np.ndarray:
         return self._c.get("output")

@@ -728,14 +728,8 @@ class GpuEnhancer(Enhancer):
         the texture. The experiment runner draws it in its window this way (docs/GPU.md).
         """
         with self._current():
-            # enhance() ends with the read-back (_output); an instance attribute shadows it for
-            # this one call, so the stage graph, the parameter checks and the stage cache are
-            # enhance()'s own.
-            self._output = lambda: None  # type: ignore[method-assign]
-            try:
-                res = self.enhance(gaze, params)
-            finally:
-                del self._output
+            # enhance() without its read-back: the same checks, stage graph and cache
+            resolved = self._prepare(gaze, params, None)
             h, w, c = self._hwc()
             got = (tuple(texture.size), int(texture.components), str(texture.dtype))
             if got != ((w, h), c, "f4"):
@@ -743,7 +737,7 @@ class GpuEnhancer(Enhancer):
                                   f"{got[1]} components, {got[2]}; the output needs {w}x{h}, "
                                   f"{c} components, f4")
             texture.write(self._c.get("output"))
-            return res.params
+            return resolved
 
     def linear(self, name: str) -> np.ndarray:  # noqa: D102 - Enhancer.linear
         with self._current():
