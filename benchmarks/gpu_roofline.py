@@ -17,7 +17,8 @@ skips by (computed here as the shaders decide it). Counted per entry:
   index arithmetic is not counted;
 - sfu: transcendentals (exp, exp2, log, log2, sqrt, reciprocal, sin, cos, atan's reciprocal;
   pow = log2 + exp2), which run on the special-function units;
-- fp64: float64 operations (the summed-area table and the contrast change); a division counts
+- fp64: float64 operations (the fixed-point conversion of the summed-area table and the
+  contrast change; the table's 64-bit integer adds are not counted); a division counts
   10 (a reciprocal estimate refined by Newton steps in FMA).
 
 The predicted time of an entry is max(bytes / bandwidth, flops / FP32 peak, sfu / SFU rate,
@@ -310,15 +311,19 @@ def frame_costs(width: int = 3840, height: int = 2160, channels: int = 3, impuls
         sp = sat_pad_px(max_sigma)
         hp, wp = h + 2 * sp, w + 2 * sp
         sat_bytes = 8 * (hp + 1) * (wp + 1)
-        # SAT_ROWS: per element the symmetric index (a float division: 3 + reciprocal), the
-        # float-to-double conversion and the add; SAT_COLS: one add, read and write
-        f.add("SAT_ROWS", "sat", hp, 4 * n_px + sat_bytes, 3 * hp * wp, hp * wp, 2 * hp * wp)
-        f.add("SAT_COLS", "sat", wp, 2 * sat_bytes, 0, 0, hp * wp)
-        # CONTRAST_CHANGE per blurred pixel, two integer levels: 4 SAT corners (3 adds), the
-        # mean (a division), the enhancement (conversions and 6): about 23 + 10 each
+        # The table holds 64-bit integers (fixed point, contrast.glsl): its adds are integer
+        # work (two 32-bit operations each on most GPUs), not counted. SAT_ROWS: per element
+        # the symmetric index (a float division: 3 + reciprocal) and the value in fixed point
+        # (to double, the scale, roundEven, to int64: 4 FP64); SAT_COLS: integer adds only
+        f.add("SAT_ROWS", "sat", hp, 4 * n_px + sat_bytes, 3 * hp * wp, hp * wp, 4 * hp * wp)
+        f.add("SAT_COLS", "sat", wp, 2 * sat_bytes, 0, 0, 0)
+        # CONTRAST_CHANGE per blurred pixel: t and the pixel in fixed point (5 FP64), then per
+        # integer level (two) the box by 4 integer corners, and in FP64 the difference's
+        # conversion, the division by n^2, the gain 1 - f_e (1 + k) (3) and the weighted
+        # accumulation (3); the result scaled (1)
         nb = int(blurred.sum())
         f.add("CONTRAST_CHANGE", "contrast", n_px, 12 * n_px + sat_bytes, 4 * nb, 0,
-              nb * (2 * (3 + FP64_DIVISION + 9 + 1) + 3))
+              nb * (2 * (1 + FP64_DIVISION + 3 + 3) + 6))
         facts["sat_pad_px"] = sp
 
     block = 1 << preset.minmax_level
