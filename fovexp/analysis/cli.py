@@ -1,4 +1,4 @@
-"""``fovexp analyze results/ --out report/`` (paper sections 6.3, 7.1): ``fovexp.cli`` registers
+"""``fovexp analyze results/ --out report/`` (paper sections 5.3, 6.1): ``fovexp.cli`` registers
 :func:`add_analyze_parser`; ``python -m fovexp.analysis`` does the same."""
 
 from __future__ import annotations
@@ -10,6 +10,7 @@ import warnings
 from pathlib import Path
 
 from fovexp import FovexpError
+from fovexp.results.limits import TrialLimits
 
 
 def _configure(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
@@ -19,10 +20,22 @@ def _configure(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     p.add_argument("--out", type=Path, default=Path("report"),
                    help="output folder for report.md, tables/, figures/ (default: report)")
     p.add_argument("--include-incomplete", action="store_true",
-                   help="keep incomplete sessions (rule R9 then only reports them)")
+                   help="keep incomplete sessions (rule R10 then only reports them)")
+    p.add_argument("--include-pilots", action="store_true",
+                   help="keep mouse-gaze pilot sessions (rule R7 leaves them out)")
     p.add_argument("--protocol", action="append", default=[], metavar="EXPERIMENT=SHA256",
                    help="keep this protocol version (hash or prefix) of an experiment instead "
-                        "of the majority one (rule R8); repeatable")
+                        "of the majority one (rule R9); repeatable")
+    d = TrialLimits()
+    p.add_argument("--max-blanked", type=float, default=d.max_blanked_fraction, metavar="F",
+                   help="rule R11: the largest blanked fraction of a trial's frames "
+                        f"(default {d.max_blanked_fraction:g})")
+    p.add_argument("--max-dropped", type=float, default=d.max_dropped_fraction, metavar="F",
+                   help="rule R12: the largest fraction of a trial's frames dropped "
+                        f"(default {d.max_dropped_fraction:g})")
+    p.add_argument("--max-latency-ms", type=float, default=d.max_latency_p95_ms, metavar="MS",
+                   help="rule R13: the largest 95th percentile of a trial's gaze-to-flip "
+                        f"latency (default {d.max_latency_p95_ms:g} ms)")
     p.add_argument("--no-figures", action="store_true", help="skip the PNG/PDF figures")
     p.add_argument("--table-out", type=Path, default=None,
                    help="also write the calibrated Table 2 (ParameterTable YAML) here")
@@ -53,8 +66,12 @@ def analyze_command(args: argparse.Namespace) -> int:
             protocol[exp] = sha
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
+            limits = TrialLimits(max_blanked_fraction=args.max_blanked,
+                                 max_dropped_fraction=args.max_dropped,
+                                 max_latency_p95_ms=args.max_latency_ms)
             ana = analyze(args.results, args.out, include_incomplete=args.include_incomplete,
-                          protocol=protocol, figures=not args.no_figures)
+                          include_pilots=args.include_pilots, protocol=protocol,
+                          limits=limits, figures=not args.no_figures)
         for w in caught:
             print(f"warning: {w.message}", file=sys.stderr)
         if args.table_out is not None:

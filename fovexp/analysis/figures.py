@@ -1,8 +1,9 @@
 """The paper's result figures with matplotlib (Agg, no display): the three calibration panels
-(section 6.3, Figure "calibration_results"), the per-scene validation plot (section 7.1, Figure
-"validation", right) and the sampling-rate reduction bars (section 7.3, Figure
-"kernels_density", right). Error bars are SEMs, as in the paper. Each figure is written as PNG
-and PDF.
+(section 5.3, Figure "calibration_results"), the per-scene validation plot (section 6.1, Figure
+"validation", right) and the sampling-rate reduction bars (section 6.3, Figure
+"kernels_density", right). Error bars are SEMs across participants, as in the paper; each
+figure says so, with n, under its panels. f_e, s_k and s_f are dimensionless (their axes say
+so). Each figure is written as PNG and PDF.
 """
 
 from __future__ import annotations
@@ -19,6 +20,19 @@ from .validation import ValidationResult
 
 # The paper's validation plot: contrast blue, ours orange.
 METHOD_COLOURS = {"contrast": "tab:blue", "ours": "tab:orange", "foveated": "tab:gray"}
+
+
+def _n_text(n: object) -> str:
+    """``n = 4`` or ``n = 3-4`` (participants per point)."""
+    vals = sorted({int(v) for v in np.atleast_1d(np.asarray(n, dtype=float)) if np.isfinite(v)})
+    if not vals:
+        return "n = 0"
+    return f"n = {vals[0]}" if len(vals) == 1 else f"n = {vals[0]}-{vals[-1]}"
+
+
+def _sem_caption(fig: Figure, n: object, what: str = "participants") -> None:
+    fig.text(0.5, -0.02, f"Error bars: SEM across {what} ({_n_text(n)} per point).",
+             ha="center", va="top", fontsize="small")
 
 
 def _save(fig: Figure, stem: Path) -> list[Path]:
@@ -39,27 +53,29 @@ def calibration_figure(calib: Calibration, stem: Path) -> list[Path]:
     fe = calib.fe
     ax1.errorbar(fe["blur_rate"], fe["mean"], yerr=fe["sem"], marker="o", capsize=3)
     ax1.set_xlabel("blur-rate (arcmin/deg)")
-    ax1.set_ylabel("$f_e$")
+    ax1.set_ylabel("$f_e$ (dimensionless)")
     ax1.set_title("Contrast enhancement $f_e$")
     for i, (br, grp) in enumerate(calib.sk.groupby("blur_rate", sort=True)):
         colour = f"C{i}"
         ax2.errorbar(grp["s_f"], grp["mean"], yerr=grp["sem"], marker="o", capsize=3,
-                     color=colour, linestyle="none", label=f"blur-rate {br:g}")
+                     color=colour, linestyle="none", label=f"blur-rate {br:g} arcmin/deg")
         x = np.linspace(grp["s_f"].min(), grp["s_f"].max(), 50)
         ax2.plot(x, calib.lines[float(br)](x), color=colour, linestyle="--", linewidth=1)
-    ax2.set_xlabel("$s_f$")
-    ax2.set_ylabel("$s_k$")
+    ax2.set_xlabel("$s_f$ (dimensionless)")
+    ax2.set_ylabel("$s_k$ (dimensionless)")
     ax2.set_title("Amplitude $s_k$ per $s_f$ (dashed: fit)")
     ax2.legend(fontsize="small")
     sf = calib.sf
     for i, (_, r) in enumerate(sf.iterrows()):
         ax3.errorbar(r["s_f"], r["s_k"], xerr=r["s_f_sem"], yerr=r["s_k_sem"], marker="o",
-                     capsize=3, color=f"C{i}", label=f"blur-rate {r['blur_rate']:g}")
-    ax3.set_xlabel("final $s_f$")
-    ax3.set_ylabel("final $s_k$")
+                     capsize=3, color=f"C{i}",
+                     label=f"blur-rate {r['blur_rate']:g} arcmin/deg")
+    ax3.set_xlabel("final $s_f$ (dimensionless)")
+    ax3.set_ylabel("final $s_k$ (dimensionless)")
     ax3.set_title("Final $s_k$ and $s_f$")
     ax3.legend(fontsize="small")
     fig.tight_layout()
+    _sem_caption(fig, np.concatenate([fe["n"], calib.sk["n"], sf["n"]]))
     return _save(fig, stem)
 
 
@@ -79,8 +95,9 @@ def validation_figure(result: ValidationResult, stem: Path) -> list[Path]:
     ax.set_xlabel("scene")
     ax.set_ylabel("selected blur-rate (arcmin/deg)")
     ax.set_title(f"{result.experiment}: highest blur-rate without visible foveation")
-    ax.legend()
+    ax.legend(title="method")
     fig.tight_layout()
+    _sem_caption(fig, s["n"])
     return _save(fig, stem)
 
 
@@ -95,8 +112,10 @@ def sampling_figure(result: ValidationResult, stem: Path) -> list[Path]:
     ax.set_xticklabels(s["scope"], rotation=45, ha="right")
     ax.axhline(0, color="black", linewidth=0.8)
     ax.set_ylabel("sampling-rate reduction (%)")
-    ax.set_title(f"{result.experiment}: ours vs contrast (section 7.3)")
+    ax.set_title(f"{result.experiment}: ours vs contrast (section 6.3)")
     fig.tight_layout()
+    fig.text(0.5, -0.02, "1 - blur-rate(contrast) / blur-rate(ours), from the means across "
+             "participants; no error bars.", ha="center", va="top", fontsize="small")
     return _save(fig, stem)
 
 
@@ -109,6 +128,9 @@ def latency_figure(latency_ms: dict[str, np.ndarray], stem: Path) -> list[Path]:
     ax.boxplot([latency_ms[n] for n in names], whis=(5, 95), showfliers=False)
     ax.set_xticks(range(1, len(names) + 1))
     ax.set_xticklabels(names, rotation=60, ha="right", fontsize=7)
+    ax.set_xlabel("session (experiment/participant/session)")
     ax.set_ylabel("gaze-to-flip latency (ms)")
     ax.set_title("Newest gaze sample to flip, per session")
+    fig.text(0.5, -0.02, "Boxes: quartiles and median of the session's frames; whiskers: 5th "
+             "and 95th percentiles.", ha="center", va="top", fontsize="small")
     return _save(fig, stem)

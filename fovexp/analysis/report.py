@@ -1,5 +1,9 @@
 """``fovexp analyze``: trial logs -> tables, figures, statistics and a Markdown report
-(paper sections 6.3, 7.1 and 7.3).
+(paper sections 5.3, 6.1 and 6.3).
+
+The report says at its top when its data come from dry runs (simulated participants) or
+include mouse-gaze pilots. Every table column with a unit names it in its header; f_e, s_k and
+s_f are dimensionless; every mean comes with its SEM across participants and n.
 
 Output folder layout::
 
@@ -26,7 +30,8 @@ import pandas as pd
 
 from fovexp import PAPER_TABLE2, FovexpError
 from fovexp.results.calibration import Calibration, calibrate, fe_summary, sk_lines, sk_summary
-from fovexp.results.loading import RULES, Dataset, load_results
+from fovexp.results.format import PILOT_TRACKER, SIMULATED_TRACKER
+from fovexp.results.loading import Dataset, TrialLimits, load_results, rules
 
 from . import figures as figs
 from .latency import session_latency
@@ -34,6 +39,22 @@ from .tables import table2_markdown, write_table2
 from .validation import ValidationResult, validate
 
 CALIBRATION_EXPERIMENTS = ("calibration-fe", "calibration-sk", "calibration-sf")
+
+#: The unit of each column the report's tables show, by column name ("dimensionless": a pure
+#: number; counts named for what they count, such as ``participants``, need none); a table
+#: passes its own for the columns whose unit depends on it (``mean``, ``sem``, ``n``).
+UNITS: dict[str, str] = {
+    "blur_rate": "arcmin/deg", "blur_rate_contrast": "arcmin/deg",
+    "blur_rate_ours": "arcmin/deg", "mean_ours": "arcmin/deg", "mean_contrast": "arcmin/deg",
+    "mean_diff": "arcmin/deg", "sd_diff": "arcmin/deg", "ci_low": "arcmin/deg",
+    "ci_high": "arcmin/deg", "f_e": "dimensionless", "s_k": "dimensionless",
+    "s_f": "dimensionless", "s_f_sem": "dimensionless", "s_k_sem": "dimensionless",
+    "slope": "s_k per unit s_f", "intercept": "dimensionless", "r2": "dimensionless",
+    "sr_ratio": "dimensionless", "reduction_pct": "%", "median_ms": "ms", "p95_ms": "ms",
+    "max_ms": "ms", "dropped_pct": "%", "with_gaze": "frames", "rule_violations": "frames",
+    "n_trials": "trials", "n_levels": "s_f levels", "t": "dimensionless",
+    "d_z": "dimensionless", "df": "degrees of freedom",
+}
 
 
 @dataclass
@@ -46,14 +67,18 @@ class Analysis:
     validations: list[ValidationResult] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
     files: list[Path] = field(default_factory=list)
+    limits: TrialLimits = field(default_factory=TrialLimits)
 
     @property
     def report(self) -> Path:
         return self.out / "report.md"
 
 
-def _md_table(frame: pd.DataFrame, digits: int = 3) -> str:
-    """A DataFrame as a Markdown table (floats to ``digits`` significant decimals)."""
+def _md_table(frame: pd.DataFrame, digits: int = 3, units: Mapping[str, str] | None = None,
+              ) -> str:
+    """A DataFrame as a Markdown table (floats to ``digits`` significant decimals), each column
+    header with its unit (:data:`UNITS`, then ``units``)."""
+    known = {**UNITS, **(units or {})}
     def cell(v: object) -> str:
         if isinstance(v, float):
             if math.isnan(v):
@@ -62,7 +87,8 @@ def _md_table(frame: pd.DataFrame, digits: int = 3) -> str:
                 return f"{v:.2e}"
             return f"{v:.{digits}f}"
         return str(v)
-    head = "| " + " | ".join(map(str, frame.columns)) + " |"
+    head = "| " + " | ".join(f"{c} ({known[c]})" if c in known else str(c)
+                             for c in frame.columns) + " |"
     rule = "|" + "---|" * len(frame.columns)
     body = ["| " + " | ".join(cell(v) for v in row) + " |" for row in frame.itertuples(False)]
     return "\n".join([head, rule, *body]) + "\n"
@@ -77,19 +103,24 @@ def run_analysis(
     out: str | Path,
     *,
     include_incomplete: bool = False,
+    include_pilots: bool = False,
     protocol: Mapping[str, str] | None = None,
+    limits: TrialLimits | None = None,
     figures: bool = True,
     table_source: str | None = None,
 ) -> Analysis:
     """Analyse every experiment under ``results`` and write the report into ``out``.
 
-    Calibration (section 6.3) needs calibration-fe, -sk and -sf; every experiment whose trials
-    adjust the blur-rate is analysed as a validation experiment (section 7.1).
+    Calibration (section 5.3) needs calibration-fe, -sk and -sf; every experiment whose trials
+    adjust the blur-rate is analysed as a validation experiment (section 6.1). The exclusion
+    rules and their options: :func:`fovexp.results.loading.load_results`.
     """
     results = Path(results)
     out = Path(out)
-    data = load_results(results, include_incomplete=include_incomplete, protocol=protocol)
-    ana = Analysis(data=data, out=out)
+    limits = limits or TrialLimits()
+    data = load_results(results, include_incomplete=include_incomplete,
+                        include_pilots=include_pilots, protocol=protocol, limits=limits)
+    ana = Analysis(data=data, out=out, limits=limits)
     tables = out / "tables"
     fig_dir = out / "figures"
     tables.mkdir(parents=True, exist_ok=True)
@@ -115,18 +146,18 @@ def run_analysis(
         missing = [e for e in CALIBRATION_EXPERIMENTS if e not in present]
         ana.notes.append(f"calibration incomplete: no trials of {', '.join(missing)}; "
                          "Table 2 not computed")
-        parts = ["## Calibration (section 6.3)\n",
+        parts = ["## Calibration (section 5.3)\n",
                  f"Table 2 needs all three calibration experiments; missing: "
                  f"{', '.join(missing)}.\n"]
         if "calibration-fe" in present:
             fe = fe_summary(data.experiment("calibration-fe"))
             fe.to_csv(tables / "calibration-fe.csv", index=False, float_format="%.6g")
-            parts += ["### f_e per blur-rate\n", _md_table(fe)]
+            parts += ["### f_e per blur-rate\n", _md_table(fe, units=_FE_UNITS)]
         if "calibration-sk" in present:
             sk = sk_summary(data.experiment("calibration-sk"))
             sk.to_csv(tables / "calibration-sk.csv", index=False, float_format="%.6g")
             lines = _lines_frame_from(sk_lines(sk))
-            parts += ["### s_k per (blur-rate, s_f)\n", _md_table(sk),
+            parts += ["### s_k per (blur-rate, s_f)\n", _md_table(sk, units=_SK_UNITS),
                       "### s_k = slope * s_f + intercept\n", _md_table(lines)]
         sections.append("\n".join(parts))
 
@@ -177,7 +208,7 @@ def _latency_section(ana: Analysis, tables: Path, fig_dir: Path, figures: bool) 
              "than the gaze timeout when the frame was decided (after the previous flip; "
              "`rule_violations`: 0 in a valid session).\n"]
     if len(table):
-        parts.append(_md_table(table, 2))
+        parts.append(_md_table(table, 2, units={"n": "participants"}))
         if figures and lat:
             ana.files += figs.latency_figure(lat, fig_dir / "latency")
             parts.append("![Gaze-to-flip latency](figures/latency.png)\n")
@@ -199,7 +230,7 @@ def _lines_frame(calib: Calibration) -> pd.DataFrame:
 def _calibration_md(calib: Calibration, figures: bool) -> str:
     paper = pd.DataFrame([r.model_dump() for r in PAPER_TABLE2.rows])
     parts = [
-        "## Calibration (section 6.3)\n",
+        "## Calibration (section 5.3)\n",
         "Means ± SEM across participants (each participant's images and repetitions averaged "
         "first).\n",
         "### Table 2: parameters per foveation level\n",
@@ -209,16 +240,16 @@ def _calibration_md(calib: Calibration, figures: bool) -> str:
         "The paper's Table 2 for comparison:\n",
         _md_table(paper, 2),
         "### f_e per blur-rate (calibration-fe)\n",
-        _md_table(calib.fe),
+        _md_table(calib.fe, units=_FE_UNITS),
         "### s_k per (blur-rate, s_f) (calibration-sk)\n",
-        _md_table(calib.sk),
+        _md_table(calib.sk, units=_SK_UNITS),
         "Least-squares line s_k = slope * s_f + intercept per blur-rate (fitted to the means "
         "above; calibration-sf sets s_k with it):\n",
         _md_table(_lines_frame(calib)),
         "### Final s_f and its s_k (calibration-sf)\n",
         "s_k is the group line at the mean s_f; its SEM is sqrt((slope x SEM(s_f))^2 + "
         "SEM_line^2), SEM_line = SEM across participants of their own lines at that s_f.\n",
-        _md_table(calib.sf),
+        _md_table(calib.sf, units={"n": "participants"}),
     ]
     if figures:
         parts.append("![Calibration results](figures/calibration.png)\n")
@@ -226,11 +257,11 @@ def _calibration_md(calib: Calibration, figures: bool) -> str:
 
 
 def _validation_md(res: ValidationResult, figures: bool) -> str:
-    parts = [f"## Validation: {res.experiment} (section 7.1)\n",
+    parts = [f"## Validation: {res.experiment} (section 6.1)\n",
              "Mean selected blur-rate ± SEM across participants, per scene and method:\n",
-             _md_table(res.summary),
+             _md_table(res.summary, units=_BLUR_UNITS),
              "Over all scenes (each participant's mean over scenes):\n",
-             _md_table(res.overall)]
+             _md_table(res.overall, units=_BLUR_UNITS)]
     if len(res.tests):
         main = res.tests.iloc[0]
         parts += [
@@ -242,8 +273,8 @@ def _validation_md(res: ValidationResult, figures: bool) -> str:
             "Rows: all scenes (pairs = participant x scene), participant means (pairs = "
             "participants, scenes averaged; does not count a participant's scenes as "
             "independent), then each scene (pairs = participants).\n",
-            _md_table(res.tests),
-            "### Estimated sampling-rate reduction (section 7.3)\n",
+            _md_table(res.tests, units={"n": "pairs", "p": "probability"}),
+            "### Estimated sampling-rate reduction (section 6.3)\n",
             "SR_ours / SR_contrast = blur_rate_contrast / blur_rate_ours; reduction = 1 - ratio.\n",
             _md_table(res.sampling),
         ]
@@ -265,6 +296,7 @@ def _report_md(ana: Analysis, sections: list[str], results: Path) -> str:
                 .reset_index())
     parts = [
         "# fovexp analysis report\n",
+        *_data_warnings(t),
         f"Results folder: `{results}` ({len(ana.data.files)} trials.csv files). "
         f"Generated {datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC.\n",
         "## Data included\n",
@@ -272,7 +304,7 @@ def _report_md(ana: Analysis, sections: list[str], results: Path) -> str:
         *sections,
         "## Exclusions\n",
         "Rules, applied in this order (docs/ANALYSIS.md):\n",
-        *[f"- **{rule}**: {text}" for rule, text in RULES.items()],
+        *[f"- **{rule}**: {text}" for rule, text in rules(ana.limits).items()],
         "",
     ]
     excl = [e for e in ana.data.exclusions if e.rule != "note"]
@@ -295,6 +327,28 @@ def _report_md(ana: Analysis, sections: list[str], results: Path) -> str:
     if notes:
         parts += ["### Notes\n", *[f"- {n}" for n in notes], ""]
     return "\n".join(parts)
+
+
+_FE_UNITS = {"mean": "f_e, dimensionless", "sem": "f_e, dimensionless", "n": "participants"}
+_SK_UNITS = {"mean": "s_k, dimensionless", "sem": "s_k, dimensionless", "n": "participants"}
+_BLUR_UNITS = {"mean": "arcmin/deg", "sem": "arcmin/deg", "n": "participants"}
+
+
+def _data_warnings(trials: pd.DataFrame) -> list[str]:
+    """What the report must say before any result: data from dry runs (simulated
+    participants), and mouse-gaze pilots kept with ``--include-pilots``."""
+    out = []
+    n = len(trials)
+    sim = int((trials["tracker"] == SIMULATED_TRACKER).sum())
+    pilots = int((trials["tracker"] == PILOT_TRACKER).sum())
+    if sim:
+        out.append(f"> **{'All' if sim == n else f'{sim} of {n}'} trials come from dry runs: "
+                   "simulated participants, not people.** Nothing below is a measurement of "
+                   "vision; it shows that the pipeline runs.\n")
+    if pilots:
+        out.append(f"> **{pilots} of {n} trials come from mouse-gaze pilot sessions** (no eye "
+                   "tracker; kept with --include-pilots).\n")
+    return out
 
 
 def _rel(path: str, root: Path) -> str:

@@ -47,6 +47,9 @@ def add_run_parser(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument("--results", type=Path, default=Path("results"),
                    help="results root; the protocol's dependencies are read from it too "
                         "(default: ./results)")
+    p.add_argument("--include-pilots", action="store_true",
+                   help="let the dependencies' mouse-gaze pilot sessions count (left out by "
+                        "default, as in fovexp analyze)")
     p.add_argument("--window", type=_size, default=None, metavar="WxH",
                    help="window size instead of the display profile's (dry run: 480x270); a "
                         "real session needs its images at exactly this size")
@@ -152,7 +155,8 @@ def run_command(args: argparse.Namespace) -> int:
         truth = SimTruth.load(args.sim_truth) if args.sim_truth else SimTruth()
         # dependencies come from the same results root; a participant's never from dry runs
         protocol = load_protocol(find_protocol(args.protocol), results_root=args.results,
-                                 real_only=tracker != SIMULATED_TRACKER, stimuli=args.stimuli)
+                                 real_only=tracker != SIMULATED_TRACKER, stimuli=args.stimuli,
+                                 include_pilots=args.include_pilots)
         # Every image's sha256 and size, for the frames this run shows, before any window.
         frame_size = args.window or (DRY_RUN_SIZE if args.dry_run else protocol.native_size)
         images = protocol.prepare_images(frame_size, args.dry_run)

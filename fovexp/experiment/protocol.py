@@ -494,17 +494,19 @@ def protocol_stimuli(path: Path, spec: Protocol,
 
 def load_protocol(path: str | Path, check_dependencies: bool = True,
                   results_root: str | Path = "results", real_only: bool = False,
-                  stimuli: str | Path | None = None) -> LoadedProtocol:
+                  stimuli: str | Path | None = None,
+                  include_pilots: bool = False) -> LoadedProtocol:
     """Load and validate a protocol, its images and its dependencies, before any window opens.
 
     Dependency folders are looked up under ``results_root`` (where the session writes; see
     :class:`ParamSource`). ``real_only`` (a session with a participant, not a dry run) refuses a
-    dependency holding only simulated sessions. ``stimuli``: the stimulus folder (``--stimuli``;
-    default: the protocol's ``stimuli`` key, else :func:`.stimuli.find_folder`). Raises
-    :class:`FovexpError` naming the file and the key for an unknown key, an out-of-range value,
-    an image id that is neither a generated scene nor in the stimulus folder's manifest, or a
-    missing dependency folder. The image files are checked by :meth:`~LoadedProtocol.
-    prepare_images`, for the frame size the session shows.
+    dependency holding only simulated sessions; ``include_pilots`` lets the dependencies'
+    mouse-gaze pilot sessions count (left out by default, as in the analysis). ``stimuli``: the
+    stimulus folder (``--stimuli``; default: the protocol's ``stimuli`` key, else
+    :func:`.stimuli.find_folder`). Raises :class:`FovexpError` naming the file and the key for
+    an unknown key, an out-of-range value, an image id that is neither a generated scene nor in
+    the stimulus folder's manifest, or a missing dependency folder. The image files are checked
+    by :meth:`~LoadedProtocol.prepare_images`, for the frame size the session shows.
     """
     path = Path(path)
     raw, spec = read_protocol(path)
@@ -518,7 +520,8 @@ def load_protocol(path: str | Path, check_dependencies: bool = True,
             raise FovexpError(f"protocol {path}: images[{i}]: {unknown}")
     lp = LoadedProtocol(path=path, sha256=hashlib.sha256(raw).hexdigest(), text=text, spec=spec,
                         stimuli=stim, display_name=disp, display=display)
-    deps = _Dependencies(base, Path(results_root), check_dependencies, real_only)
+    deps = _Dependencies(base, Path(results_root), check_dependencies, real_only,
+                         include_pilots)
     for name, src in spec.parameters.items():
         snap = _snapshot(path, deps, name, src, lp)
         if snap is not None:
@@ -559,6 +562,7 @@ class _Dependencies:
     results_root: Path  # results folders
     check: bool
     real_only: bool
+    include_pilots: bool = False
 
 
 def _snapshot(path: Path, deps: _Dependencies, name: str, src: ParamSource,
@@ -588,7 +592,7 @@ def _snapshot(path: Path, deps: _Dependencies, name: str, src: ParamSource,
             _require_results(where + ".table", tpath, deps.check, nested=True)
             from fovexp.results.derive import parameter_table
             table = _call(where + ".table", lambda f: parameter_table(
-                f, real_only=deps.real_only), tpath)
+                f, real_only=deps.real_only, include_pilots=deps.include_pilots), tpath)
         return {"kind": "table", "from": src.table, "table": table.model_dump()}
     # values derived from an earlier experiment's results folder (section 6.2's chain)
     derived = (
@@ -607,7 +611,8 @@ def _snapshot(path: Path, deps: _Dependencies, name: str, src: ParamSource,
         _require_results(f"{where}.{key}", folder, deps.check)
         from fovexp.results import derive
         fn = getattr(derive, fn_name)
-        values = _call(f"{where}.{key}", lambda f, fn=fn: fn(f, real_only=deps.real_only),
+        values = _call(f"{where}.{key}", lambda f, fn=fn: fn(f, real_only=deps.real_only,
+                                                             include_pilots=deps.include_pilots),
                        folder)
         return {"kind": key, "from": str(folder), **pack(values)}
     return None

@@ -45,6 +45,9 @@ ADJUSTABLE: tuple[str, ...] = ("f_e", "s_k", "s_f", "blur_rate")
 #: Gaze sources (the ``tracker`` column); the simulated one marks dry runs, never a participant.
 TRACKERS: tuple[str, ...] = ("tobii", "simulated", "mouse")
 SIMULATED_TRACKER = "simulated"
+#: Mouse gaze: a person, but a pilot (no eye tracker): the analysis and the calibration chain
+#: leave pilot sessions out unless asked (``--include-pilots``).
+PILOT_TRACKER = "mouse"
 #: A participant ID, safe as a folder name.
 PARTICIPANT_PATTERN = r"[A-Za-z0-9_-]{1,32}"
 #: ``\Z``, not ``$``: ``$`` also matches before a final newline ("P01\n").

@@ -97,5 +97,24 @@ def unblanked_violations(frames: pd.DataFrame, radius_deg: float, gaze_timeout_s
     return f[bad.fillna(True)]
 
 
+def trial_quality(frames: pd.DataFrame) -> pd.DataFrame:
+    """Per trial (``trial_index``; its last attempt, the one whose answer the trial log holds):
+    ``frames``, ``dropped_fraction`` and the gaze-to-flip latency's 95th percentile
+    ``latency_p95_ms`` (NaN without gaze samples): what the exclusion rules on a trial's frame
+    timing read (:mod:`fovexp.results.loading`, R12 and R13)."""
+    if frames.empty:
+        return pd.DataFrame(columns=["trial_index", "frames", "dropped_fraction",
+                                     "latency_p95_ms"])
+    last = frames.groupby("trial_index")["attempt"].transform("max")
+    f = frames[frames["attempt"] == last].assign(latency_ms=gaze_to_flip_ms(frames))
+    out = f.groupby("trial_index").agg(
+        frames=("frame", "size"),
+        dropped_fraction=("dropped", lambda d: float(d.fillna(0).mean())),
+        latency_p95_ms=("latency_ms", lambda v: float(np.nanpercentile(v, 95))
+                        if v.notna().any() else float("nan")),
+    )
+    return out.reset_index()
+
+
 __all__ = ["FRAME_INT_COLUMNS", "gaze_to_flip_ms", "latency_summary", "read_frame_log",
-           "unblanked_violations"]
+           "trial_quality", "unblanked_violations"]

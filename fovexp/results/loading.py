@@ -21,19 +21,31 @@ R5 duplicated trials
 R6 wrong parameter
     In the paper's four experiments, rows whose ``adjusted_parameter`` is not the one the
     experiment adjusts are excluded.
-R7 simulated sessions
-    Where an experiment has trials with a participant's own gaze (tracker ``tobii`` or
-    ``mouse``; mouse pilots are people too) in a session not recorded as incomplete, its trials
-    with simulated gaze (dry runs, demos) are excluded: a dry run left in
-    the lab's results folder never enters its calibration. A folder of simulated sessions alone
-    (CI, demos) is analysed as it is, with a note saying so.
-R8 mixed protocol versions
+R7 pilot sessions
+    Trials with mouse gaze (tracker ``mouse``: a person, but no eye tracker) are pilots:
+    excluded unless ``include_pilots`` (``--include-pilots``).
+R8 simulated sessions
+    Where an experiment has trials with a participant's own gaze (tracker ``tobii``, or
+    ``mouse`` with ``include_pilots``) in a session not recorded as incomplete, its trials with
+    simulated gaze (dry runs, demos) are excluded: a dry run left in the lab's results folder
+    never enters its calibration. A folder of simulated sessions alone (CI, demos) is analysed
+    as it is, and the report says so at its top.
+R9 mixed protocol versions
     Per experiment, the protocol version (``protocol_sha256``) run by the most participants is
     kept (ties: more trials, then the later last trial); rows of other versions are excluded.
-R9 incomplete sessions
+R10 incomplete sessions
     A session whose ``session-<id>.json`` records it as not completed is excluded; without a
     readable completion state, a session with fewer trials than the largest session of the same
     experiment and protocol version is excluded.
+R11 blanking, R12 dropped frames, R13 latency
+    A participant's trial (not a dry run's: its frame timing is the machine's that ran it) is
+    excluded when the stimulus was blanked for more than :attr:`TrialLimits.max_blanked_fraction`
+    of its frames (the participant mostly looked away from the cross), when more than
+    :attr:`TrialLimits.max_dropped_fraction` of its frames were dropped, or when the 95th
+    percentile of its frames' gaze-to-flip latency exceeds
+    :attr:`TrialLimits.max_latency_p95_ms`. R12 and R13 read the session's frame log
+    (``frames-<session>.csv``, :func:`fovexp.results.frames.trial_quality`); a session without
+    one is noted and not judged by them.
 """
 
 from __future__ import annotations
@@ -51,15 +63,18 @@ from fovexp import FovexpError
 from .format import (
     FLOAT_COLUMNS,
     INT_COLUMNS,
+    PILOT_TRACKER,
     SIMULATED_TRACKER,
     TRIAL_COLUMNS,
 )
 from .format import read_trials_file as _read_file
+from .frames import read_frame_log, trial_quality
+from .limits import TrialLimits
 
 #: ``trials.csv`` columns in their documented order (docs/LOGS.md); the format is defined once,
 #: in :mod:`fovexp.results.format`.
 COLUMNS: tuple[str, ...] = TRIAL_COLUMNS
-#: The parameter each of the paper's experiments adjusts (sections 6.2, 7.1).
+#: The parameter each of the paper's experiments adjusts (sections 5.2, 6.1).
 EXPERIMENT_PARAMETER: dict[str, str] = {
     "calibration-fe": "f_e",
     "calibration-sk": "s_k",
@@ -82,14 +97,21 @@ RULES: dict[str, str] = {
     "identical copies merged, conflicting copies keep the last one written",
     "R6 wrong parameter": "a row of calibration-fe/-sk/-sf or validation whose "
     "adjusted_parameter is not the experiment's (f_e/s_k/s_f/blur_rate): excluded",
-    "R7 simulated sessions": "trials with simulated gaze (dry runs) of an experiment that also "
-    "has trials with a participant's own gaze (tobii, mouse): excluded",
-    "R8 mixed protocol versions": "per experiment, only the protocol version run by the most "
+    "R7 pilot sessions": "trials with mouse gaze (pilots: a person, no eye tracker): excluded "
+    "unless --include-pilots",
+    "R8 simulated sessions": "trials with simulated gaze (dry runs) of an experiment that also "
+    "has trials with a participant's own gaze (tobii; mouse with --include-pilots): excluded",
+    "R9 mixed protocol versions": "per experiment, only the protocol version run by the most "
     "participants (ties: more trials, then the later last trial) is kept",
-    "R9 incomplete session": "a session recorded as not completed in session-<id>.json (or, "
+    "R10 incomplete session": "a session recorded as not completed in session-<id>.json (or, "
     "without one, with fewer trials than the largest session of its experiment and protocol "
     "version): excluded",
 }
+
+
+def rules(limits: TrialLimits | None = None) -> dict[str, str]:
+    """Every exclusion rule in the order applied (R1-R13), with the thresholds of ``limits``."""
+    return {**RULES, **(limits or TrialLimits()).rules()}
 
 
 @dataclass(frozen=True)
@@ -221,15 +243,19 @@ def load_results(
     root: str | Path,
     *,
     include_incomplete: bool = False,
+    include_pilots: bool = False,
     protocol: Mapping[str, str] | None = None,
+    limits: TrialLimits | None = None,
 ) -> Dataset:
-    """Load every ``trials.csv`` under ``root`` and apply rules R1-R9 (see module docstring).
+    """Load every ``trials.csv`` under ``root`` and apply rules R1-R13 (see module docstring).
 
-    ``include_incomplete`` keeps incomplete sessions (R9 then only reports them);
-    ``protocol`` maps an experiment to the ``protocol_sha256`` (or a prefix) to keep instead of
-    the majority version (R8). Raises :class:`FovexpError` for an empty or missing folder, a
+    ``include_incomplete`` keeps incomplete sessions (R10 then only reports them);
+    ``include_pilots`` keeps mouse-gaze sessions (R7); ``protocol`` maps an experiment to the
+    ``protocol_sha256`` (or a prefix) to keep instead of the majority version (R9); ``limits``
+    the thresholds of R11-R13. Raises :class:`FovexpError` for an empty or missing folder, a
     corrupt row, or when no trial is left.
     """
+    limits = limits or TrialLimits()
     root = Path(root)
     files = find_trial_files(root)
     session_state = functools.cache(_session_state)  # R7 and R9 ask about the same sessions
@@ -281,7 +307,13 @@ def load_results(
         trials = _exclude(trials, wrong, "R6 wrong parameter",
                           "adjusted_parameter is not the experiment's", exclusions)
 
-    # R7 simulated sessions (before R8: dry runs must not outvote the real participants).
+    # R7 pilot sessions.
+    pilot = trials["tracker"] == PILOT_TRACKER
+    if pilot.any() and not include_pilots:
+        trials = _exclude(trials, pilot, "R7 pilot sessions",
+                          "mouse gaze: a pilot session (--include-pilots keeps it)", exclusions)
+
+    # R8 simulated sessions (before R9: dry runs must not outvote the real participants).
     simulated = trials["tracker"] == SIMULATED_TRACKER
     for exp, grp in list(trials.groupby("experiment", sort=True)):
         sim = simulated & (trials["experiment"] == exp)
@@ -291,7 +323,7 @@ def load_results(
                        for f, sess in real[["file", "session"]].drop_duplicates().itertuples(
                            index=False))
         if sim.any() and has_real:
-            trials = _exclude(trials, sim, "R7 simulated sessions",
+            trials = _exclude(trials, sim, "R8 simulated sessions",
                               "simulated gaze (a dry run) beside real participants' sessions",
                               exclusions)
             simulated = simulated[trials.index]
@@ -299,7 +331,7 @@ def load_results(
             notes.append(f"experiment {exp}: every trial comes from simulated gaze (dry runs), "
                          "not from real participants")
 
-    # R8 mixed protocol versions.
+    # R9 mixed protocol versions.
     protocol = dict(protocol or {})
     for exp, grp in list(trials.groupby("experiment", sort=True)):
         versions = grp.groupby("protocol_sha256").agg(
@@ -319,11 +351,11 @@ def load_results(
             continue
         other = (trials["experiment"] == exp) & (trials["protocol_sha256"] != keep)
         if other.any():
-            trials = _exclude(trials, other, "R8 mixed protocol versions",
+            trials = _exclude(trials, other, "R9 mixed protocol versions",
                               f"protocol {_short(trials.loc[other, 'protocol_sha256'])} "
                               f"differs from the kept {keep[:12]}", exclusions)
 
-    # R9 incomplete sessions.
+    # R10 incomplete sessions.
     sess_key = ["experiment", "protocol_sha256", "participant", "session"]
     sizes = trials.groupby(sess_key, sort=True).agg(n=("trial_index", "size"),
                                                     file=("file", "first"))
@@ -342,17 +374,58 @@ def load_results(
         mask = ((trials["experiment"] == exp) & (trials["participant"] == part)
                 & (trials["session"] == sess) & (trials["protocol_sha256"] == sha))
         if include_incomplete:
-            exclusions.append(Exclusion("R9 incomplete session", str(row["file"]),
+            exclusions.append(Exclusion("R10 incomplete session", str(row["file"]),
                                         reason + "; kept (--include-incomplete)", 0,
                                         str(exp), str(part), str(sess)))
         else:
-            trials = _exclude(trials, mask, "R9 incomplete session", reason, exclusions)
+            trials = _exclude(trials, mask, "R10 incomplete session", reason, exclusions)
+
+    trials = _trial_quality_rules(trials, limits, exclusions, notes)
 
     if trials.empty:
+        hint = (" (mouse-gaze pilot sessions were left out: --include-pilots keeps them)"
+                if any(e.rule == "R7 pilot sessions" for e in exclusions) else "")
         raise FovexpError(f"{root}: no trials left after the exclusion rules"
-                          + _first_reason(exclusions))
+                          + _first_reason(exclusions) + hint)
     return Dataset(root=root, trials=trials.reset_index(drop=True), files=files,
                    exclusions=exclusions, notes=notes)
+
+
+def _trial_quality_rules(trials: pd.DataFrame, limits: TrialLimits,
+                         exclusions: list[Exclusion], notes: list[str]) -> pd.DataFrame:
+    """R11 blanking, R12 dropped frames, R13 latency: a participant's trials only (a dry run's
+    frame timing is the machine's that ran it, not a participant's)."""
+    person = trials["tracker"] != SIMULATED_TRACKER
+    if not person.any():
+        return trials
+    blanked = person & (trials["blanked_fraction"] > limits.max_blanked_fraction)
+    if blanked.any():
+        trials = _exclude(trials, blanked, "R11 blanking",
+                          f"blanked for more than {limits.max_blanked_fraction:.0%} of the "
+                          "trial's frames", exclusions)
+    dropped = pd.Series(False, index=trials.index)
+    late = pd.Series(False, index=trials.index)
+    person = trials["tracker"] != SIMULATED_TRACKER
+    for (file, sess), grp in trials[person].groupby(["file", "session"], sort=True):
+        path = Path(str(file)).parent / f"frames-{sess}.csv"
+        if not path.is_file():
+            notes.append(f"{path.parent}: session {sess} has no frame log: rules R12 and R13 "
+                         "not applied to it")
+            continue
+        quality = trial_quality(read_frame_log(path)).set_index("trial_index")
+        q = quality.reindex(grp["trial_index"].astype(int).to_numpy())
+        dropped[grp.index] = (q["dropped_fraction"] > limits.max_dropped_fraction).to_numpy()
+        late[grp.index] = (q["latency_p95_ms"] > limits.max_latency_p95_ms).to_numpy()
+    if dropped.any():
+        trials = _exclude(trials, dropped, "R12 dropped frames",
+                          f"more than {limits.max_dropped_fraction:.0%} of the trial's frames "
+                          "dropped", exclusions)
+    late = late[trials.index]
+    if late.any():
+        trials = _exclude(trials, late, "R13 latency",
+                          "the 95th percentile of the gaze-to-flip latency above "
+                          f"{limits.max_latency_p95_ms:g} ms", exclusions)
+    return trials
 
 
 def _short(values: Iterable[str]) -> str:

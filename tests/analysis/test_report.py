@@ -42,9 +42,9 @@ def test_cli_writes_the_report(results: Path, tmp_path: Path,
     assert (out / "figures/calibration.png").read_bytes()[:4] == b"\x89PNG"
     assert (out / "figures/validation.pdf").read_bytes()[:4] == b"%PDF"
     report = (out / "report.md").read_text()
-    for heading in ("## Calibration (section 6.3)", "### Table 2", "## Validation: validation",
+    for heading in ("## Calibration (section 5.3)", "### Table 2", "## Validation: validation",
                     "### Paired t-test, ours vs contrast", "sampling-rate reduction",
-                    "## Exclusions", "R4 practice", "R9 incomplete session"):
+                    "## Exclusions", "R4 practice", "R10 incomplete session"):
         assert heading in report, heading
     # 2 practice trials per session, 6 participants x 4 experiments
     assert "| R4 practice | 48 |" in report
@@ -118,10 +118,26 @@ def test_report_lists_exclusions(tmp_path: Path, capsys: pytest.CaptureFixture[s
     captured = capsys.readouterr()
     assert "warning:" in captured.err and "torn last row" in captured.err
     report = (out / "report.md").read_text()
-    assert "| R1 torn last row | 1 |" in report and "| R9 incomplete session | 20 |" in report
+    assert "| R1 torn last row | 1 |" in report and "| R10 incomplete session | 20 |" in report
     assert "validation/P03/trials.csv" in report  # the details name the file
     assert main([str(root), "--out", str(out), "--no-figures", "--include-incomplete"]) == 0
     report = (out / "report.md").read_text()
     assert "kept (--include-incomplete)" in report
     summary = (out / "tables" / "validation-summary.csv").read_text()
     assert ",3," in summary  # three participants again
+
+
+def test_report_says_dry_runs_first_and_gives_units(results: Path, tmp_path: Path) -> None:
+    """Issue 9 section 5: the report says at its top that its data come from dry runs; table
+    headers carry units, means their SEM and n; a tracked study gets no such warning."""
+    ana = run_analysis(results, tmp_path / "sim", figures=False)
+    lines = ana.report.read_text().splitlines()
+    assert lines[0] == "# fovexp analysis report"
+    assert lines[2].startswith("> **All trials come from dry runs: simulated participants")
+    text = "\n".join(lines)
+    assert "| blur_rate (arcmin/deg) | mean (f_e, dimensionless) | sem (f_e, dimensionless) | " \
+           "n (participants) |" in text
+    assert "| image | method | mean (arcmin/deg) | sem (arcmin/deg) | n (participants) |" in text
+    real = write_study(tmp_path / "real", n_participants=3, seed=5, tracker="tobii")
+    report = run_analysis(real, tmp_path / "real-report", figures=False).report.read_text()
+    assert "dry runs" not in report.split("## Data included")[0]

@@ -147,7 +147,7 @@ def test_results_paths_stay_in_the_results_root(ws: Path) -> None:
 
 def test_participant_sessions_never_use_dry_runs(ws: Path) -> None:
     """Dependencies holding only dry runs serve dry runs, and stop a real session; beside real
-    participants' results, dry runs are left out (analysis rule R7)."""
+    participants' results, dry runs are left out (analysis rule R8)."""
     root = ws / "results"
     write_study(root, n_participants=2, seed=5, experiments=("calibration-fe",),
                 truth=Truth(f_e={0.11: 0.3, 0.34: 0.3, 0.57: 0.3}), prefix="SIM")
@@ -161,6 +161,19 @@ def test_participant_sessions_never_use_dry_runs(ws: Path) -> None:
     for real_only in (False, True):
         f_e = load_protocol(sk, results_root=root, real_only=real_only).sources["f_e"]
         assert f_e(0.34, None) == pytest.approx(0.1, abs=0.03)  # the dry runs' 0.3 left out
+
+
+def test_pilot_sessions_serve_the_chain_only_when_asked(ws: Path) -> None:
+    """Mouse-gaze pilots (analysis rule R7) feed the next calibration step only with
+    --include-pilots; without it the error names the option."""
+    root = ws / "results"
+    write_study(root, n_participants=2, seed=5, experiments=("calibration-fe",),
+                truth=Truth(f_e={0.11: 0.3, 0.34: 0.3, 0.57: 0.3}), tracker="mouse")
+    sk = ws / "protocols" / "calibration-sk.yaml"
+    with pytest.raises(FovexpError, match=r"parameters\.f_e\.fe_results: .*--include-pilots"):
+        load_protocol(sk, results_root=root, real_only=True)
+    f_e = load_protocol(sk, results_root=root, real_only=True, include_pilots=True)
+    assert f_e.sources["f_e"](0.34, None) == pytest.approx(0.3, abs=0.03)
 
 
 def test_method_needs_its_parameters(ws: Path) -> None:

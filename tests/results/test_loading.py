@@ -1,4 +1,4 @@
-"""Loading and validation of trial logs: each exclusion rule of docs/ANALYSIS.md (R1-R9), and the
+"""Loading and validation of trial logs: each exclusion rule of docs/ANALYSIS.md (R1-R13), and the
 clear errors for empty folders, non-numeric values and corrupt rows."""
 
 from __future__ import annotations
@@ -161,7 +161,7 @@ def test_mixed_protocol_versions(tmp_path: Path) -> None:
     write_trials(tmp_path / "calibration-fe" / "P09", rows(pid="P09", k=9, sha="b" * 64))
     ds = load_results(tmp_path)
     assert set(ds.trials["participant"]) == {"P00", "P01", "P02"}
-    mixed = [e for e in ds.exclusions if e.rule == "R8 mixed protocol versions"]
+    mixed = [e for e in ds.exclusions if e.rule == "R9 mixed protocol versions"]
     assert len(mixed) == 1 and mixed[0].participant == "P09" and mixed[0].n_trials == 15
     assert "bbbbbbbbbbbb" in mixed[0].detail
     chosen = load_results(tmp_path, protocol={"calibration-fe": "bbbb"})
@@ -171,14 +171,14 @@ def test_mixed_protocol_versions(tmp_path: Path) -> None:
 
 
 def test_dry_runs_beside_real_sessions(tmp_path: Path) -> None:
-    """R7: three dry runs (another protocol version) beside two real participants: the dry runs
-    are left out before R8, so they cannot outvote the real sessions' protocol version."""
+    """R8: three dry runs (another protocol version) beside two real participants: the dry runs
+    are left out before R9, so they cannot outvote the real sessions' protocol version."""
     for k, pid in enumerate(("SIM01", "SIM02", "SIM03")):
         write_trials(tmp_path / "calibration-fe" / pid, rows(pid=pid, k=k, sha="d" * 64))
     only_dry = load_results(tmp_path)
-    assert len(only_dry.trials) == 45 and "R7 simulated sessions" not in rules(only_dry)
+    assert len(only_dry.trials) == 45 and "R8 simulated sessions" not in rules(only_dry)
     assert any("simulated gaze" in n for n in only_dry.notes)
-    # a participant's aborted session alone does not push the dry runs out (R9 drops it)
+    # a participant's aborted session alone does not push the dry runs out (R10 drops it)
     aborted = [dict(r, tracker="tobii") for r in rows(pid="P09", k=9)][:6]
     write_trials(tmp_path / "calibration-fe" / "P09", aborted, completed=False)
     assert sorted(load_results(tmp_path).trials["participant"].unique()) == [
@@ -189,10 +189,10 @@ def test_dry_runs_beside_real_sessions(tmp_path: Path) -> None:
     ds = load_results(tmp_path)
     assert sorted(ds.trials["participant"].unique()) == ["P01", "P02"]
     assert (ds.trials["tracker"] == "tobii").all()
-    dry = [e for e in ds.exclusions if e.rule == "R7 simulated sessions"]
+    dry = [e for e in ds.exclusions if e.rule == "R8 simulated sessions"]
     assert sorted(e.participant for e in dry) == ["SIM01", "SIM02", "SIM03"]
     assert sum(e.n_trials for e in dry) == 45
-    assert "R8 mixed protocol versions" not in rules(ds)
+    assert "R9 mixed protocol versions" not in rules(ds)
 
 
 def test_incomplete_session_from_json(tmp_path: Path) -> None:
@@ -200,11 +200,11 @@ def test_incomplete_session_from_json(tmp_path: Path) -> None:
     write_trials(tmp_path / "calibration-fe" / "P02", rows(pid="P02", k=1), completed=False)
     ds = load_results(tmp_path)
     assert set(ds.trials["participant"]) == {"P01"}
-    inc = [e for e in ds.exclusions if e.rule == "R9 incomplete session"]
+    inc = [e for e in ds.exclusions if e.rule == "R10 incomplete session"]
     assert len(inc) == 1 and "not completed" in inc[0].detail and inc[0].n_trials == 15
     kept = load_results(tmp_path, include_incomplete=True)
     assert set(kept.trials["participant"]) == {"P01", "P02"}
-    assert "R9 incomplete session" in rules(kept)
+    assert "R10 incomplete session" in rules(kept)
 
 
 def test_incomplete_session_from_trial_count(tmp_path: Path) -> None:
@@ -212,7 +212,7 @@ def test_incomplete_session_from_trial_count(tmp_path: Path) -> None:
     write_trials(tmp_path / "calibration-fe" / "P02", rows(pid="P02", k=1)[:10], completed=None)
     ds = load_results(tmp_path)
     assert set(ds.trials["participant"]) == {"P01"}
-    inc = [e for e in ds.exclusions if e.rule == "R9 incomplete session"]
+    inc = [e for e in ds.exclusions if e.rule == "R10 incomplete session"]
     assert "8 trials, fewer than the 15" in inc[0].detail
 
 
@@ -272,9 +272,93 @@ def test_runner_writer_round_trip(tmp_path: Path) -> None:
     got = ds.trials.sort_values("trial_index")
     assert got["final_value"].tolist() == [x["final_value"] for x in main]
     assert got["s_k"].isna().all()  # empty in the log, NaN here
-    # a session the runner marked incomplete is excluded (R9)
+    # a session the runner marked incomplete is excluded (R10)
     logs.write_json_atomic(folder / f"session-{session_id(0)}.json",
                            {"session": session_id(0), "state": "interrupted", "completed": False})
     write_trials(tmp_path / "calibration-fe" / "P02", rows(pid="P02", k=1))
     ds = load_results(tmp_path)
     assert set(ds.trials["participant"]) == {"P02"}
+
+
+def _as(rows_: list[dict], **kw) -> list[dict]:
+    return [dict(r, **kw) for r in rows_]
+
+
+def test_mouse_pilots_left_out_unless_asked(tmp_path: Path) -> None:
+    """R7: mouse-gaze sessions are pilots: left out beside a tracked participant, an error
+    naming --include-pilots when nothing else is left, kept with include_pilots."""
+    write_trials(tmp_path / "calibration-fe" / "P01", _as(rows(pid="P01"), tracker="tobii"))
+    write_trials(tmp_path / "calibration-fe" / "M01",
+                 _as(rows(pid="M01", k=1, seed=1), tracker="mouse"))
+    ds = load_results(tmp_path)
+    assert set(ds.trials["participant"]) == {"P01"}
+    pilots = [e for e in ds.exclusions if e.rule == "R7 pilot sessions"]
+    assert len(pilots) == 1 and pilots[0].participant == "M01" and pilots[0].n_trials == 15
+    kept = load_results(tmp_path, include_pilots=True)
+    assert set(kept.trials["participant"]) == {"P01", "M01"}
+    only = tmp_path / "only-pilots"
+    write_trials(only / "calibration-fe" / "M01", _as(rows(pid="M01"), tracker="mouse"))
+    with pytest.raises(FovexpError, match="--include-pilots keeps them"):
+        load_results(only)
+    assert len(load_results(only, include_pilots=True).trials) == 15
+
+
+def _frame_log(folder: Path, session: str, trials: dict[int, dict]) -> None:
+    """A frame log: per trial ``n`` frames at 120 Hz, ``dropped`` of them dropped, each with a
+    gaze sample ``latency_ms`` before its flip (a retried first attempt with bad frames too,
+    which the trial's answer did not come from)."""
+    from fovexp.results.format import FRAME_COLUMNS
+
+    lines = [",".join(FRAME_COLUMNS)]
+    t_us = 10**9
+    for idx, spec in trials.items():
+        for attempt in (0, 1):
+            for k in range(spec["n"]):
+                t_us += 8333
+                bad = attempt == 0  # the abandoned attempt: every frame late and dropped
+                lat = 500.0 if bad else spec["latency_ms"]
+                dropped = int(bad or k < spec["dropped"])
+                row = {"trial_index": idx, "attempt": attempt, "frame": k,
+                       "flip_time_s": t_us / 1e6, "interval_s": 0.00833, "dropped": dropped,
+                       "blanked": 0, "value": 0.1, "gaze_system_time_us": int(t_us - 1e3 * lat),
+                       "gaze_ecc_deg": 0.3, "flip_system_time_us": t_us}
+                lines.append(",".join(str(row[c]) for c in FRAME_COLUMNS))
+    (folder / f"frames-{session}.csv").write_text("\n".join(lines) + "\n")
+
+
+def test_trial_quality_rules(tmp_path: Path) -> None:
+    """R11-R13: a participant's trials blanked too long, with too many dropped frames or too
+    late a gaze-to-flip latency are excluded, with the stated thresholds; the attempt the answer
+    did not come from does not count; dry runs are not judged by them."""
+    from fovexp.results.limits import TrialLimits
+
+    rs = _as(rows(pid="P01"), tracker="tobii")
+    main = [r for r in rs if not r["practice"]]
+    main[0]["blanked_fraction"] = 0.8  # R11
+    folder = tmp_path / "calibration-fe" / "P01"
+    write_trials(folder, rs)
+    good = {"n": 100, "dropped": 1, "latency_ms": 12.0}
+    spec = {r["trial_index"]: dict(good) for r in rs}
+    spec[main[1]["trial_index"]]["dropped"] = 10  # R12: 10 % dropped
+    spec[main[2]["trial_index"]]["latency_ms"] = 80.0  # R13
+    _frame_log(folder, rs[0]["session"], spec)
+    ds = load_results(tmp_path)
+    got = {e.rule: e.n_trials for e in ds.exclusions if e.rule.startswith(("R11", "R12", "R13"))}
+    assert got == {"R11 blanking": 1, "R12 dropped frames": 1, "R13 latency": 1}
+    assert len(ds.trials) == 12
+    # looser thresholds keep them all
+    loose = TrialLimits(max_blanked_fraction=0.9, max_dropped_fraction=0.2,
+                        max_latency_p95_ms=100.0)
+    assert len(load_results(tmp_path, limits=loose).trials) == 15
+    # the same logs from a dry run: not judged (its frame timing is the machine's)
+    sim = tmp_path / "sim"
+    write_trials(sim / "calibration-fe" / "P01", _as(rs, tracker="simulated"))
+    _frame_log(sim / "calibration-fe" / "P01", rs[0]["session"], spec)
+    assert len(load_results(sim).trials) == 15
+
+
+def test_trial_quality_without_frame_log_is_noted(tmp_path: Path) -> None:
+    write_trials(tmp_path / "calibration-fe" / "P01", _as(rows(pid="P01"), tracker="tobii"))
+    ds = load_results(tmp_path)
+    assert len(ds.trials) == 15
+    assert any("no frame log: rules R12 and R13 not applied" in n for n in ds.notes)
