@@ -21,10 +21,10 @@ THIBOS_T_HIGH_CPD = np.array([60.0, 40.0, 26.0, 24.0, 23.0, 21.0, 20.5, 20.5, 20
 
 
 def t_low_cpd(ecc_deg: np.ndarray | float) -> np.ndarray:
-    """Resolution limit T_L(e) in cycles/deg (paper section 4.1, appendix table)."""
+    """Resolution limit T_L(e) in cycles/deg (paper section 4.1, appendix A table)."""
     return np.interp(ecc_deg, THIBOS_ECC_DEG, THIBOS_T_LOW_CPD)
 
 
 def t_high_cpd(ecc_deg: np.ndarray | float) -> np.ndarray:
-    """Detection limit T_H(e) in cycles/deg (paper section 4.1, appendix table)."""
+    """Detection limit T_H(e) in cycles/deg (paper section 4.1, appendix A table)."""
     return np.interp(ecc_deg, THIBOS_ECC_DEG, THIBOS_T_HIGH_CPD)

@@ -1,16 +1,16 @@
 """Noise amplitude K from the Laplacian pyramid, and the clipping control (paper section 4.2).
 
 The blur attenuates a frequency f by ``exp(-f^2 / (2 sigma_f^2))``, ``sigma_f = 1 / (2 pi
-sigma)``. It falls to the attenuation cut-off ``a`` at (notes section 1, erratum of eq. 6)::
+sigma)``. It falls to the attenuation cut-off ``a`` at (notes section 1, erratum of eq. 7)::
 
     f_c = sigma_f sqrt(-2 ln a) = sqrt(-2 ln a) / (2 pi sigma)
 
 The Laplacian level whose centre ``2**-(l + 0.5)`` (levels from 1, notes section 1) equals f_c
-is (eq. 7, corrected)::
+is (eq. 8, corrected)::
 
     l_a = log2(1 / f_c) - 0.5,   at least 1
 
-and (eq. 8) ``K = s_k |L_{l_a}|``, with a non-integer ``l_a`` interpolated linearly between the
+and (eq. 9) ``K = s_k |L_{l_a}|``, with a non-integer ``l_a`` interpolated linearly between the
 two bracketing levels in the log-frequency domain (the level index is log2 of frequency). As in
 the release (notes 3.7), ``|L_k|`` is smoothed by a 3 x 3 mean on its own grid, sampled
 bilinearly, and K carries the release's gain 3.5722, so that ``s_k`` of Table 2 means the
@@ -32,7 +32,7 @@ RELEASE_AMPLITUDE_GAIN = 3.5722
 
 
 def attenuation_cutoff_cpp(sigma_px: np.ndarray, attenuation: float) -> np.ndarray:
-    """Frequency (cycles/px) the blur attenuates to ``attenuation`` (eq. 6, corrected)."""
+    """Frequency (cycles/px) the blur attenuates to ``attenuation`` (eq. 7, corrected)."""
     sigma_px = np.asarray(sigma_px, dtype=np.float64)
     with np.errstate(divide="ignore"):
         return np.sqrt(-2.0 * np.log(attenuation)) / (2.0 * np.pi * sigma_px)
@@ -44,7 +44,7 @@ def band_centre_cpp(level: np.ndarray | float) -> np.ndarray:
 
 
 def laplacian_level(sigma_px: np.ndarray, attenuation: float) -> np.ndarray:
-    """Continuous level ``l_a`` whose centre the blur attenuates by ``attenuation`` (eq. 7),
+    """Continuous level ``l_a`` whose centre the blur attenuates by ``attenuation`` (eq. 8),
     clamped to at least 1 (the finest band). Infinite sigma-free pixels get level 1."""
     f_c = attenuation_cutoff_cpp(sigma_px, attenuation)
     with np.errstate(divide="ignore"):
@@ -54,7 +54,7 @@ def laplacian_level(sigma_px: np.ndarray, attenuation: float) -> np.ndarray:
 
 def bracketing_levels(level: np.ndarray, top: int) -> tuple[np.ndarray, np.ndarray]:
     """``(k0, t)``: the Laplacian levels ``k0`` and ``k0 + 1`` (at most ``top``, the coarsest
-    built) between which continuous ``level`` lies, and its weight ``t`` on ``k0 + 1`` (eq. 8's
+    built) between which continuous ``level`` lies, and its weight ``t`` on ``k0 + 1`` (eq. 9's
     interpolation in the log-frequency domain)."""
     level = np.minimum(np.asarray(level, dtype=np.float64), top)
     k0 = np.minimum(np.floor(level).astype(np.int64), top - 1) if top > 1 else np.ones_like(

@@ -1,6 +1,6 @@
 """Foveation: the spatially varying Gaussian blur that simulates foveated rendering.
 
-Paper section 6.2: inside the fovea (8 deg) the image is full resolution; past it the standard
+Paper section 5.2: inside the fovea (8 deg) the image is full resolution; past it the standard
 deviation of a Gaussian blur grows linearly with eccentricity at the *blur-rate* (arcmin of
 sigma per degree of eccentricity)::
 
@@ -48,7 +48,7 @@ def sigma_px(
     ecc_deg: np.ndarray, ppd: np.ndarray, blur_rate: float, fovea_deg: float,
     dtype: type = np.float32,
 ) -> np.ndarray:
-    """Blur std in pixels: ``blur_rate / 60 * max(0, e - fovea) * ppd`` (paper section 6.2).
+    """Blur std in pixels: ``blur_rate / 60 * max(0, e - fovea) * ppd`` (paper section 5.2).
 
     ``blur_rate`` is in arcmin per degree; ``ppd`` the local pixels per degree. With the
     release preset (fovea 12 deg, 42.67 px/deg) blur-rate 0.46875 gives the release's

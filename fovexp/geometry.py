@@ -11,7 +11,7 @@ Three models of the geometry are offered:
     Flat screen, eye on the normal through the screen centre. Eccentricity is the true angle
     between the gaze ray and the pixel's ray; pixels per degree grow off-axis (notes section 2).
 ``linear``
-    The paper's approximation (section 6.1): a constant ``width_px / horizontal field`` pixels
+    The paper's approximation (section 5.1): a constant ``width_px / horizontal field`` pixels
     per degree and eccentricity = on-screen distance / that constant.
 ``release``
     The authors' released prototype (notes section 3): eccentricity ``atan(R / D)`` with ``R``
@@ -244,7 +244,7 @@ class ViewingGeometry:
         """Retinal eccentricity (deg) of pixels ``(x_px, y_px)`` for a gaze at ``gaze_px``.
 
         ``exact``: the angle between the two rays from the eye, ``atan2(|u x v|, u . v)``.
-        ``linear``: on-screen distance in px over the constant px/deg (paper section 6.1).
+        ``linear``: on-screen distance in px over the constant px/deg (paper section 5.1).
         ``release``: ``atan(R / D)`` with ``R`` the on-screen distance in cm (notes section 3).
         """
         x_px = np.asarray(x_px, dtype=np.float64)

@@ -1,7 +1,7 @@
 """Method parameters, the paper's Table 2, and the two presets (paper, release).
 
 The calibrated parameters (f_e, s_k, s_f) depend on the foveation strength only (paper
-section 6); Table 2 gives them at three blur-rates. :class:`ParameterTable` interpolates them
+section 5); Table 2 gives them at three blur-rates. :class:`ParameterTable` interpolates them
 linearly in blur-rate and clamps outside the table's range. A lab's own calibration (written by
 ``fovexp analyze``) is a table in the same YAML format::
 
@@ -45,7 +45,7 @@ class Preset:
     """Constants that differ between the paper and the authors' released prototype."""
 
     name: str
-    #: radius of the full-resolution fovea (paper section 6.2: 8 deg; release: 12 deg)
+    #: radius of the full-resolution fovea (paper section 5.2: 8 deg; release: 12 deg)
     fovea_deg: float
     geometry: GeometryModel
     #: attenuation cut-off a of the amplitude level selection (paper section 4.2)
@@ -265,7 +265,7 @@ class ParameterTable(BaseModel):
         Path(path).write_text(text)
 
 
-#: Table 2 of the paper (section 6.3).
+#: Table 2 of the paper (section 5.3).
 PAPER_TABLE2 = ParameterTable(
     source="Tariq, Tursun, Didyk 2022, Table 2",
     rows=[

@@ -182,7 +182,7 @@ class ImpulseParams:
     f_low_cpp: np.ndarray
     f_high_cpp: np.ndarray
     open_: np.ndarray  # bool: F_L < F_H
-    level: np.ndarray  # the continuous Laplacian level l_a |L| is read at (eq. 7)
+    level: np.ndarray  # the continuous Laplacian level l_a |L| is read at (eq. 8)
 
     def subset(self, keep: np.ndarray) -> ImpulseParams:
         return ImpulseParams(self.index[keep], self.x_px[keep], self.y_px[keep],
@@ -391,7 +391,7 @@ class Enhancer:
         return ecc, np.broadcast_to(geom.ppd(x, y), ecc.shape)
 
     def _sigma(self, given, grids, blur_rate) -> np.ndarray:
-        """The sigma map (px, section 6.2): the one given with the frame, else from the
+        """The sigma map (px, section 5.2): the one given with the frame, else from the
         eccentricity and px/deg maps (computed only then)."""
         if given is not None:
             return given
@@ -566,7 +566,7 @@ class Enhancer:
         )
 
     def _amplitude(self, band: ImpulseParams, lap_amp, limit, s_k) -> np.ndarray:
-        """K (eq. 8, with the release's gain), reduced by the clipping control; 0 where the
+        """K (eq. 9, with the release's gain), reduced by the clipping control; 0 where the
         band is closed."""
         k = np.minimum(s_k * amp.RELEASE_AMPLITUDE_GAIN * lap_amp, limit)
         return np.where(band.open_, k, 0.0)

@@ -1,7 +1,7 @@
 """Frame sequences: a folder of frames or a video, enhanced with the same impulses throughout.
 
 The paper keeps the impulse positions fixed over a sequence (section 4.4) and measures temporal
-coherence as the mean SSIM between consecutive frames (section 7.2); both are done here. Frames
+coherence as the mean SSIM between consecutive frames (section 6.2); both are done here. Frames
 are streamed: one input and one output frame are held at a time, whatever the length. Frames of
 a folder keep their alpha channel and bit depth; videos are 8-bit colour.
 """
@@ -109,7 +109,7 @@ def _colour(frame: np.ndarray) -> np.ndarray:
 
 
 class InterframeSSIM:
-    """Running mean SSIM between consecutive frames (paper section 7.2), on grey."""
+    """Running mean SSIM between consecutive frames (paper section 6.2), on grey."""
 
     def __init__(self) -> None:
         self._prev: np.ndarray | None = None

@@ -1,4 +1,4 @@
-"""``fovexp analyze results/ --out report/`` (paper sections 6.3, 7.1): ``fovexp.cli`` registers
+"""``fovexp analyze results/ --out report/`` (paper sections 5.3, 6.1): ``fovexp.cli`` registers
 :func:`add_analyze_parser`; ``python -m fovexp.analysis`` does the same."""
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """The paper's result figures with matplotlib (Agg, no display): the three calibration panels
-(section 6.3, Figure "calibration_results"), the per-scene validation plot (section 7.1, Figure
-"validation", right) and the sampling-rate reduction bars (section 7.3, Figure
+(section 5.3, Figure "calibration_results"), the per-scene validation plot (section 6.1, Figure
+"validation", right) and the sampling-rate reduction bars (section 6.3, Figure
 "kernels_density", right). Error bars are SEMs, as in the paper. Each figure is written as PNG
 and PDF.
 """
@@ -95,7 +95,7 @@ def sampling_figure(result: ValidationResult, stem: Path) -> list[Path]:
     ax.set_xticklabels(s["scope"], rotation=45, ha="right")
     ax.axhline(0, color="black", linewidth=0.8)
     ax.set_ylabel("sampling-rate reduction (%)")
-    ax.set_title(f"{result.experiment}: ours vs contrast (section 7.3)")
+    ax.set_title(f"{result.experiment}: ours vs contrast (section 6.3)")
     fig.tight_layout()
     return _save(fig, stem)
 

@@ -1,5 +1,5 @@
 """``fovexp analyze``: trial logs -> tables, figures, statistics and a Markdown report
-(paper sections 6.3, 7.1 and 7.3).
+(paper sections 5.3, 6.1 and 6.3).
 
 Output folder layout::
 
@@ -83,8 +83,8 @@ def run_analysis(
 ) -> Analysis:
     """Analyse every experiment under ``results`` and write the report into ``out``.
 
-    Calibration (section 6.3) needs calibration-fe, -sk and -sf; every experiment whose trials
-    adjust the blur-rate is analysed as a validation experiment (section 7.1).
+    Calibration (section 5.3) needs calibration-fe, -sk and -sf; every experiment whose trials
+    adjust the blur-rate is analysed as a validation experiment (section 6.1).
     """
     results = Path(results)
     out = Path(out)
@@ -115,7 +115,7 @@ def run_analysis(
         missing = [e for e in CALIBRATION_EXPERIMENTS if e not in present]
         ana.notes.append(f"calibration incomplete: no trials of {', '.join(missing)}; "
                          "Table 2 not computed")
-        parts = ["## Calibration (section 6.3)\n",
+        parts = ["## Calibration (section 5.3)\n",
                  f"Table 2 needs all three calibration experiments; missing: "
                  f"{', '.join(missing)}.\n"]
         if "calibration-fe" in present:
@@ -169,7 +169,7 @@ def _latency_section(ana: Analysis, tables: Path, fig_dir: Path, figures: bool) 
     table, lat, notes = session_latency(ana.data)
     table.to_csv(tables / "latency.csv", index=False, float_format="%.6g")
     ana.files.append(tables / "latency.csv")
-    parts = ["## Gaze-to-flip latency and blanking (section 6.1)\n",
+    parts = ["## Gaze-to-flip latency and blanking (section 5.1)\n",
              "Per session, from its frame log: the time from the newest gaze sample a frame's "
              "blanking decision used to the frame's flip, on the tracker's clock (median, 95th "
              "percentile, maximum), the dropped frames, and the frames drawn with the stimulus "
@@ -199,7 +199,7 @@ def _lines_frame(calib: Calibration) -> pd.DataFrame:
 def _calibration_md(calib: Calibration, figures: bool) -> str:
     paper = pd.DataFrame([r.model_dump() for r in PAPER_TABLE2.rows])
     parts = [
-        "## Calibration (section 6.3)\n",
+        "## Calibration (section 5.3)\n",
         "Means ± SEM across participants (each participant's images and repetitions averaged "
         "first).\n",
         "### Table 2: parameters per foveation level\n",
@@ -226,7 +226,7 @@ def _calibration_md(calib: Calibration, figures: bool) -> str:
 
 
 def _validation_md(res: ValidationResult, figures: bool) -> str:
-    parts = [f"## Validation: {res.experiment} (section 7.1)\n",
+    parts = [f"## Validation: {res.experiment} (section 6.1)\n",
              "Mean selected blur-rate ± SEM across participants, per scene and method:\n",
              _md_table(res.summary),
              "Over all scenes (each participant's mean over scenes):\n",
@@ -243,7 +243,7 @@ def _validation_md(res: ValidationResult, figures: bool) -> str:
             "participants, scenes averaged; does not count a participant's scenes as "
             "independent), then each scene (pairs = participants).\n",
             _md_table(res.tests),
-            "### Estimated sampling-rate reduction (section 7.3)\n",
+            "### Estimated sampling-rate reduction (section 6.3)\n",
             "SR_ours / SR_contrast = blur_rate_contrast / blur_rate_ours; reduction = 1 - ratio.\n",
             _md_table(res.sampling),
         ]

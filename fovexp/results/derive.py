@@ -1,4 +1,4 @@
-"""Calibration results for the experiment runner (paper section 6.2: each calibration step uses
+"""Calibration results for the experiment runner (paper section 5.2: each calibration step uses
 the previous step's result).
 
 The runner imports these three functions to set up the next calibration experiment and to write
@@ -34,7 +34,7 @@ def _trials(folder: Path, real_only: bool) -> pd.DataFrame:
 
 
 def fe_by_blur_rate(folder: Path, real_only: bool = False) -> dict[float, float]:
-    """Mean adjusted f_e per blur-rate from a calibration-fe results folder (section 6.2)."""
+    """Mean adjusted f_e per blur-rate from a calibration-fe results folder (section 5.2)."""
     fe = fe_summary(_trials(folder, real_only))
     return {float(b): float(m) for b, m in zip(fe["blur_rate"], fe["mean"], strict=True)}
 
@@ -42,14 +42,14 @@ def fe_by_blur_rate(folder: Path, real_only: bool = False) -> dict[float, float]
 def sk_line_by_blur_rate(folder: Path,
                          real_only: bool = False) -> dict[float, tuple[float, float]]:
     """Per blur-rate the least-squares line s_k = slope * s_f + intercept, as (slope, intercept),
-    from a calibration-sk results folder (section 6.2, "Bandwidth scaling" uses it)."""
+    from a calibration-sk results folder (section 5.2, "Bandwidth scaling" uses it)."""
     lines = sk_lines(sk_summary(_trials(folder, real_only)))
     return {br: (line.slope, line.intercept) for br, line in lines.items()}
 
 
 def parameter_table(calibration_root: Path, source: str = "fovexp analyze: lab calibration",
                     real_only: bool = False) -> ParameterTable:
-    """Table 2 (section 6.3) from ``calibration-fe``, ``calibration-sk`` and ``calibration-sf``
+    """Table 2 (section 5.3) from ``calibration-fe``, ``calibration-sk`` and ``calibration-sf``
     under ``calibration_root``: f_e is the mean adjusted f_e, s_f the mean adjusted s_f, and s_k
     the s_k line at that s_f."""
     root = Path(calibration_root)

@@ -1,4 +1,4 @@
-"""Load and validate the runner's trial logs (docs/LOGS.md) for paper sections 6.3 and 7.1.
+"""Load and validate the runner's trial logs (docs/LOGS.md) for paper sections 5.3 and 6.1.
 
 Every row that does not reach the statistics is accounted for: it is either an error
 (:class:`~fovexp.FovexpError` naming the file, line and problem) or an :class:`Exclusion`
@@ -59,7 +59,7 @@ from .format import read_trials_file as _read_file
 #: ``trials.csv`` columns in their documented order (docs/LOGS.md); the format is defined once,
 #: in :mod:`fovexp.results.format`.
 COLUMNS: tuple[str, ...] = TRIAL_COLUMNS
-#: The parameter each of the paper's experiments adjusts (sections 6.2, 7.1).
+#: The parameter each of the paper's experiments adjusts (sections 5.2, 6.1).
 EXPERIMENT_PARAMETER: dict[str, str] = {
     "calibration-fe": "f_e",
     "calibration-sk": "s_k",

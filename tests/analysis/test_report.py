@@ -42,7 +42,7 @@ def test_cli_writes_the_report(results: Path, tmp_path: Path,
     assert (out / "figures/calibration.png").read_bytes()[:4] == b"\x89PNG"
     assert (out / "figures/validation.pdf").read_bytes()[:4] == b"%PDF"
     report = (out / "report.md").read_text()
-    for heading in ("## Calibration (section 6.3)", "### Table 2", "## Validation: validation",
+    for heading in ("## Calibration (section 5.3)", "### Table 2", "## Validation: validation",
                     "### Paired t-test, ours vs contrast", "sampling-rate reduction",
                     "## Exclusions", "R4 practice", "R9 incomplete session"):
         assert heading in report, heading

@@ -136,10 +136,10 @@ def test_selected_level_centre_is_attenuated_by_a(a):
 
 def test_measured_attenuation_crosses_a_at_the_selected_level():
     """Blur white noise by sigma and measure each Laplacian band's amplitude ratio (blurred /
-    sharp). The (log-interpolated) level where the ratio crosses a = 0.25 is the level eq. 7
+    sharp). The (log-interpolated) level where the ratio crosses a = 0.25 is the level eq. 8
     (corrected, notes section 1) selects, within 0.75 level: a band's RMS ratio averages the
     blur's response over an octave, which puts the measured crossing 0.3-0.5 level below the
-    centre-frequency figure. The paper's uncorrected eq. 7 is off by 1.5-2 levels here.)"""
+    centre-frequency figure. The paper's uncorrected eq. 8 is off by 1.5-2 levels here.)"""
     rng = np.random.default_rng(0)
     img = rng.random((1024, 1024)).astype(np.float32)
 

@@ -16,7 +16,7 @@ vec2 screen_cm(vec2 p_px) {
 }
 
 // ViewingGeometry.eccentricity_deg: the angle between the eye's rays to p and to the gaze
-// (exact), on-screen px over a constant px/deg (linear, paper section 6.1), or atan(R / D)
+// (exact), on-screen px over a constant px/deg (linear, paper section 5.1), or atan(R / D)
 // (release, notes section 3)
 float eccentricity_deg(vec2 p_px) {
     if (geom_model == GEOM_LINEAR) return length(p_px - gaze_px) / geom_ppd_constant;
