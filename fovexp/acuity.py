@@ -4,7 +4,7 @@ Thibos et al. 1996 measured, as a function of eccentricity, the resolution limit
 gratings are no longer resolved) and the detection limit T_H (above it, not even detected).
 Between the two lies the band the method fills with noise. The paper's appendix table stops at
 30 deg; a 4K 55" screen at 71.5 cm reaches about 44 deg in its corners, so the table is extended
-as the authors' release does (notes section 3.6). Values are linearly interpolated and held
+as the authors' release does (docs/METHOD.md, 5.6). Values are linearly interpolated and held
 constant past the last entry.
 """
 

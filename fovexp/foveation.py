@@ -6,7 +6,7 @@ sigma per degree of eccentricity)::
 
     sigma(e) = blur_rate * max(0, e - fovea)          [arcmin]
 
-converted to pixels with the local pixels per degree (notes section 2: blur-rate 0.34 at 40 deg
+converted to pixels with the local pixels per degree (docs/METHOD.md, 4: blur-rate 0.34 at 40 deg
 gives 10.9 arcmin, about 9 px on the paper's display).
 
 :func:`foveate` is the fast method: a stack of Gaussian blurs at fixed sigmas, each computed on

@@ -9,12 +9,12 @@ Three models of the geometry are offered:
 
 ``exact``
     Flat screen, eye on the normal through the screen centre. Eccentricity is the true angle
-    between the gaze ray and the pixel's ray; pixels per degree grow off-axis (notes section 2).
+    between the gaze ray and the pixel's ray; pixels per degree grow off-axis (docs/METHOD.md, 4).
 ``linear``
     The paper's approximation (section 5.1): a constant ``width_px / horizontal field`` pixels
     per degree and eccentricity = on-screen distance / that constant.
 ``release``
-    The authors' released prototype (notes section 3): eccentricity ``atan(R / D)`` with ``R``
+    The authors' released prototype (docs/METHOD.md, 5): eccentricity ``atan(R / D)`` with ``R``
     the physical distance from the gaze point on the screen, and a constant 42.67 px/deg
     (1920 px / 45 deg) at 3840 px width.
 
@@ -44,7 +44,7 @@ GeometryModel = Literal["exact", "linear", "release"]
 #: Minutes of arc per degree of visual angle.
 ARCMIN_PER_DEG = 60.0
 
-#: Release constants (notes section 3): 3840 px over a 90 degree field, taken as constant.
+#: Release constants (docs/METHOD.md, 5): 3840 px over a 90 degree field, taken as constant.
 RELEASE_PPD_AT_3840 = 1920.0 / 45.0
 RELEASE_WIDTH_CM = 120.0
 RELEASE_HEIGHT_CM = 67.0
@@ -71,11 +71,11 @@ class Display(BaseModel):
 
     @property
     def horizontal_field_deg(self) -> float:
-        """Full horizontal field of view, ``2 atan(w / 2D)`` (notes section 2: 80.8 deg)."""
+        """Full horizontal field of view, ``2 atan(w / 2D)`` (docs/METHOD.md, 4: 80.8 deg)."""
         return math.degrees(2.0 * math.atan(0.5 * self.width_cm / self.distance_cm))
 
 
-#: The release's display (notes section 3), for the ``release`` preset.
+#: The release's display (docs/METHOD.md, 5), for the ``release`` preset.
 RELEASE_DISPLAY = Display(
     name="release-prototype",
     width_px=RELEASE_WIDTH_PX,
@@ -245,7 +245,7 @@ class ViewingGeometry:
 
         ``exact``: the angle between the two rays from the eye, ``atan2(|u x v|, u . v)``.
         ``linear``: on-screen distance in px over the constant px/deg (paper section 5.1).
-        ``release``: ``atan(R / D)`` with ``R`` the on-screen distance in cm (notes section 3).
+        ``release``: ``atan(R / D)`` with ``R`` the on-screen distance in cm (docs/METHOD.md, 5).
         """
         x_px = np.asarray(x_px, dtype=np.float64)
         y_px = np.asarray(y_px, dtype=np.float64)
@@ -265,7 +265,7 @@ class ViewingGeometry:
         ``exact``: a pixel at distance ``L = D / cos(theta)`` from the eye (theta off the
         screen normal) subtends ``pitch / L`` rad across the line of sight, so
         ``ppd = (pi / 180) L / pitch``: 39.3 px/deg on axis on the LG profile, 51 at its
-        horizontal edge (a 10.9 arcmin blur there is about 9 px, notes section 2). Along the
+        horizontal edge (a 10.9 arcmin blur there is about 9 px, docs/METHOD.md, 4). Along the
         radius the screen is foreshortened by a further cos(theta); an isotropic screen-space
         blur cannot follow that, so the across-the-line-of-sight figure is used.
         ``linear`` and ``release``: the model's constant.

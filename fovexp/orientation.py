@@ -1,4 +1,4 @@
-"""Noise orientation from image gradients (paper section 4.3; notes section 3.5).
+"""Noise orientation from image gradients (paper section 4.3; docs/METHOD.md, 5.5).
 
 Sobel gradients of the foveated grey image on Gaussian-pyramid level 3 (1/8 resolution, for
 spatial and temporal smoothness), interpolated bicubically to the points where they are needed

@@ -107,9 +107,9 @@ class EngineOptions(BaseModel):
         Floating-point type of every image stage (``"float64"``: the reference; the result's
         arrays then are float64 too).
     ``kernel_truncation``
-        Envelope value at which the Gabor kernel is cut (section 4.4; notes 2: 0.01, radius
-        20.2 px at a = 0.06). The impulse cells keep the 0.01 radius, so the impulses stay the
-        same whatever the truncation.
+        Envelope value at which the Gabor kernel is cut (section 4.4; docs/METHOD.md, 4: 0.01,
+        radius 20.2 px at a = 0.06). The impulse cells keep the 0.01 radius, so the impulses stay
+        the same whatever the truncation.
     ``impulse_count``
         Impulses per cell: ``"poisson"`` (Lagae et al. 2009, the release) or ``"jittered"``:
         floor(m) or floor(m) + 1 with probability frac(m), mean m = N / pi cell areas the
@@ -275,7 +275,7 @@ PAPER_TABLE2 = ParameterTable(
     ],
 )
 
-#: The release's defaults (notes section 3), one row: the same at every blur-rate.
+#: The release's defaults (docs/METHOD.md, 5), one row: the same at every blur-rate.
 RELEASE_TABLE = ParameterTable(
     source="released prototype defaults",
     rows=[TableRow(blur_rate=0.0, f_e=0.2, s_k=16.0, s_f=2.1)],

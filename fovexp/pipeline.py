@@ -460,7 +460,7 @@ class Enhancer:
         ``EngineOptions(extremes="exact")``: per pixel over the channels, reduced later over
         exactly the pixels each impulse's kernel covers (:func:`fovexp.pyramids.
         window_extremes`). Release preset: grey and a 25 x 25 box, as the release does
-        (notes 3.8)."""
+        (docs/METHOD.md, 5.8)."""
         p = self.preset
         if p.minmax == "pyramid" and self.options.extremes == "exact":
             lo, hi = pyramids.block_extremes(foveated, 0, add=delta)
@@ -471,7 +471,7 @@ class Enhancer:
             lo, hi = pyramids.block_extremes(foveated, p.minmax_level, add=delta)
             lo = ndimage.minimum_filter(lo, reach, mode="nearest")
             hi = ndimage.maximum_filter(hi, reach, mode="nearest")
-        else:  # the release: grey, a 25 x 25 box (notes 3.8), kept as it is for comparison
+        else:  # the release: grey, a 25 x 25 box (docs/METHOD.md, 5.8), kept for comparison
             grey = luma + delta  # the luma weights sum to 1
             lo = ndimage.minimum_filter(grey, p.minmax_box_px, mode="nearest")
             hi = ndimage.maximum_filter(grey, p.minmax_box_px, mode="nearest")

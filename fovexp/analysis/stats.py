@@ -74,7 +74,7 @@ def paired_ttest(a: Sequence[float] | np.ndarray, b: Sequence[float] | np.ndarra
 
 
 def sampling_rate_ratio(blur_rate_new: float, blur_rate_base: float) -> float:
-    """SR_new / SR_base = blur_rate_base / blur_rate_new (paper section 6.3, eq. 10).
+    """SR_new / SR_base = blur_rate_base / blur_rate_new (paper section 6.3, eqs. 10-11).
 
     With SR(x) = 1 / (4 sigma(x)) and sigma proportional to the blur-rate past the fovea, the
     net sampling rate scales with 1 / blur-rate. The reduction is ``1 - ratio``.

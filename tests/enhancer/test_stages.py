@@ -137,7 +137,7 @@ def test_selected_level_centre_is_attenuated_by_a(a):
 def test_measured_attenuation_crosses_a_at_the_selected_level():
     """Blur white noise by sigma and measure each Laplacian band's amplitude ratio (blurred /
     sharp). The (log-interpolated) level where the ratio crosses a = 0.25 is the level eq. 8
-    (corrected, notes section 1) selects, within 0.75 level: a band's RMS ratio averages the
+    (corrected, docs/METHOD.md, 3.1) selects, within 0.75 level: a band's RMS ratio averages the
     blur's response over an octave, which puts the measured crossing 0.3-0.5 level below the
     centre-frequency figure. The paper's uncorrected eq. 8 is off by 1.5-2 levels here.)"""
     rng = np.random.default_rng(0)
@@ -195,7 +195,7 @@ def test_kernel_radius_and_density_from_the_notes():
 
 @pytest.mark.parametrize("n", [12, 64])
 def test_noise_std_over_k_is_one_sixth_whatever_the_impulse_count(n):
-    """notes 3.9: the release's noise has std / K = 0.164 (measured) for 12 and 64."""
+    """docs/METHOD.md, 5.9: the release's noise has std / K = 0.164 (measured) for 12 and 64."""
     h, w = 600, 800
     imp = gabor.generate_impulses(w, h, n, 0.06, 2)
     m = len(imp)

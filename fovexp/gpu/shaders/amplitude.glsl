@@ -1,5 +1,5 @@
 // Noise amplitude and the clipping control: fovexp/amplitude.py (paper section 4.2, eqs. 7-9
-// as corrected in notes section 1; the release's smoothing and gain, notes 3.7).
+// as corrected in docs/METHOD.md, 3.1-3.2; the release's smoothing and gain, docs/METHOD.md, 5.7).
 
 #include "pyramids.glsl"
 
