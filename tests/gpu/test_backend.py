@@ -429,10 +429,19 @@ def test_a_context_the_caller_holds_current_stays_current(ctx, frame):
     back the EGL context that was current (here the fixture's, entered by the caller), for an
     enhancer in that context and for one in its own."""
     from fovexp.gpu import GpuEnhancer
+    from fovexp.gpu.programs import _libegl
 
+    egl = _libegl()
+    if egl is None:
+        pytest.skip("not an EGL context: GLX, WGL and CGL restore the current context")
     p = EnhanceParams(blur_rate=0.57, impulses=12)
     with GpuEnhancer(LG) as own, GpuEnhancer(LG, ctx=ctx) as same, ctx:
+        caller = egl.eglGetCurrentContext()
+        assert caller  # the fixture's context, entered above
         for enh in (own, same):
             enh.set_image(frame)
-            enh.enhance((0.5, 0.5), p).map("noise")
+            assert egl.eglGetCurrentContext() == caller
+            noise = enh.enhance((0.5, 0.5), p).map("noise")
+            assert egl.eglGetCurrentContext() == caller
+            assert np.abs(noise).max() > 0  # the calls did run
             ctx.buffer(reserve=16).release()  # "cannot create buffer" with no context current
