@@ -6,6 +6,13 @@ Between the two lies the band the method fills with noise. The paper's appendix 
 30 deg; a 4K 55" screen at 71.5 cm reaches about 44 deg in its corners, so the table is extended
 as the authors' release does (docs/METHOD.md, 5.6). Values are linearly interpolated and held
 constant past the last entry.
+
+References
+----------
+.. [tariq] Tariq, T., Tursun, C., Didyk, P. (2022). Noise-based Enhancement for Foveated
+   Rendering. ACM Transactions on Graphics 41(4) (SIGGRAPH 2022). doi:10.1145/3528223.3530101
+.. [thibos] Thibos, L. N., et al. (1996), the paper's "thibos1996": the source of its appendix A
+   limits (no DOI: which 1996 article it is could not be checked against the paper's bibliography)
 """
 
 from __future__ import annotations

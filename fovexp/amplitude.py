@@ -19,6 +19,13 @@ same thing (the noise's local std is K / 6, see :mod:`fovexp.gabor`).
 Clipping control (section 4.2): with local minimum ``N_min`` and maximum ``N_max`` of the image
 the noise is added to, ``K`` is reduced so that ``N_max + K / 2 <= 1`` and
 ``N_min - K / 2 >= 0`` (K / 2 is three noise standard deviations), and never below 0.
+
+References
+----------
+.. [tariq] Tariq, T., Tursun, C., Didyk, P. (2022). Noise-based Enhancement for Foveated
+   Rendering. ACM Transactions on Graphics 41(4) (SIGGRAPH 2022). doi:10.1145/3528223.3530101
+.. [burt] Burt, P. J., Adelson, E. H. (1983). The Laplacian Pyramid as a Compact Image Code.
+   IEEE Transactions on Communications 31(4), 532-540. doi:10.1109/TCOM.1983.1095851
 """
 
 from __future__ import annotations

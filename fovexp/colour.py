@@ -4,6 +4,13 @@ The method processes luminance only: the input is linearised with the display's 
 function, the noise is computed from linear luminance and added to every channel of the linear
 colour image (a change of BT.601 luma Y with Cb, Cr kept adds the same amount to R, G and B),
 and the result is re-encoded.
+
+References
+----------
+.. [tariq] Tariq, T., Tursun, C., Didyk, P. (2022). Noise-based Enhancement for Foveated
+   Rendering. ACM Transactions on Graphics 41(4) (SIGGRAPH 2022). doi:10.1145/3528223.3530101
+.. [bt601] ITU-R Recommendation BT.601, Studio encoding parameters of digital television (the
+   luma weights 0.299, 0.587, 0.114)
 """
 
 from __future__ import annotations

@@ -27,6 +27,14 @@ The flat regions the enhancer skips (``EngineOptions.skip``) are exactly those w
 evaluated (no stack of filtered images).
 Even widths follow MATLAB's anchoring: the window of width ``n`` covers
 ``[x - floor((n - 1) / 2), x + ceil((n - 1) / 2)]``.
+
+References
+----------
+.. [tariq] Tariq, T., Tursun, C., Didyk, P. (2022). Noise-based Enhancement for Foveated
+   Rendering. ACM Transactions on Graphics 41(4) (SIGGRAPH 2022). doi:10.1145/3528223.3530101
+.. [patney] Patney, A., Salvi, M., Kim, J., Kaplanyan, A., Wyman, C., Benty, N., Luebke, D.,
+   Lefohn, A. (2016). Towards Foveated Rendering for Gaze-Tracked Virtual Reality. ACM
+   Transactions on Graphics 35(6). doi:10.1145/2980179.2980246
 """
 
 from __future__ import annotations

@@ -16,6 +16,14 @@ sigmas need it; each pixel then interpolates linearly between the two stack leve
 its sigma, sampling them bilinearly. :func:`foveate_exact` is the exact per-pixel spatially
 varying convolution it is measured against (``benchmarks/run.py``; results in
 ``benchmarks/RESULTS.md``; and the tests).
+
+References
+----------
+.. [tariq] Tariq, T., Tursun, C., Didyk, P. (2022). Noise-based Enhancement for Foveated
+   Rendering. ACM Transactions on Graphics 41(4) (SIGGRAPH 2022). doi:10.1145/3528223.3530101
+.. [patney] Patney, A., Salvi, M., Kim, J., Kaplanyan, A., Wyman, C., Benty, N., Luebke, D.,
+   Lefohn, A. (2016). Towards Foveated Rendering for Gaze-Tracked Virtual Reality. ACM
+   Transactions on Graphics 35(6). doi:10.1145/2980179.2980246
 """
 
 from __future__ import annotations

@@ -16,6 +16,13 @@ The truncated draw is exact, by inversion of the normal CDF: ``z = Phi^-1(u Phi(
 ``z_H = (ln F_H - mu_n) / sigma_n`` and ``u`` uniform in (0, 1); no rejection loop. The
 release's draw (up to 10 normal draws, keeping the first below ln F_H, else mu_n;
 docs/METHOD.md, 5.6) is available for the ``release`` preset.
+
+References
+----------
+.. [tariq] Tariq, T., Tursun, C., Didyk, P. (2022). Noise-based Enhancement for Foveated
+   Rendering. ACM Transactions on Graphics 41(4) (SIGGRAPH 2022). doi:10.1145/3528223.3530101
+.. [thibos] Thibos, L. N., et al. (1996), the paper's "thibos1996": the source of its appendix A
+   limits (no DOI: which 1996 article it is could not be checked against the paper's bibliography)
 """
 
 from __future__ import annotations

@@ -36,6 +36,14 @@ Synthesis: each kernel is separable as the real part of a product of two complex
 ``exp(-pi a^2 d_x^2 + i 2 pi F cos(t) d_x) * exp(-pi a^2 d_y^2 + i 2 pi F sin(t) d_y)``;
 the factors are built by recurrence (no transcendental per pixel), each pixel costs one complex
 multiply-add, and bands of rows are summed in parallel without locks.
+
+References
+----------
+.. [tariq] Tariq, T., Tursun, C., Didyk, P. (2022). Noise-based Enhancement for Foveated
+   Rendering. ACM Transactions on Graphics 41(4) (SIGGRAPH 2022). doi:10.1145/3528223.3530101
+.. [lagae] Lagae, A., Lefebvre, S., Drettakis, G., Dutré, P. (2009). Procedural Noise using
+   Sparse Gabor Convolution. ACM Transactions on Graphics 28(3) (SIGGRAPH 2009).
+   doi:10.1145/1531326.1531360
 """
 
 from __future__ import annotations

@@ -20,6 +20,11 @@ Three models of the geometry are offered:
 
 Coordinates: pixel centres at integer ``(x, y)``, x to the right, y down; gaze points in
 normalised screen coordinates ``(x_h, x_v)`` in [0, 1] (paper section 3).
+
+References
+----------
+.. [tariq] Tariq, T., Tursun, C., Didyk, P. (2022). Noise-based Enhancement for Foveated
+   Rendering. ACM Transactions on Graphics 41(4) (SIGGRAPH 2022). doi:10.1145/3528223.3530101
 """
 
 from __future__ import annotations

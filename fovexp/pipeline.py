@@ -23,6 +23,17 @@ on demand (:meth:`EnhanceResult.map`), by the same functions evaluated on the pi
 Stages that do not depend on the image (geometry, grids, sigma, impulses, per-impulse band)
 are kept across the frames of a sequence as across parameter steps: :meth:`Enhancer.set_image`
 invalidates only what depends on the image.
+
+References
+----------
+.. [tariq] Tariq, T., Tursun, C., Didyk, P. (2022). Noise-based Enhancement for Foveated
+   Rendering. ACM Transactions on Graphics 41(4) (SIGGRAPH 2022). doi:10.1145/3528223.3530101
+.. [patney] Patney, A., Salvi, M., Kim, J., Kaplanyan, A., Wyman, C., Benty, N., Luebke, D.,
+   Lefohn, A. (2016). Towards Foveated Rendering for Gaze-Tracked Virtual Reality. ACM
+   Transactions on Graphics 35(6). doi:10.1145/2980179.2980246
+.. [lagae] Lagae, A., Lefebvre, S., Drettakis, G., Dutré, P. (2009). Procedural Noise using
+   Sparse Gabor Convolution. ACM Transactions on Graphics 28(3) (SIGGRAPH 2009).
+   doi:10.1145/1531326.1531360
 """
 
 from __future__ import annotations

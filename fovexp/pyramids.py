@@ -11,6 +11,16 @@ the finest band, 0.25..0.5 cycles/px, with centre ``2**-1.5``; level ``k`` has c
 
 Min/max pyramids (paper section 4.2): level ``l`` holds the minimum (maximum) of each
 ``2**l x 2**l`` block of the full-resolution image.
+
+References
+----------
+.. [tariq] Tariq, T., Tursun, C., Didyk, P. (2022). Noise-based Enhancement for Foveated
+   Rendering. ACM Transactions on Graphics 41(4) (SIGGRAPH 2022). doi:10.1145/3528223.3530101
+.. [burt] Burt, P. J., Adelson, E. H. (1983). The Laplacian Pyramid as a Compact Image Code.
+   IEEE Transactions on Communications 31(4), 532-540. doi:10.1109/TCOM.1983.1095851
+.. [keys] Keys, R. (1981). Cubic Convolution Interpolation for Digital Image Processing. IEEE
+   Transactions on Acoustics, Speech, and Signal Processing 29(6), 1153-1160.
+   doi:10.1109/TASSP.1981.1163711
 """
 
 from __future__ import annotations

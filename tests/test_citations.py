@@ -232,3 +232,22 @@ def _method_has(number: str) -> bool:
     if "." in number:
         return re.search(rf"^{re.escape(number)} \*\*", text, flags=re.M) is not None
     return re.search(rf"^## {number}\. ", text, flags=re.M) is not None
+
+
+#: The stage modules (one per stage of the paper) and the DOIs their References must give.
+STAGE_REFERENCES = {
+    "geometry": [], "acuity": [], "foveation": ["10.1145/2980179.2980246"],
+    "contrast": ["10.1145/2980179.2980246"], "pyramids": ["10.1109/TCOM.1983.1095851"],
+    "frequency": [], "amplitude": [], "orientation": ["10.1109/TASSP.1981.1163711"],
+    "gabor": ["10.1145/1531326.1531360"], "colour": [], "sequence": ["10.1109/TIP.2003.819861"],
+}
+TARIQ_DOI = "10.1145/3528223.3530101"
+
+
+@pytest.mark.parametrize("module", sorted(STAGE_REFERENCES))
+def test_stage_modules_end_with_references(module):
+    doc = importlib.import_module(f"fovexp.{module}").__doc__ or ""
+    assert "\nReferences\n----------\n" in doc, module
+    refs = doc.split("\nReferences\n", 1)[1]
+    for doi in [TARIQ_DOI, *STAGE_REFERENCES[module]]:
+        assert f"doi:{doi}" in refs, (module, doi)
