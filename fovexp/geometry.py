@@ -109,6 +109,11 @@ def load_display(name_or_path: str | Path) -> Display:
     """Load a display profile by name (searched in :func:`display_search_path`) or by path.
 
     Raises :class:`FovexpError` naming the file and the field for a missing or bad profile.
+
+    >>> from fovexp import load_display
+    >>> lg = load_display("lg-oled55cx")  # the paper's display (section 5.1)
+    >>> lg.width_px, lg.height_px, lg.distance_cm, round(lg.horizontal_field_deg, 1)
+    (3840, 2160, 71.5, 80.8)
     """
     path = Path(name_or_path)
     if path.suffix not in (".yaml", ".yml"):
@@ -180,6 +185,17 @@ class ViewingGeometry:
     ``screen_width x screen_height`` pixels (by default the image *is* the frame). Pixel
     coordinates are the image's own; the pitch is the frame's. Attributes are in the units
     their names say; ``pitch_*_cm`` is the size of one frame pixel on the screen.
+
+    >>> import numpy as np
+    >>> from fovexp import ViewingGeometry, load_display
+    >>> g = ViewingGeometry.for_image(load_display("lg-oled55cx"), 3840, 2160)
+    >>> gaze = g.gaze_px((0.5, 0.5))  # normalised screen coordinates -> px
+    >>> gaze
+    (1919.5, 1079.5)
+    >>> g.ppd(np.array([gaze[0]]), np.array([gaze[1]])).round(1)  # px/deg on the axis
+    array([39.3])
+    >>> g.eccentricity_deg(np.array([2312.5, 3839.0]), np.array([1079.5, 2159.0]), gaze).round(2)
+    array([ 9.89, 44.33])
     """
 
     width_px: int

@@ -140,7 +140,17 @@ class EngineOptions(BaseModel):
 
 
 def make_options(**kwargs: object) -> EngineOptions:
-    """Build :class:`EngineOptions`, turning validation errors into one clear line."""
+    """Build :class:`EngineOptions`, turning validation errors into one clear line.
+
+    >>> from fovexp import EngineOptions, make_options
+    >>> EngineOptions(skip=False, dtype="float64").non_default()
+    {'skip': False, 'dtype': 'float64'}
+    >>> make_options(foveation="exact").foveation
+    'exact'
+    >>> make_options(dtype="float16")
+    Traceback (most recent call last):
+    fovexp.errors.FovexpError: engine option: dtype='float16': Input should be 'float32' or ...
+    """
     try:
         return EngineOptions(**kwargs)  # type: ignore[arg-type]
     except ValidationError as exc:
@@ -315,7 +325,19 @@ class EnhanceParams(_CheckedParameters):
 
 
 def make_params(**kwargs: object) -> EnhanceParams:
-    """Build :class:`EnhanceParams`, turning validation errors into one clear line."""
+    """Build :class:`EnhanceParams`, turning validation errors into one clear line.
+
+    >>> from fovexp import make_params
+    >>> p = make_params(blur_rate=0.34, impulses=12)
+    >>> p.method, p.blur_rate, p.impulses, p.s_k
+    ('ours', 0.34, 12, None)
+    >>> r = p.resolved()  # f_e, s_k, s_f from Table 2 at this blur-rate
+    >>> r.f_e, r.s_k, r.s_f
+    (0.23, 21.02, 2.21)
+    >>> make_params(blur_rate=float("nan"))
+    Traceback (most recent call last):
+    fovexp.errors.FovexpError: parameter: blur_rate=nan: must be a finite number in [0, 5] ...
+    """
     try:
         return EnhanceParams(**kwargs)  # type: ignore[arg-type]
     except ValidationError as exc:
