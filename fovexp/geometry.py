@@ -253,7 +253,9 @@ class ViewingGeometry:
         return (gx * self.screen_width_px - 0.5 - self.x0_px,
                 gy * self.screen_height_px - 0.5 - self.y0_px)
 
-    def _screen_cm(self, x_px: np.ndarray, y_px: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _screen_cm(
+        self, x_px: np.ndarray | np.float64, y_px: np.ndarray | np.float64
+    ) -> tuple[np.ndarray | np.float64, np.ndarray | np.float64]:
         """Image pixel coordinates to cm from the screen centre."""
         return ((x_px + self.x0_px + 0.5) - 0.5 * self.screen_width_px) * self.pitch_x_cm, (
             (y_px + self.y0_px + 0.5) - 0.5 * self.screen_height_px

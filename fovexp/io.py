@@ -132,7 +132,7 @@ def _temporary_beside(path: Path) -> Path:
     raise FovexpError(f"{path.parent}: cannot create a temporary file")  # pragma: no cover
 
 
-def atomic_write_bytes(path: Path, write: Callable[[Path], None]) -> None:
+def atomic_write_bytes(path: Path, write: Callable[[Path], object]) -> None:
     """Call ``write(tmp_path)`` for a temporary file beside ``path`` and rename it into place;
     the file keeps the permissions a new file gets (folders too: created as ``mkdir`` does)."""
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -207,7 +207,7 @@ def write_image(path: str | Path, image: np.ndarray, bit_depth: int = 8) -> None
         atomic_write_bytes(path, lambda tmp: tmp.write_bytes(encoded))
 
 
-def _encode(kind: str, data: np.ndarray) -> bytes:
+def _encode(kind: str, data: np.ndarray) -> bytes | bytearray:
     import imagecodecs
 
     if kind == "PNG":

@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 import yaml
@@ -152,7 +152,7 @@ def make_options(**kwargs: object) -> EngineOptions:
     fovexp.errors.FovexpError: engine option: dtype='float16': Input should be 'float32' or ...
     """
     try:
-        return EngineOptions(**kwargs)  # type: ignore[arg-type]
+        return EngineOptions(**kwargs)
     except ValidationError as exc:
         raise validation_error("engine option", exc) from None
 
@@ -191,7 +191,8 @@ def check_parameter(name: str, value: object) -> float | int:
         if isinstance(value, bool) or (integer and isinstance(value, float)
                                        and not value.is_integer()):
             raise TypeError
-        v = int(value) if integer else float(value)  # type: ignore[arg-type]
+        number: Any = value  # checked by int() / float() themselves
+        v = int(number) if integer else float(number)
     except (TypeError, ValueError, OverflowError):
         raise ValueError(f"must be {what} in {where}") from None
     if not math.isfinite(v) or not (lo < v if open_lo else lo <= v) or v > hi:
@@ -211,20 +212,20 @@ class _CheckedParameters(BaseModel):
         return value
 
 
-def _blur_rate(**kw: object) -> float:
-    return Field(ge=BLUR_RATE_RANGE[0], le=BLUR_RATE_RANGE[1], **kw)  # type: ignore[return-value]
+def _blur_rate(**kw: Any) -> float:
+    return Field(ge=BLUR_RATE_RANGE[0], le=BLUR_RATE_RANGE[1], **kw)
 
 
-def _f_e(**kw: object) -> float:
-    return Field(ge=F_E_RANGE[0], le=F_E_RANGE[1], **kw)  # type: ignore[return-value]
+def _f_e(**kw: Any) -> float:
+    return Field(ge=F_E_RANGE[0], le=F_E_RANGE[1], **kw)
 
 
-def _s_k(**kw: object) -> float:
-    return Field(ge=S_K_RANGE[0], le=S_K_RANGE[1], **kw)  # type: ignore[return-value]
+def _s_k(**kw: Any) -> float:
+    return Field(ge=S_K_RANGE[0], le=S_K_RANGE[1], **kw)
 
 
-def _s_f(**kw: object) -> float:
-    return Field(gt=S_F_RANGE[0], le=S_F_RANGE[1], **kw)  # type: ignore[return-value]
+def _s_f(**kw: Any) -> float:
+    return Field(gt=S_F_RANGE[0], le=S_F_RANGE[1], **kw)
 
 
 class TableRow(_CheckedParameters):
@@ -339,6 +340,6 @@ def make_params(**kwargs: object) -> EnhanceParams:
     fovexp.errors.FovexpError: parameter: blur_rate=nan: must be a finite number in [0, 5] ...
     """
     try:
-        return EnhanceParams(**kwargs)  # type: ignore[arg-type]
+        return EnhanceParams(**kwargs)
     except ValidationError as exc:
         raise validation_error("parameter", exc) from None

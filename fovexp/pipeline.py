@@ -359,7 +359,8 @@ class Enhancer:
             if not np.isfinite(sigma_given).all() or float(sigma_given.min()) < 0:
                 raise FovexpError("sigma map must be finite and non-negative (px)")
         if viewport is not None:
-            viewport = tuple(int(v) for v in viewport)
+            x0, y0, sw, sh = (int(v) for v in viewport)
+            viewport = (x0, y0, sw, sh)
             ViewingGeometry.for_image(self.display, img.shape[1], img.shape[0], "exact",
                                       viewport)  # validates it
         self._c.set(image=img, shape=img.shape[:2], sigma_given=sigma_given, viewport=viewport,
@@ -556,7 +557,7 @@ class Enhancer:
         top = max(min(amp.MAX_LAPLACIAN_LEVEL, pyramids.pyramid_depth(shape, 99)), 1)
         k0, _ = amp.bracketing_levels(band.level, top)
         levels = np.flatnonzero(np.bincount(k0, minlength=top + 1))  # the k0 present
-        radii = pyramids.blocks_reaching(amp.laplacian_reach_px(levels, top), block)
+        radii = np.asarray(pyramids.blocks_reaching(amp.laplacian_reach_px(levels, top), block))
         # per bracketing level, the blocks around which the luminance is one constant that far
         const = np.zeros((top + 1, *lo.shape), dtype=np.bool_)
         const[levels[0]] = pyramids.constant_blocks(lo, hi, int(radii[0]))
