@@ -24,7 +24,7 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 SPONZA = HERE.parent.parent / "shared" / "stimuli" / "sponza-4k.jpg"
-# the authors' C++ noise generator, single-threaded, 4K, on a CI-class machine (notes 4)
+# the authors' C++ noise generator, single-threaded, 4K, on a CI-class machine (docs/METHOD.md, 7)
 RELEASE_NOISE_S = {12: 10.0, 64: 52.0}
 
 
@@ -297,7 +297,7 @@ def report(r: dict) -> str:
         if "speedup_vs_release_cpp" in c:
             lines.append(f"- {c['case']}: "
                          f"{c['speedup_vs_release_cpp']:.0f}x the release's C++ "
-                         f"({RELEASE_NOISE_S[c['impulses']]:.0f} s, notes section 4)")
+                         f"({RELEASE_NOISE_S[c['impulses']]:.0f} s, docs/METHOD.md, 7)")
     fov = next(c for c in r["cases"] if c["case"].startswith("foveation"))
     lines += ["", "## Foveation: fast blur stack against the exact per-pixel convolution", "",
               f"{fov['source']}, linear values in [0, 1], errors over random blurred pixels "

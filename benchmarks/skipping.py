@@ -11,7 +11,7 @@ quarters flat". A frame is what a renderer calls per frame: a new image and a mo
 impulses kept (section 4.4). Two kinds of whole enhancement are timed:
 
 - "foveated input": enhancing an already-foveated frame (the renderer hands one), i.e. the
-  paper's section 7.3 count: parameter estimation and noise synthesis (plus the contrast
+  paper's section 6.3 count: parameter estimation and noise synthesis (plus the contrast
   enhancement and the display encoding, which it does not count);
 - "foveated input + sigma map": the same with the frame's sigma map given, as a foveated renderer
   knows it (no eccentricity and sigma maps to compute);
@@ -39,7 +39,7 @@ from run import _frame, machine  # noqa: E402  (benchmarks/run.py: the frame, th
 
 BLUR_RATE = 0.34
 TARGET = 2.0  # the flat scene at least 2x faster than the textured one (64 impulses)
-#: The stages the paper's section 7.3 times: "building all the image pyramids and estimating
+#: The stages the paper's section 6.3 times: "building all the image pyramids and estimating
 #: frequency, amplitude, and orientation for each Gabor patch", and the synthesis (not the
 #: linearisation, the sigma map, the contrast enhancement or the encoding).
 PAPER_STAGES = ("luma", "luma_blocks", "pyramid", "abs_laplacian", "gradients", "headroom",
@@ -188,14 +188,14 @@ def report(r: dict) -> str:
         f"Scenes: {r['source']} (\"textured\"), and the same with all but its top-left "
         "quadrant constant grey (\"3/4 flat\"); 4K, blur-rate "
         f"{r['blur_rate']}, LG OLED55CX profile, a new frame and a moved gaze each time. "
-        "\"foveated input\": enhancing an already-foveated frame (the paper's section 7.3 "
+        "\"foveated input\": enhancing an already-foveated frame (the paper's section 6.3 "
         "count, parameter estimation and synthesis, plus contrast and encoding); "
         "\"+ sigma map\": with the frame's sigma map given, as a foveated renderer knows it; "
-        "\"foveation + enhancement\": the foveation simulated first. \"section 7.3 stages\": "
+        "\"foveation + enhancement\": the foveation simulated first. \"section 6.3 stages\": "
         "the sum of the stages the paper's Performance section counts (pyramids, per-impulse "
         "parameters, synthesis), from the same frames.", "",
         "| impulses | input | scene | skip on s | skip off s | saved | flat vs textured "
-        "(skip on) | same, fastest frames | CPU time, skip on s | flat vs textured | section 7.3 "
+        "(skip on) | same, fastest frames | CPU time, skip on s | flat vs textured | section 6.3 "
         "stages, skip on s | flat vs textured | output identical |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]

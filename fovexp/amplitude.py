@@ -1,24 +1,31 @@
 """Noise amplitude K from the Laplacian pyramid, and the clipping control (paper section 4.2).
 
 The blur attenuates a frequency f by ``exp(-f^2 / (2 sigma_f^2))``, ``sigma_f = 1 / (2 pi
-sigma)``. It falls to the attenuation cut-off ``a`` at (notes section 1, erratum of eq. 6)::
+sigma)``. It falls to the attenuation cut-off ``a`` at (docs/METHOD.md, 3.1, erratum of eq. 7)::
 
     f_c = sigma_f sqrt(-2 ln a) = sqrt(-2 ln a) / (2 pi sigma)
 
-The Laplacian level whose centre ``2**-(l + 0.5)`` (levels from 1, notes section 1) equals f_c
-is (eq. 7, corrected)::
+The Laplacian level whose centre ``2**-(l + 0.5)`` (levels from 1, docs/METHOD.md, 3.2) equals f_c
+is (eq. 8, corrected)::
 
     l_a = log2(1 / f_c) - 0.5,   at least 1
 
-and (eq. 8) ``K = s_k |L_{l_a}|``, with a non-integer ``l_a`` interpolated linearly between the
+and (eq. 9) ``K = s_k |L_{l_a}|``, with a non-integer ``l_a`` interpolated linearly between the
 two bracketing levels in the log-frequency domain (the level index is log2 of frequency). As in
-the release (notes 3.7), ``|L_k|`` is smoothed by a 3 x 3 mean on its own grid, sampled
+the release (docs/METHOD.md, 5.7), ``|L_k|`` is smoothed by a 3 x 3 mean on its own grid, sampled
 bilinearly, and K carries the release's gain 3.5722, so that ``s_k`` of Table 2 means the
 same thing (the noise's local std is K / 6, see :mod:`fovexp.gabor`).
 
 Clipping control (section 4.2): with local minimum ``N_min`` and maximum ``N_max`` of the image
 the noise is added to, ``K`` is reduced so that ``N_max + K / 2 <= 1`` and
 ``N_min - K / 2 >= 0`` (K / 2 is three noise standard deviations), and never below 0.
+
+References
+----------
+.. [tariq] Tariq, T., Tursun, C., Didyk, P. (2022). Noise-based Enhancement for Foveated
+   Rendering. ACM Transactions on Graphics 41(4) (SIGGRAPH 2022). doi:10.1145/3528223.3530101
+.. [burt] Burt, P. J., Adelson, E. H. (1983). The Laplacian Pyramid as a Compact Image Code.
+   IEEE Transactions on Communications 31(4), 532-540. doi:10.1109/TCOM.1983.1095851
 """
 
 from __future__ import annotations
@@ -27,24 +34,25 @@ import numpy as np
 
 from .pyramids import abs_laplacian_reach_px, sample_bilinear
 
-#: The release's amplitude gain (notes section 3.7); part of what Table 2's s_k means.
+#: The release's amplitude gain (docs/METHOD.md, 5.7); part of what Table 2's s_k means.
 RELEASE_AMPLITUDE_GAIN = 3.5722
 
 
 def attenuation_cutoff_cpp(sigma_px: np.ndarray, attenuation: float) -> np.ndarray:
-    """Frequency (cycles/px) the blur attenuates to ``attenuation`` (eq. 6, corrected)."""
+    """Frequency (cycles/px) the blur attenuates to ``attenuation`` (eq. 7, corrected)."""
     sigma_px = np.asarray(sigma_px, dtype=np.float64)
     with np.errstate(divide="ignore"):
         return np.sqrt(-2.0 * np.log(attenuation)) / (2.0 * np.pi * sigma_px)
 
 
 def band_centre_cpp(level: np.ndarray | float) -> np.ndarray:
-    """Centre frequency of Laplacian level ``level`` (from 1): ``2**-(level + 0.5)``."""
+    """Centre frequency of Laplacian level ``level`` (from 1): ``2**-(level + 0.5)`` (eq. 6;
+    levels counted from 1, docs/METHOD.md, 3.2)."""
     return 2.0 ** -(np.asarray(level, dtype=np.float64) + 0.5)
 
 
 def laplacian_level(sigma_px: np.ndarray, attenuation: float) -> np.ndarray:
-    """Continuous level ``l_a`` whose centre the blur attenuates by ``attenuation`` (eq. 7),
+    """Continuous level ``l_a`` whose centre the blur attenuates by ``attenuation`` (eq. 8),
     clamped to at least 1 (the finest band). Infinite sigma-free pixels get level 1."""
     f_c = attenuation_cutoff_cpp(sigma_px, attenuation)
     with np.errstate(divide="ignore"):
@@ -54,7 +62,7 @@ def laplacian_level(sigma_px: np.ndarray, attenuation: float) -> np.ndarray:
 
 def bracketing_levels(level: np.ndarray, top: int) -> tuple[np.ndarray, np.ndarray]:
     """``(k0, t)``: the Laplacian levels ``k0`` and ``k0 + 1`` (at most ``top``, the coarsest
-    built) between which continuous ``level`` lies, and its weight ``t`` on ``k0 + 1`` (eq. 8's
+    built) between which continuous ``level`` lies, and its weight ``t`` on ``k0 + 1`` (eq. 9's
     interpolation in the log-frequency domain)."""
     level = np.minimum(np.asarray(level, dtype=np.float64), top)
     k0 = np.minimum(np.floor(level).astype(np.int64), top - 1) if top > 1 else np.ones_like(
@@ -73,7 +81,8 @@ def laplacian_reach_px(k0: np.ndarray, top: int) -> np.ndarray:
 def laplacian_amplitude_at(
     abs_levels: dict[int, np.ndarray], level: np.ndarray, x_px: np.ndarray, y_px: np.ndarray
 ) -> np.ndarray:
-    """``|L|`` at continuous ``level``, interpolated between the two bracketing levels,
+    """``|L|`` at continuous ``level`` (eq. 9, before ``s_k``), interpolated between the two
+    bracketing levels,
     each sampled bilinearly at full-resolution coordinates (level k lives on G_{k-1}'s grid)."""
     k0, t = bracketing_levels(level, max(abs_levels))
     out = np.zeros(k0.shape, dtype=np.float64)

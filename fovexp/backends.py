@@ -47,6 +47,11 @@ def make_enhancer(
 
     The enhancer's ``fallback_reason`` says why ``auto`` chose the CPU (None when it did not
     fall back: the GPU was chosen, or the CPU was asked for), so a caller can show it.
+
+    >>> from fovexp import load_display, make_enhancer
+    >>> enh = make_enhancer(load_display("lg-oled55cx"), backend="cpu")
+    >>> enh.backend, enh.fallback_reason
+    ('cpu', None)
     """
     if backend not in BACKENDS:
         raise FovexpError(f"unknown backend {backend!r} (choose from {', '.join(BACKENDS)})")

@@ -1,9 +1,16 @@
-"""Colour: display transfer functions and luminance (paper section 4.5, notes section 3.1, 3.4).
+"""Colour: display transfer functions and luminance (paper section 4.5, docs/METHOD.md, 5.1, 5.4).
 
 The method processes luminance only: the input is linearised with the display's transfer
 function, the noise is computed from linear luminance and added to every channel of the linear
 colour image (a change of BT.601 luma Y with Cb, Cr kept adds the same amount to R, G and B),
 and the result is re-encoded.
+
+References
+----------
+.. [tariq] Tariq, T., Tursun, C., Didyk, P. (2022). Noise-based Enhancement for Foveated
+   Rendering. ACM Transactions on Graphics 41(4) (SIGGRAPH 2022). doi:10.1145/3528223.3530101
+.. [bt601] ITU-R Recommendation BT.601, Studio encoding parameters of digital television (the
+   luma weights 0.299, 0.587, 0.114)
 """
 
 from __future__ import annotations
@@ -14,12 +21,12 @@ import numpy as np
 from .jit import FASTMATH
 
 #: BT.601 luma weights. The release's Y of YCbCr, normalised as (Y - 16/255) / (219/255), equals
-#: 0.299 R + 0.587 G + 0.114 B (notes section 3.4); its grey for orientation uses the same
+#: 0.299 R + 0.587 G + 0.114 B (docs/METHOD.md, 5.4); its grey for orientation uses the same
 #: weights rounded as MATLAB's rgb2gray (0.2989, 0.5870, 0.1140).
 LUMA_BT601_F64 = np.array([0.299, 0.587, 0.114])
 LUMA_BT601 = LUMA_BT601_F64.astype(np.float32)
 
-#: The release's hybrid transfer (notes section 3.1): ((v + 0.055) / 1.055) ** 2.2.
+#: The release's hybrid transfer (docs/METHOD.md, 5.1): ((v + 0.055) / 1.055) ** 2.2.
 _RELEASE_OFFSET = 0.055
 
 
@@ -29,7 +36,7 @@ def linearize(
     """Display-encoded values in [0, 1] to linear light in [0, 1] (float32, or ``dtype``).
 
     ``power``: ``v ** gamma`` (the display profile's gamma). ``release``: the release's
-    ``((v + 0.055) / 1.055) ** 2.2`` (notes section 3.1).
+    ``((v + 0.055) / 1.055) ** 2.2`` (docs/METHOD.md, 5.1).
     """
     out = np.array(encoded, dtype=dtype)  # a copy: worked on in place below
     scalar = out.dtype.type

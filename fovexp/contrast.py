@@ -1,4 +1,5 @@
-"""Contrast enhancement (Patney et al. 2016, as the authors' release applies it; notes 3.3).
+"""Contrast enhancement (Patney et al. 2016, as the authors' release applies it;
+docs/METHOD.md, 5.3).
 
 The paper defers the formula to Patney et al.; the release implements it per integer blur
 level ``k`` (the foveation sigma rounded down and up)::
@@ -26,6 +27,14 @@ The flat regions the enhancer skips (``EngineOptions.skip``) are exactly those w
 evaluated (no stack of filtered images).
 Even widths follow MATLAB's anchoring: the window of width ``n`` covers
 ``[x - floor((n - 1) / 2), x + ceil((n - 1) / 2)]``.
+
+References
+----------
+.. [tariq] Tariq, T., Tursun, C., Didyk, P. (2022). Noise-based Enhancement for Foveated
+   Rendering. ACM Transactions on Graphics 41(4) (SIGGRAPH 2022). doi:10.1145/3528223.3530101
+.. [patney] Patney, A., Salvi, M., Kim, J., Kaplanyan, A., Wyman, C., Benty, N., Luebke, D.,
+   Lefohn, A. (2016). Towards Foveated Rendering for Gaze-Tracked Virtual Reality. ACM
+   Transactions on Graphics 35(6). doi:10.1145/2980179.2980246
 """
 
 from __future__ import annotations
@@ -41,12 +50,12 @@ from .foveation import _float_array, per_pixel_sigma
 from .jit import FASTMATH
 from .pyramids import FLAT_BLOCK_LEVEL, blocks_reaching, constant_blocks, level_scale
 
-#: Box-filter width per integer blur level (notes section 3.3): level k averages ceil(4 k) px.
+#: Box-filter width per integer blur level (docs/METHOD.md, 5.3): level k averages ceil(4 k) px.
 BOX_WIDTH_PX_PER_LEVEL = 4
 
 
 def box_width_px(level: int) -> int:
-    """Box-filter width of integer blur level ``level`` (notes section 3.3): ceil(4 level)."""
+    """Box-filter width of integer blur level ``level`` (docs/METHOD.md, 5.3): ceil(4 level)."""
     return int(math.ceil(BOX_WIDTH_PX_PER_LEVEL * level))
 
 
@@ -209,7 +218,7 @@ def sat_pad_px(max_sigma: float) -> int:
 
 
 def contrast_enhance(linear: np.ndarray, sigma_map_px: np.ndarray, f_e: float) -> np.ndarray:
-    """Release contrast enhancement of an (H, W) or (H, W, C) linear image (notes 3.3).
+    """Release contrast enhancement of an (H, W) or (H, W, C) linear image (docs/METHOD.md, 5.3).
 
     ``sigma_map_px`` is the foveation sigma per pixel; ``f_e`` the enhancement factor
     (Table 2: 0.15 .. 0.28). The result may leave [0, 1]; the noise's clipping control

@@ -1,12 +1,12 @@
 """Foveation: the spatially varying Gaussian blur that simulates foveated rendering.
 
-Paper section 6.2: inside the fovea (8 deg) the image is full resolution; past it the standard
+Paper section 5.2: inside the fovea (8 deg) the image is full resolution; past it the standard
 deviation of a Gaussian blur grows linearly with eccentricity at the *blur-rate* (arcmin of
 sigma per degree of eccentricity)::
 
     sigma(e) = blur_rate * max(0, e - fovea)          [arcmin]
 
-converted to pixels with the local pixels per degree (notes section 2: blur-rate 0.34 at 40 deg
+converted to pixels with the local pixels per degree (docs/METHOD.md, 4: blur-rate 0.34 at 40 deg
 gives 10.9 arcmin, about 9 px on the paper's display).
 
 :func:`foveate` is the fast method: a stack of Gaussian blurs at fixed sigmas, each computed on
@@ -16,6 +16,14 @@ sigmas need it; each pixel then interpolates linearly between the two stack leve
 its sigma, sampling them bilinearly. :func:`foveate_exact` is the exact per-pixel spatially
 varying convolution it is measured against (``benchmarks/run.py``; results in
 ``benchmarks/RESULTS.md``; and the tests).
+
+References
+----------
+.. [tariq] Tariq, T., Tursun, C., Didyk, P. (2022). Noise-based Enhancement for Foveated
+   Rendering. ACM Transactions on Graphics 41(4) (SIGGRAPH 2022). doi:10.1145/3528223.3530101
+.. [patney] Patney, A., Salvi, M., Kim, J., Kaplanyan, A., Wyman, C., Benty, N., Luebke, D.,
+   Lefohn, A. (2016). Towards Foveated Rendering for Gaze-Tracked Virtual Reality. ACM
+   Transactions on Graphics 35(6). doi:10.1145/2980179.2980246
 """
 
 from __future__ import annotations
@@ -48,7 +56,7 @@ def sigma_px(
     ecc_deg: np.ndarray, ppd: np.ndarray, blur_rate: float, fovea_deg: float,
     dtype: type = np.float32,
 ) -> np.ndarray:
-    """Blur std in pixels: ``blur_rate / 60 * max(0, e - fovea) * ppd`` (paper section 6.2).
+    """Blur std in pixels: ``blur_rate / 60 * max(0, e - fovea) * ppd`` (paper section 5.2).
 
     ``blur_rate`` is in arcmin per degree; ``ppd`` the local pixels per degree. With the
     release preset (fovea 12 deg, 42.67 px/deg) blur-rate 0.46875 gives the release's

@@ -14,8 +14,15 @@ Nyquist-frequency noise there, a defect this implementation does not copy.
 
 The truncated draw is exact, by inversion of the normal CDF: ``z = Phi^-1(u Phi(z_H))`` with
 ``z_H = (ln F_H - mu_n) / sigma_n`` and ``u`` uniform in (0, 1); no rejection loop. The
-release's draw (up to 10 normal draws, keeping the first below ln F_H, else mu_n; notes 3.6)
-is available for the ``release`` preset.
+release's draw (up to 10 normal draws, keeping the first below ln F_H, else mu_n;
+docs/METHOD.md, 5.6) is available for the ``release`` preset.
+
+References
+----------
+.. [tariq] Tariq, T., Tursun, C., Didyk, P. (2022). Noise-based Enhancement for Foveated
+   Rendering. ACM Transactions on Graphics 41(4) (SIGGRAPH 2022). doi:10.1145/3528223.3530101
+.. [thibos] Thibos, L. N., et al. (1996), the paper's "thibos1996": the source of its appendix A
+   limits (no DOI: which 1996 article it is could not be checked against the paper's bibliography)
 """
 
 from __future__ import annotations
@@ -30,7 +37,7 @@ from .geometry import cpd_to_cpp
 NYQUIST_CPP = 0.5
 #: The paper's blur cut-off: 3 sigma_f, where the Gaussian's response is about 1 % (eq. 1).
 CUTOFF_SIGMAS_F = 3.0
-#: Normal draws the release tries before falling back to the mean (notes section 3.6).
+#: Normal draws the release tries before falling back to the mean (docs/METHOD.md, 5.6).
 RELEASE_REJECTION_TRIES = 10
 
 
@@ -62,7 +69,8 @@ def lognormal_params(
 def draw_truncated(
     u: np.ndarray, mu: np.ndarray, sigma_n: np.ndarray, f_high_cpp: np.ndarray
 ) -> np.ndarray:
-    """Exact draw from the log-normal truncated to (0, F_H), by inversion (paper section 4.1).
+    """Exact draw from the log-normal truncated to (0, F_H), by inversion (paper eq. 5 and
+    section 4.1; docs/METHOD.md, 6.1).
 
     ``u`` are uniform variates in (0, 1), one per impulse (fixed per impulse, so a frame
     sequence keeps each impulse's quantile).

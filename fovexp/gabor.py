@@ -1,4 +1,4 @@
-"""Sparse Gabor noise (Lagae et al. 2009; paper section 4.4; notes sections 2 and 3.9).
+"""Sparse Gabor noise (Lagae et al. 2009; paper section 4.4; docs/METHOD.md, 4 and 5.9).
 
 The noise is a sum of Gabor kernels placed at random impulses::
 
@@ -20,8 +20,8 @@ r (side ``cell_scale r``, mean ``m = N cell_scale^2 / pi``) that the synthesis c
 finely. The impulses depend only on the image size, N, a, these options and the seed: every
 frame of a sequence has the same ones (section 4.4).
 
-Normalisation (notes 3.9): the sum is divided by ``6 sqrt(V)`` with ``V`` the variance of the
-sum for K = 1 at F = 0.0625 cycles/px (notes section 2)::
+Normalisation (docs/METHOD.md, 5.9): the sum is divided by ``6 sqrt(V)`` with ``V`` the
+variance of the sum for K = 1 at F = 0.0625 cycles/px (docs/METHOD.md, 4)::
 
     V = lambda E[w^2] (1 / (4 a^2)) (1 + exp(-2 pi F^2 / a^2)),   E[w^2] = 1/3 (uniform), 1 (+-1)
 
@@ -36,6 +36,14 @@ Synthesis: each kernel is separable as the real part of a product of two complex
 ``exp(-pi a^2 d_x^2 + i 2 pi F cos(t) d_x) * exp(-pi a^2 d_y^2 + i 2 pi F sin(t) d_y)``;
 the factors are built by recurrence (no transcendental per pixel), each pixel costs one complex
 multiply-add, and bands of rows are summed in parallel without locks.
+
+References
+----------
+.. [tariq] Tariq, T., Tursun, C., Didyk, P. (2022). Noise-based Enhancement for Foveated
+   Rendering. ACM Transactions on Graphics 41(4) (SIGGRAPH 2022). doi:10.1145/3528223.3530101
+.. [lagae] Lagae, A., Lefebvre, S., Drettakis, G., Dutré, P. (2009). Procedural Noise using
+   Sparse Gabor Convolution. ACM Transactions on Graphics 28(3) (SIGGRAPH 2009).
+   doi:10.1145/1531326.1531360
 """
 
 from __future__ import annotations
@@ -49,13 +57,13 @@ import numpy as np
 from ._parallel import interleave
 from .jit import FASTMATH
 
-#: Envelope value at which the kernel is truncated (notes section 2).
+#: Envelope value at which the kernel is truncated (docs/METHOD.md, 4).
 KERNEL_TRUNCATION = 0.01
-#: Frequency used in the normalisation's variance (notes section 3.9).
+#: Frequency used in the normalisation's variance (docs/METHOD.md, 5.9).
 NORMALISATION_F_CPP = 0.0625
-#: The noise's local standard deviation is K / NOISE_STD_DIVISOR (notes section 3.9).
+#: The noise's local standard deviation is K / NOISE_STD_DIVISOR (docs/METHOD.md, 5.9).
 NOISE_STD_DIVISOR = 6.0
-#: Period of the cell pattern, in cells (notes section 3.9).
+#: Period of the cell pattern, in cells (docs/METHOD.md, 5.9).
 CELL_PERIOD = 256
 #: Rows per parallel band of the synthesis.
 BAND_ROWS = 128
@@ -67,13 +75,13 @@ CELL_BORDER = 1
 CELL_ORIGIN_PX = -0.5
 
 
-#: Mean square E[w^2] of the impulse weights: uniform in (-1, 1), or +-1 (notes section 2).
+#: Mean square E[w^2] of the impulse weights: uniform in (-1, 1), or +-1 (docs/METHOD.md, 4).
 WEIGHT_MEAN_SQUARE: dict[str, float] = {"uniform": 1.0 / 3.0, "sign": 1.0}
 
 
 def kernel_radius_px(gabor_a_cpp: float, truncation: float = KERNEL_TRUNCATION) -> float:
-    """Truncation radius ``sqrt(-ln t / pi) / a``, t = 0.01 (notes 2): 20.2 px at a = 0.06,
-    15.1 at 0.08."""
+    """Truncation radius ``sqrt(-ln t / pi) / a``, t = 0.01 (docs/METHOD.md, 4): 20.2 px at
+    a = 0.06, 15.1 at 0.08."""
     return math.sqrt(-math.log(truncation) / math.pi) / gabor_a_cpp
 
 
@@ -103,8 +111,8 @@ def impulse_density(impulses_per_kernel: int, gabor_a_cpp: float) -> float:
 
 
 def normalisation(impulses_per_kernel: int, gabor_a_cpp: float, weights: str = "uniform") -> float:
-    """Factor that makes the local std ``K / 6``: ``1 / (6 sqrt(V))`` (notes 3.9), V with the
-    weights' mean square."""
+    """Factor that makes the local std ``K / 6``: ``1 / (6 sqrt(V))`` (docs/METHOD.md, 5.9),
+    V with the weights' mean square."""
     a = gabor_a_cpp
     lam = impulse_density(impulses_per_kernel, a)
     v = lam * WEIGHT_MEAN_SQUARE[weights] / (4.0 * a * a) * (

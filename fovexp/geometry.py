@@ -9,17 +9,22 @@ Three models of the geometry are offered:
 
 ``exact``
     Flat screen, eye on the normal through the screen centre. Eccentricity is the true angle
-    between the gaze ray and the pixel's ray; pixels per degree grow off-axis (notes section 2).
+    between the gaze ray and the pixel's ray; pixels per degree grow off-axis (docs/METHOD.md, 4).
 ``linear``
-    The paper's approximation (section 6.1): a constant ``width_px / horizontal field`` pixels
+    The paper's approximation (section 5.1): a constant ``width_px / horizontal field`` pixels
     per degree and eccentricity = on-screen distance / that constant.
 ``release``
-    The authors' released prototype (notes section 3): eccentricity ``atan(R / D)`` with ``R``
+    The authors' released prototype (docs/METHOD.md, 5): eccentricity ``atan(R / D)`` with ``R``
     the physical distance from the gaze point on the screen, and a constant 42.67 px/deg
     (1920 px / 45 deg) at 3840 px width.
 
 Coordinates: pixel centres at integer ``(x, y)``, x to the right, y down; gaze points in
 normalised screen coordinates ``(x_h, x_v)`` in [0, 1] (paper section 3).
+
+References
+----------
+.. [tariq] Tariq, T., Tursun, C., Didyk, P. (2022). Noise-based Enhancement for Foveated
+   Rendering. ACM Transactions on Graphics 41(4) (SIGGRAPH 2022). doi:10.1145/3528223.3530101
 """
 
 from __future__ import annotations
@@ -44,7 +49,7 @@ GeometryModel = Literal["exact", "linear", "release"]
 #: Minutes of arc per degree of visual angle.
 ARCMIN_PER_DEG = 60.0
 
-#: Release constants (notes section 3): 3840 px over a 90 degree field, taken as constant.
+#: Release constants (docs/METHOD.md, 5): 3840 px over a 90 degree field, taken as constant.
 RELEASE_PPD_AT_3840 = 1920.0 / 45.0
 RELEASE_WIDTH_CM = 120.0
 RELEASE_HEIGHT_CM = 67.0
@@ -71,11 +76,11 @@ class Display(BaseModel):
 
     @property
     def horizontal_field_deg(self) -> float:
-        """Full horizontal field of view, ``2 atan(w / 2D)`` (notes section 2: 80.8 deg)."""
+        """Full horizontal field of view, ``2 atan(w / 2D)`` (docs/METHOD.md, 4: 80.8 deg)."""
         return math.degrees(2.0 * math.atan(0.5 * self.width_cm / self.distance_cm))
 
 
-#: The release's display (notes section 3), for the ``release`` preset.
+#: The release's display (docs/METHOD.md, 5), for the ``release`` preset.
 RELEASE_DISPLAY = Display(
     name="release-prototype",
     width_px=RELEASE_WIDTH_PX,
@@ -104,6 +109,11 @@ def load_display(name_or_path: str | Path) -> Display:
     """Load a display profile by name (searched in :func:`display_search_path`) or by path.
 
     Raises :class:`FovexpError` naming the file and the field for a missing or bad profile.
+
+    >>> from fovexp import load_display
+    >>> lg = load_display("lg-oled55cx")  # the paper's display (section 5.1)
+    >>> lg.width_px, lg.height_px, lg.distance_cm, round(lg.horizontal_field_deg, 1)
+    (3840, 2160, 71.5, 80.8)
     """
     path = Path(name_or_path)
     if path.suffix not in (".yaml", ".yml"):
@@ -175,6 +185,17 @@ class ViewingGeometry:
     ``screen_width x screen_height`` pixels (by default the image *is* the frame). Pixel
     coordinates are the image's own; the pitch is the frame's. Attributes are in the units
     their names say; ``pitch_*_cm`` is the size of one frame pixel on the screen.
+
+    >>> import numpy as np
+    >>> from fovexp import ViewingGeometry, load_display
+    >>> g = ViewingGeometry.for_image(load_display("lg-oled55cx"), 3840, 2160)
+    >>> gaze = g.gaze_px((0.5, 0.5))  # normalised screen coordinates -> px
+    >>> gaze
+    (1919.5, 1079.5)
+    >>> g.ppd(np.array([gaze[0]]), np.array([gaze[1]])).round(1)  # px/deg on the axis
+    array([39.3])
+    >>> g.eccentricity_deg(np.array([2312.5, 3839.0]), np.array([1079.5, 2159.0]), gaze).round(2)
+    array([ 9.89, 44.33])
     """
 
     width_px: int
@@ -232,7 +253,9 @@ class ViewingGeometry:
         return (gx * self.screen_width_px - 0.5 - self.x0_px,
                 gy * self.screen_height_px - 0.5 - self.y0_px)
 
-    def _screen_cm(self, x_px: np.ndarray, y_px: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _screen_cm(
+        self, x_px: np.ndarray | np.float64, y_px: np.ndarray | np.float64
+    ) -> tuple[np.ndarray | np.float64, np.ndarray | np.float64]:
         """Image pixel coordinates to cm from the screen centre."""
         return ((x_px + self.x0_px + 0.5) - 0.5 * self.screen_width_px) * self.pitch_x_cm, (
             (y_px + self.y0_px + 0.5) - 0.5 * self.screen_height_px
@@ -244,8 +267,8 @@ class ViewingGeometry:
         """Retinal eccentricity (deg) of pixels ``(x_px, y_px)`` for a gaze at ``gaze_px``.
 
         ``exact``: the angle between the two rays from the eye, ``atan2(|u x v|, u . v)``.
-        ``linear``: on-screen distance in px over the constant px/deg (paper section 6.1).
-        ``release``: ``atan(R / D)`` with ``R`` the on-screen distance in cm (notes section 3).
+        ``linear``: on-screen distance in px over the constant px/deg (paper section 5.1).
+        ``release``: ``atan(R / D)`` with ``R`` the on-screen distance in cm (docs/METHOD.md, 5).
         """
         x_px = np.asarray(x_px, dtype=np.float64)
         y_px = np.asarray(y_px, dtype=np.float64)
@@ -265,7 +288,7 @@ class ViewingGeometry:
         ``exact``: a pixel at distance ``L = D / cos(theta)`` from the eye (theta off the
         screen normal) subtends ``pitch / L`` rad across the line of sight, so
         ``ppd = (pi / 180) L / pitch``: 39.3 px/deg on axis on the LG profile, 51 at its
-        horizontal edge (a 10.9 arcmin blur there is about 9 px, notes section 2). Along the
+        horizontal edge (a 10.9 arcmin blur there is about 9 px, docs/METHOD.md, 4). Along the
         radius the screen is foreshortened by a further cos(theta); an isotropic screen-space
         blur cannot follow that, so the across-the-line-of-sight figure is used.
         ``linear`` and ``release``: the model's constant.

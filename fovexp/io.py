@@ -132,7 +132,7 @@ def _temporary_beside(path: Path) -> Path:
     raise FovexpError(f"{path.parent}: cannot create a temporary file")  # pragma: no cover
 
 
-def atomic_write_bytes(path: Path, write: Callable[[Path], None]) -> None:
+def atomic_write_bytes(path: Path, write: Callable[[Path], object]) -> None:
     """Call ``write(tmp_path)`` for a temporary file beside ``path`` and rename it into place;
     the file keeps the permissions a new file gets (folders too: created as ``mkdir`` does)."""
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -162,7 +162,18 @@ def write_bytes_atomic(path: str | Path, data: bytes, sync: bool = True) -> None
 def write_image(path: str | Path, image: np.ndarray, bit_depth: int = 8) -> None:
     """Write float values in [0, 1] (grey, grey + alpha, RGB or RGBA; values outside are
     clipped) as an 8- or 16-bit PNG or TIFF, or an 8-bit JPEG (quality :data:`JPEG_QUALITY`,
-    no alpha)."""
+    no alpha).
+
+    >>> import os, tempfile
+    >>> import numpy as np
+    >>> from fovexp import read_image, write_image
+    >>> path = os.path.join(tempfile.mkdtemp(), "ramp.png")
+    >>> ramp = np.linspace(0, 1, 12, dtype=np.float32).reshape(3, 4)
+    >>> write_image(path, ramp, 16)
+    >>> back = read_image(path)
+    >>> back.shape, back.dtype, float(np.abs(back - ramp).max()) <= 0.5 / 65535
+    ((3, 4), dtype('float32'), True)
+    """
     path = Path(path)
     kind = IMAGE_SUFFIXES.get(path.suffix.lower())
     if kind is None:
@@ -196,7 +207,7 @@ def write_image(path: str | Path, image: np.ndarray, bit_depth: int = 8) -> None
         atomic_write_bytes(path, lambda tmp: tmp.write_bytes(encoded))
 
 
-def _encode(kind: str, data: np.ndarray) -> bytes:
+def _encode(kind: str, data: np.ndarray) -> bytes | bytearray:
     import imagecodecs
 
     if kind == "PNG":

@@ -1,4 +1,4 @@
-"""Noise orientation from image gradients (paper section 4.3; notes section 3.5).
+"""Noise orientation from image gradients (paper section 4.3; docs/METHOD.md, 5.5).
 
 Sobel gradients of the foveated grey image on Gaussian-pyramid level 3 (1/8 resolution, for
 spatial and temporal smoothness), interpolated bicubically to the points where they are needed
@@ -9,6 +9,14 @@ The orientation follows the release's convention (x right, y down)::
 
 and the Gabor carrier then runs at ``omega - pi / 2``, i.e. along the gradient: the noise's
 stripes run along the edges (see :mod:`fovexp.gabor`).
+
+References
+----------
+.. [tariq] Tariq, T., Tursun, C., Didyk, P. (2022). Noise-based Enhancement for Foveated
+   Rendering. ACM Transactions on Graphics 41(4) (SIGGRAPH 2022). doi:10.1145/3528223.3530101
+.. [keys] Keys, R. (1981). Cubic Convolution Interpolation for Digital Image Processing. IEEE
+   Transactions on Acoustics, Speech, and Signal Processing 29(6), 1153-1160.
+   doi:10.1109/TASSP.1981.1163711
 """
 
 from __future__ import annotations

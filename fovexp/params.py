@@ -1,7 +1,7 @@
 """Method parameters, the paper's Table 2, and the two presets (paper, release).
 
 The calibrated parameters (f_e, s_k, s_f) depend on the foveation strength only (paper
-section 6); Table 2 gives them at three blur-rates. :class:`ParameterTable` interpolates them
+section 5); Table 2 gives them at three blur-rates. :class:`ParameterTable` interpolates them
 linearly in blur-rate and clamps outside the table's range. A lab's own calibration (written by
 ``fovexp analyze``) is a table in the same YAML format::
 
@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 import yaml
@@ -45,7 +45,7 @@ class Preset:
     """Constants that differ between the paper and the authors' released prototype."""
 
     name: str
-    #: radius of the full-resolution fovea (paper section 6.2: 8 deg; release: 12 deg)
+    #: radius of the full-resolution fovea (paper section 5.2: 8 deg; release: 12 deg)
     fovea_deg: float
     geometry: GeometryModel
     #: attenuation cut-off a of the amplitude level selection (paper section 4.2)
@@ -107,9 +107,9 @@ class EngineOptions(BaseModel):
         Floating-point type of every image stage (``"float64"``: the reference; the result's
         arrays then are float64 too).
     ``kernel_truncation``
-        Envelope value at which the Gabor kernel is cut (section 4.4; notes 2: 0.01, radius
-        20.2 px at a = 0.06). The impulse cells keep the 0.01 radius, so the impulses stay the
-        same whatever the truncation.
+        Envelope value at which the Gabor kernel is cut (section 4.4; docs/METHOD.md, 4: 0.01,
+        radius 20.2 px at a = 0.06). The impulse cells keep the 0.01 radius, so the impulses stay
+        the same whatever the truncation.
     ``impulse_count``
         Impulses per cell: ``"poisson"`` (Lagae et al. 2009, the release) or ``"jittered"``:
         floor(m) or floor(m) + 1 with probability frac(m), mean m = N / pi cell areas the
@@ -140,9 +140,19 @@ class EngineOptions(BaseModel):
 
 
 def make_options(**kwargs: object) -> EngineOptions:
-    """Build :class:`EngineOptions`, turning validation errors into one clear line."""
+    """Build :class:`EngineOptions`, turning validation errors into one clear line.
+
+    >>> from fovexp import EngineOptions, make_options
+    >>> EngineOptions(skip=False, dtype="float64").non_default()
+    {'skip': False, 'dtype': 'float64'}
+    >>> make_options(foveation="exact").foveation
+    'exact'
+    >>> make_options(dtype="float16")
+    Traceback (most recent call last):
+    fovexp.errors.FovexpError: engine option: dtype='float16': Input should be 'float32' or ...
+    """
     try:
-        return EngineOptions(**kwargs)  # type: ignore[arg-type]
+        return EngineOptions(**kwargs)
     except ValidationError as exc:
         raise validation_error("engine option", exc) from None
 
@@ -181,7 +191,8 @@ def check_parameter(name: str, value: object) -> float | int:
         if isinstance(value, bool) or (integer and isinstance(value, float)
                                        and not value.is_integer()):
             raise TypeError
-        v = int(value) if integer else float(value)  # type: ignore[arg-type]
+        number: Any = value  # checked by int() / float() themselves
+        v = int(number) if integer else float(number)
     except (TypeError, ValueError, OverflowError):
         raise ValueError(f"must be {what} in {where}") from None
     if not math.isfinite(v) or not (lo < v if open_lo else lo <= v) or v > hi:
@@ -201,20 +212,20 @@ class _CheckedParameters(BaseModel):
         return value
 
 
-def _blur_rate(**kw: object) -> float:
-    return Field(ge=BLUR_RATE_RANGE[0], le=BLUR_RATE_RANGE[1], **kw)  # type: ignore[return-value]
+def _blur_rate(**kw: Any) -> float:
+    return Field(ge=BLUR_RATE_RANGE[0], le=BLUR_RATE_RANGE[1], **kw)
 
 
-def _f_e(**kw: object) -> float:
-    return Field(ge=F_E_RANGE[0], le=F_E_RANGE[1], **kw)  # type: ignore[return-value]
+def _f_e(**kw: Any) -> float:
+    return Field(ge=F_E_RANGE[0], le=F_E_RANGE[1], **kw)
 
 
-def _s_k(**kw: object) -> float:
-    return Field(ge=S_K_RANGE[0], le=S_K_RANGE[1], **kw)  # type: ignore[return-value]
+def _s_k(**kw: Any) -> float:
+    return Field(ge=S_K_RANGE[0], le=S_K_RANGE[1], **kw)
 
 
-def _s_f(**kw: object) -> float:
-    return Field(gt=S_F_RANGE[0], le=S_F_RANGE[1], **kw)  # type: ignore[return-value]
+def _s_f(**kw: Any) -> float:
+    return Field(gt=S_F_RANGE[0], le=S_F_RANGE[1], **kw)
 
 
 class TableRow(_CheckedParameters):
@@ -265,7 +276,7 @@ class ParameterTable(BaseModel):
         Path(path).write_text(text)
 
 
-#: Table 2 of the paper (section 6.3).
+#: Table 2 of the paper (section 5.3).
 PAPER_TABLE2 = ParameterTable(
     source="Tariq, Tursun, Didyk 2022, Table 2",
     rows=[
@@ -275,7 +286,7 @@ PAPER_TABLE2 = ParameterTable(
     ],
 )
 
-#: The release's defaults (notes section 3), one row: the same at every blur-rate.
+#: The release's defaults (docs/METHOD.md, 5), one row: the same at every blur-rate.
 RELEASE_TABLE = ParameterTable(
     source="released prototype defaults",
     rows=[TableRow(blur_rate=0.0, f_e=0.2, s_k=16.0, s_f=2.1)],
@@ -315,8 +326,20 @@ class EnhanceParams(_CheckedParameters):
 
 
 def make_params(**kwargs: object) -> EnhanceParams:
-    """Build :class:`EnhanceParams`, turning validation errors into one clear line."""
+    """Build :class:`EnhanceParams`, turning validation errors into one clear line.
+
+    >>> from fovexp import make_params
+    >>> p = make_params(blur_rate=0.34, impulses=12)
+    >>> p.method, p.blur_rate, p.impulses, p.s_k
+    ('ours', 0.34, 12, None)
+    >>> r = p.resolved()  # f_e, s_k, s_f from Table 2 at this blur-rate
+    >>> r.f_e, r.s_k, r.s_f
+    (0.23, 21.02, 2.21)
+    >>> make_params(blur_rate=float("nan"))
+    Traceback (most recent call last):
+    fovexp.errors.FovexpError: parameter: blur_rate=nan: must be a finite number in [0, 5] ...
+    """
     try:
-        return EnhanceParams(**kwargs)  # type: ignore[arg-type]
+        return EnhanceParams(**kwargs)
     except ValidationError as exc:
         raise validation_error("parameter", exc) from None

@@ -23,6 +23,17 @@ on demand (:meth:`EnhanceResult.map`), by the same functions evaluated on the pi
 Stages that do not depend on the image (geometry, grids, sigma, impulses, per-impulse band)
 are kept across the frames of a sequence as across parameter steps: :meth:`Enhancer.set_image`
 invalidates only what depends on the image.
+
+References
+----------
+.. [tariq] Tariq, T., Tursun, C., Didyk, P. (2022). Noise-based Enhancement for Foveated
+   Rendering. ACM Transactions on Graphics 41(4) (SIGGRAPH 2022). doi:10.1145/3528223.3530101
+.. [patney] Patney, A., Salvi, M., Kim, J., Kaplanyan, A., Wyman, C., Benty, N., Luebke, D.,
+   Lefohn, A. (2016). Towards Foveated Rendering for Gaze-Tracked Virtual Reality. ACM
+   Transactions on Graphics 35(6). doi:10.1145/2980179.2980246
+.. [lagae] Lagae, A., Lefebvre, S., Drettakis, G., Dutré, P. (2009). Procedural Noise using
+   Sparse Gabor Convolution. ACM Transactions on Graphics 28(3) (SIGGRAPH 2009).
+   doi:10.1145/1531326.1531360
 """
 
 from __future__ import annotations
@@ -182,7 +193,7 @@ class ImpulseParams:
     f_low_cpp: np.ndarray
     f_high_cpp: np.ndarray
     open_: np.ndarray  # bool: F_L < F_H
-    level: np.ndarray  # the continuous Laplacian level l_a |L| is read at (eq. 7)
+    level: np.ndarray  # the continuous Laplacian level l_a |L| is read at (eq. 8)
 
     def subset(self, keep: np.ndarray) -> ImpulseParams:
         return ImpulseParams(self.index[keep], self.x_px[keep], self.y_px[keep],
@@ -231,6 +242,24 @@ class Enhancer:
     a parameter change recomputes only what depends on it. ``options``
     (:class:`~fovexp.params.EngineOptions`) are the implementation choices, fixed for the
     enhancer's life.
+
+    A 96 x 64 patch shown 25 deg right of the screen centre of the paper's display (a
+    viewport of the 4K frame), gaze at the centre:
+
+    >>> import numpy as np
+    >>> from fovexp import Enhancer, load_display, make_params
+    >>> yy, xx = np.mgrid[0:64, 0:96]
+    >>> patch = (0.5 + 0.3 * np.sin(xx / 1.5) * np.cos(yy / 2.5)).astype(np.float32)
+    >>> enh = Enhancer(load_display("lg-oled55cx"))
+    >>> enh.set_image(patch, viewport=(2900, 1048, 3840, 2160))
+    >>> res = enh.enhance((0.5, 0.5), make_params(blur_rate=0.57, impulses=12))
+    >>> res.output.shape, res.output.dtype
+    ((64, 96), dtype('float32'))
+    >>> bool(res.map("sigma_px").min() > 0), bool(np.abs(res.map("noise")).max() > 0)
+    (True, True)
+    >>> step = enh.enhance((0.5, 0.5), res.params.model_copy(update={"s_k": 5.0}))
+    >>> sorted(step.timings_s)  # a wheel step on s_k recomputes only what depends on it
+    ['imp_amplitude', 'noise', 'output']
     """
 
     #: which implementation runs the stages ("cpu": NumPy/Numba; "gpu": fovexp.gpu)
@@ -330,7 +359,8 @@ class Enhancer:
             if not np.isfinite(sigma_given).all() or float(sigma_given.min()) < 0:
                 raise FovexpError("sigma map must be finite and non-negative (px)")
         if viewport is not None:
-            viewport = tuple(int(v) for v in viewport)
+            x0, y0, sw, sh = (int(v) for v in viewport)
+            viewport = (x0, y0, sw, sh)
             ViewingGeometry.for_image(self.display, img.shape[1], img.shape[0], "exact",
                                       viewport)  # validates it
         self._c.set(image=img, shape=img.shape[:2], sigma_given=sigma_given, viewport=viewport,
@@ -399,7 +429,7 @@ class Enhancer:
         return ecc, np.broadcast_to(geom.ppd(x, y), ecc.shape)
 
     def _sigma(self, given, grids, blur_rate) -> np.ndarray:
-        """The sigma map (px, section 6.2): the one given with the frame, else from the
+        """The sigma map (px, section 5.2): the one given with the frame, else from the
         eccentricity and px/deg maps (computed only then)."""
         if given is not None:
             return given
@@ -468,7 +498,7 @@ class Enhancer:
         ``EngineOptions(extremes="exact")``: per pixel over the channels, reduced later over
         exactly the pixels each impulse's kernel covers (:func:`fovexp.pyramids.
         window_extremes`). Release preset: grey and a 25 x 25 box, as the release does
-        (notes 3.8)."""
+        (docs/METHOD.md, 5.8)."""
         p = self.preset
         if p.minmax == "pyramid" and self.options.extremes == "exact":
             lo, hi = pyramids.block_extremes(foveated, 0, add=delta)
@@ -479,7 +509,7 @@ class Enhancer:
             lo, hi = pyramids.block_extremes(foveated, p.minmax_level, add=delta)
             lo = ndimage.minimum_filter(lo, reach, mode="nearest")
             hi = ndimage.maximum_filter(hi, reach, mode="nearest")
-        else:  # the release: grey, a 25 x 25 box (notes 3.8), kept as it is for comparison
+        else:  # the release: grey, a 25 x 25 box (docs/METHOD.md, 5.8), kept for comparison
             grey = luma + delta  # the luma weights sum to 1
             lo = ndimage.minimum_filter(grey, p.minmax_box_px, mode="nearest")
             hi = ndimage.maximum_filter(grey, p.minmax_box_px, mode="nearest")
@@ -535,7 +565,7 @@ class Enhancer:
         top = max(min(amp.MAX_LAPLACIAN_LEVEL, pyramids.pyramid_depth(shape, 99)), 1)
         k0, _ = amp.bracketing_levels(band.level, top)
         levels = np.flatnonzero(np.bincount(k0, minlength=top + 1))  # the k0 present
-        radii = pyramids.blocks_reaching(amp.laplacian_reach_px(levels, top), block)
+        radii = np.asarray(pyramids.blocks_reaching(amp.laplacian_reach_px(levels, top), block))
         # per bracketing level, the blocks around which the luminance is one constant that far
         const = np.zeros((top + 1, *lo.shape), dtype=np.bool_)
         const[levels[0]] = pyramids.constant_blocks(lo, hi, int(radii[0]))
@@ -574,7 +604,7 @@ class Enhancer:
         )
 
     def _amplitude(self, band: ImpulseParams, lap_amp, limit, s_k) -> np.ndarray:
-        """K (eq. 8, with the release's gain), reduced by the clipping control; 0 where the
+        """K (eq. 9, with the release's gain), reduced by the clipping control; 0 where the
         band is closed."""
         k = np.minimum(s_k * amp.RELEASE_AMPLITUDE_GAIN * lap_amp, limit)
         return np.where(band.open_, k, 0.0)
@@ -670,7 +700,15 @@ def enhance(
     image: np.ndarray, display: Display, gaze: tuple[float, float] = (0.5, 0.5),
     params: EnhanceParams | None = None, preset: str | None = None,
 ) -> EnhanceResult:
-    """One-shot convenience: foveate ``image`` and enhance it (see :class:`Enhancer`)."""
+    """One-shot convenience: foveate ``image`` and enhance it (see :class:`Enhancer`).
+
+    >>> import numpy as np
+    >>> from fovexp import enhance, load_display, make_params
+    >>> grey = np.full((27, 48), 0.5, dtype=np.float32)
+    >>> res = enhance(grey, load_display("lg-oled55cx"), params=make_params(method="contrast"))
+    >>> bool(np.array_equal(res.output, grey))  # nothing to enhance on a flat image
+    True
+    """
     params = params or EnhanceParams()
     enh = Enhancer(display, preset=preset or params.preset)
     enh.set_image(image)

@@ -1,16 +1,26 @@
 
-"""Image pyramids (paper sections 4.2, 4.3; notes sections 3.5, 3.7, 3.8).
+"""Image pyramids (paper sections 4.2, 4.3; docs/METHOD.md, 5.5, 5.7, 5.8).
 
 Gaussian and Laplacian pyramids use the 5-tap binomial kernel [1, 4, 6, 4, 1] / 16 with
 replicated borders, keeping every second sample (Burt and Adelson 1983), as the release does.
 Sample ``j`` of level ``m`` sits on full-resolution pixel ``j * 2**m``.
 
-Laplacian levels are counted from 1 (notes section 1, erratum): ``L_1 = G_0 - expand(G_1)`` is
+Laplacian levels are counted from 1 (docs/METHOD.md, 3.2, erratum): ``L_1 = G_0 - expand(G_1)`` is
 the finest band, 0.25..0.5 cycles/px, with centre ``2**-1.5``; level ``k`` has centre
 ``2**-(k + 0.5)`` cycles/px and lives on the grid of ``G_{k-1}``.
 
 Min/max pyramids (paper section 4.2): level ``l`` holds the minimum (maximum) of each
 ``2**l x 2**l`` block of the full-resolution image.
+
+References
+----------
+.. [tariq] Tariq, T., Tursun, C., Didyk, P. (2022). Noise-based Enhancement for Foveated
+   Rendering. ACM Transactions on Graphics 41(4) (SIGGRAPH 2022). doi:10.1145/3528223.3530101
+.. [burt] Burt, P. J., Adelson, E. H. (1983). The Laplacian Pyramid as a Compact Image Code.
+   IEEE Transactions on Communications 31(4), 532-540. doi:10.1109/TCOM.1983.1095851
+.. [keys] Keys, R. (1981). Cubic Convolution Interpolation for Digital Image Processing. IEEE
+   Transactions on Acoustics, Speech, and Signal Processing 29(6), 1153-1160.
+   doi:10.1109/TASSP.1981.1163711
 """
 
 from __future__ import annotations
@@ -230,8 +240,8 @@ def tile_grid(shape: tuple[int, int], tile: int = ABS_LAPLACIAN_TILE) -> tuple[i
 def smoothed_abs_laplacian(
     gaussian: list[np.ndarray], levels: int, need: dict[int, np.ndarray] | None = None
 ) -> dict[int, np.ndarray]:
-    """``|L_k|`` smoothed by a 3 x 3 mean on its own grid (notes 3.7), ``k = 1..levels``, in
-    one fused pass per level: ``|G_{k-1} - expand(G_k)|`` then the mean.
+    """``|L_k|`` smoothed by a 3 x 3 mean on its own grid (docs/METHOD.md, 5.7),
+    ``k = 1..levels``, in one fused pass per level: ``|G_{k-1} - expand(G_k)|`` then the mean.
 
     ``need[k]`` (bool, :func:`tile_grid` of level k's grid) limits level k to the tiles that
     are read (the enhancer's skipping); the others are left 0. A tile's values are the same
@@ -281,7 +291,8 @@ def blocks_reaching(radius_px: int | np.ndarray, block: int) -> int | np.ndarray
 
 
 def laplacian_levels(gaussian: list[np.ndarray], levels: int) -> dict[int, np.ndarray]:
-    """Laplacian bands ``{k: G_{k-1} - expand(G_k)}`` for ``k = 1..levels`` (notes section 1)."""
+    """Laplacian bands ``{k: G_{k-1} - expand(G_k)}`` for ``k = 1..levels``
+    (docs/METHOD.md, 3.2)."""
     out = {}
     for k in range(1, min(levels, len(gaussian) - 1) + 1):
         fine = gaussian[k - 1]
@@ -414,7 +425,7 @@ def sample_nearest(grid: np.ndarray, x_px: np.ndarray, y_px: np.ndarray, block: 
 
 
 #: Keys (1981) cubic-convolution parameter: a = -0.5 is MATLAB's imresize 'bicubic', with which
-#: the release brings the level-3 gradients to full size (notes section 3.5).
+#: the release brings the level-3 gradients to full size (docs/METHOD.md, 5.5).
 KEYS_A = -0.5
 
 
@@ -452,7 +463,7 @@ def _sample_cubic(grid, u, v):  # pragma: no cover - compiled
 
 def sample_cubic(grid: np.ndarray, x_px: np.ndarray, y_px: np.ndarray, level: int) -> np.ndarray:
     """Bicubic sample (Keys cubic convolution, a = -0.5, borders held) of a level-``level``
-    grid at full-resolution coordinates: MATLAB's imresize 'bicubic' kernel (notes 3.5),
+    grid at full-resolution coordinates: MATLAB's imresize 'bicubic' kernel (docs/METHOD.md, 5.5),
     evaluated only at the points asked for. Returns float64 of the points' shape."""
     s = float(level_scale(level))
     x = np.asarray(x_px, dtype=np.float64)

@@ -39,7 +39,15 @@ def shipped_stimuli() -> Path:
 
 def find_protocol(name_or_path: str | Path) -> Path:
     """A protocol file: ``name_or_path`` itself when it is a file, else ``NAME.yaml`` in
-    ``./protocols`` or among the shipped protocols (``fovexp run validation``)."""
+    ``./protocols`` or among the shipped protocols (``fovexp run validation``).
+
+    >>> from fovexp import find_protocol
+    >>> find_protocol("calibration-sk").name
+    'calibration-sk.yaml'
+    >>> find_protocol("no-such-protocol")
+    Traceback (most recent call last):
+    fovexp.errors.FovexpError: ...
+    """
     path = Path(name_or_path)
     if path.is_file():
         return path

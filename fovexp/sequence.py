@@ -1,9 +1,17 @@
 """Frame sequences: a folder of frames or a video, enhanced with the same impulses throughout.
 
 The paper keeps the impulse positions fixed over a sequence (section 4.4) and measures temporal
-coherence as the mean SSIM between consecutive frames (section 7.2); both are done here. Frames
+coherence as the mean SSIM between consecutive frames (section 6.2); both are done here. Frames
 are streamed: one input and one output frame are held at a time, whatever the length. Frames of
 a folder keep their alpha channel and bit depth; videos are 8-bit colour.
+
+References
+----------
+.. [tariq] Tariq, T., Tursun, C., Didyk, P. (2022). Noise-based Enhancement for Foveated
+   Rendering. ACM Transactions on Graphics 41(4) (SIGGRAPH 2022). doi:10.1145/3528223.3530101
+.. [ssim] Wang, Z., Bovik, A. C., Sheikh, H. R., Simoncelli, E. P. (2004). Image Quality
+   Assessment: From Error Visibility to Structural Similarity. IEEE Transactions on Image
+   Processing 13(4), 600-612. doi:10.1109/TIP.2003.819861
 """
 
 from __future__ import annotations
@@ -109,7 +117,7 @@ def _colour(frame: np.ndarray) -> np.ndarray:
 
 
 class InterframeSSIM:
-    """Running mean SSIM between consecutive frames (paper section 7.2), on grey."""
+    """Running mean SSIM between consecutive frames (paper section 6.2), on grey."""
 
     def __init__(self) -> None:
         self._prev: np.ndarray | None = None

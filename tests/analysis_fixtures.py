@@ -1,7 +1,7 @@
 """Synthetic trial logs in the exact docs/LOGS.md format, from known ground truth.
 
 Simulated participants answer ground truth + a per-participant offset + per-trial noise, clipped to
-the experiment's wheel range (paper section 6.2). Used by the analysis tests; nothing here touches
+the experiment's wheel range (paper section 5.2). Used by the analysis tests; nothing here touches
 results/.
 """
 
@@ -19,7 +19,7 @@ from fovexp.results.format import format_value
 from fovexp.results.loading import COLUMNS, EXPERIMENT_PARAMETER
 
 BLUR_RATES = (0.11, 0.34, 0.57)
-SK_SF_LEVELS = (1.0, 1.9, 3.61, 6.81)  # paper section 6.2
+SK_SF_LEVELS = (1.0, 1.9, 3.61, 6.81)  # paper section 5.2
 IMAGES = tuple(f"cal{i}" for i in range(5))
 SCENES = tuple(f"scene{i:02d}" for i in range(10))
 SHA = "a" * 64

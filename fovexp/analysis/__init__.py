@@ -1,4 +1,4 @@
-"""fovexp analysis: trial logs -> the paper's results (sections 6.3, 7.1 and 7.3).
+"""fovexp analysis: trial logs -> the paper's results (sections 5.3, 6.1 and 6.3).
 
 ``fovexp analyze results/ --out report/`` (or ``python -m fovexp.analysis``) runs
 :func:`fovexp.analysis.report.run_analysis`. Reading the logs and the calibration reductions

@@ -1,6 +1,6 @@
 """Gaze-to-flip latency and the blanking rule, per session, from the frame logs (docs/LOGS.md).
 
-Paper section 6.1 hides the stimulus "whenever participants' gaze position moved outside a
+Paper section 5.1 hides the stimulus "whenever participants' gaze position moved outside a
 small circular region with radius 1.25 deg"; how late a frame can react to the gaze is the
 time from the newest gaze sample its decision used to its flip. Every frame log names both on
 the tracker's clock (:mod:`fovexp.results.frames`), so each session included in the analysis
@@ -25,7 +25,7 @@ from fovexp.results.frames import (
 )
 from fovexp.results.loading import Dataset
 
-#: Paper section 6.1: the blanking radius, and the runner's default gaze timeout (s), used
+#: Paper section 5.1: the blanking radius, and the runner's default gaze timeout (s), used
 #: where a session file does not give the protocol's.
 DEFAULT_RADIUS_DEG = 1.25
 DEFAULT_GAZE_TIMEOUT_S = 0.05

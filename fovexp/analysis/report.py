@@ -200,7 +200,7 @@ def _latency_section(ana: Analysis, tables: Path, fig_dir: Path, figures: bool) 
     table, lat, notes = session_latency(ana.data)
     table.to_csv(tables / "latency.csv", index=False, float_format="%.6g")
     ana.files.append(tables / "latency.csv")
-    parts = ["## Gaze-to-flip latency and blanking (section 6.1)\n",
+    parts = ["## Gaze-to-flip latency and blanking (section 5.1)\n",
              "Per session, from its frame log: the time from the newest gaze sample a frame's "
              "blanking decision used to the frame's flip, on the tracker's clock (median, 95th "
              "percentile, maximum), the dropped frames, and the frames drawn with the stimulus "

@@ -1,5 +1,5 @@
-"""The paired t-test of the validation (paper section 7.1) and the sampling-rate ratio of
-section 7.3. The tests go through :mod:`scipy.stats`; the hand formulas are in the docstrings
+"""The paired t-test of the validation (paper section 6.1) and the sampling-rate ratio of
+section 6.3. The tests go through :mod:`scipy.stats`; the hand formulas are in the docstrings
 and checked against scipy in the tests.
 """
 
@@ -41,7 +41,7 @@ class PairedTTest:
 
 def paired_ttest(a: Sequence[float] | np.ndarray, b: Sequence[float] | np.ndarray,
                  confidence: float = 0.95) -> PairedTTest:
-    """Paired t-test of ``a`` vs ``b`` (paper section 7.1: ours vs contrast, "t-test").
+    """Paired t-test of ``a`` vs ``b`` (paper section 6.1: ours vs contrast, "t-test").
 
     Uses :func:`scipy.stats.ttest_rel`; needs at least two pairs, else the statistics are NaN.
     """
@@ -74,7 +74,7 @@ def paired_ttest(a: Sequence[float] | np.ndarray, b: Sequence[float] | np.ndarra
 
 
 def sampling_rate_ratio(blur_rate_new: float, blur_rate_base: float) -> float:
-    """SR_new / SR_base = blur_rate_base / blur_rate_new (paper section 7.3, eq. SR).
+    """SR_new / SR_base = blur_rate_base / blur_rate_new (paper section 6.3, eqs. 10-11).
 
     With SR(x) = 1 / (4 sigma(x)) and sigma proportional to the blur-rate past the fovea, the
     net sampling rate scales with 1 / blur-rate. The reduction is ``1 - ratio``.

@@ -1,4 +1,4 @@
-"""Table 2 (paper section 6.3) written out: CSV, Markdown, LaTeX in the paper's layout, and the
+"""Table 2 (paper section 5.3) written out: CSV, Markdown, LaTeX in the paper's layout, and the
 ParameterTable YAML the enhancer reads."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Validation experiment results (paper section 7.1, Figure "validation"; section 7.3, eq. SR).
+"""Validation experiment results (paper section 6.1, Figure "validation"; section 6.3, eq. 10).
 
 Participants chose, per scene and method, the highest blur-rate at which foveation was not
 visible. Reported here:
@@ -10,7 +10,7 @@ visible. Reported here:
   as a check that does not treat a participant's scenes as independent, the same test on each
   participant's mean over scenes;
 * the estimated sampling-rate reduction of ours over contrast, 1 - SR_ours / SR_contrast with
-  SR_ours / SR_contrast = blur_rate_contrast / blur_rate_ours (section 7.3), from the mean
+  SR_ours / SR_contrast = blur_rate_contrast / blur_rate_ours (section 6.3), from the mean
   blur-rates per scene and overall.
 """
 
@@ -31,7 +31,7 @@ TEST_COLUMNS = ["scope", "n", "mean_ours", "mean_contrast", "mean_diff", "sd_dif
 
 @dataclass
 class ValidationResult:
-    """Section 7.1 results of one validation experiment."""
+    """Section 6.1 results of one validation experiment."""
 
     experiment: str
     summary: pd.DataFrame  # image, method, mean, sem, n, n_trials
@@ -55,7 +55,7 @@ def _sampling_row(scope: str, contrast: float, ours: float) -> dict:
 
 
 def validate(trials: pd.DataFrame, experiment: str = "validation") -> ValidationResult:
-    """Section 7.1 statistics from the trials of one validation experiment."""
+    """Section 6.1 statistics from the trials of one validation experiment."""
     sel = trials[trials["adjusted_parameter"] == "blur_rate"]
     if sel.empty:
         raise FovexpError(f"{experiment}: no trials adjusting blur_rate")

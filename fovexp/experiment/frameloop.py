@@ -1,4 +1,4 @@
-"""The frame loop of one attempt at a trial (paper section 6.1, "Task"), without PsychoPy.
+"""The frame loop of one attempt at a trial (paper section 5.1, "Task"), without PsychoPy.
 
 The session runs every trial through :class:`TrialLoop`, and ``benchmarks/display_loop.py``
 drives the same class at 4K to measure it. Per frame, on the display thread, in this order:

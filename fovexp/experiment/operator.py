@@ -14,7 +14,7 @@ import numpy as np
 
 from fovexp import FovexpError
 
-#: The display settings a session relies on (paper section 6.1, "Hardware": an LG OLED55CX at
+#: The display settings a session relies on (paper section 5.1, "Hardware": an LG OLED55CX at
 #: 4K, 120 Hz, peak luminance 167.33 cd/m2); the operator confirms them at the start of each
 #: run, and the session file records it. docs/EXPERIMENT.md lists the same items.
 DISPLAY_CHECKLIST: tuple[str, ...] = (

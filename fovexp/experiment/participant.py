@@ -2,7 +2,7 @@
 
 The ground truth is configurable per parameter and per blur-rate (a :class:`fovexp.ParameterTable`
 for f_e, s_k and s_f, an optional s_k-versus-s_f slope for the amplitude experiment of paper
-section 6.2, and a blur-rate per method for the validation of section 7.1), with a noise sd per
+section 5.2, and a blur-rate per method for the validation of section 6.1), with a noise sd per
 parameter: each trial's personal target is the truth plus Gaussian noise, clipped to the range.
 The analysis' recovery test dry-runs such participants and checks that it recovers the truth.
 

@@ -1,7 +1,7 @@
 """Experiment protocols: YAML files validated before any window opens.
 
-A protocol describes one of the paper's adjustment experiments (section 6.2 "Experiment
-Procedure" for ``calibration-fe``, ``calibration-sk``, ``calibration-sf``; section 7.1 for
+A protocol describes one of the paper's adjustment experiments (section 5.2 "Experiment
+Procedure" for ``calibration-fe``, ``calibration-sk``, ``calibration-sf``; section 6.1 for
 ``validation``): which parameter the wheel adjusts, its range, steps and start value, the
 conditions (images x blur-rates x methods x s_f values) and their repetitions, the seeded
 randomised order, the display profile, and where the parameters that are not adjusted come from
@@ -134,7 +134,7 @@ class ParamSource(_Strict):
 
 
 class FixationSpec(_Strict):
-    #: gaze farther than this from the cross blanks the next frame (paper section 6.1: 1.25 deg)
+    #: gaze farther than this from the cross blanks the next frame (paper section 5.1: 1.25 deg)
     radius_deg: float = Field(default=BLANKING_RADIUS_DEG, gt=0, le=20)
     cross_size_deg: float = Field(default=0.6, gt=0, le=10)
     #: gaze older than this counts as lost (s)
@@ -163,7 +163,7 @@ class TrackerSpec(_Strict):
 class RenderSpec(_Strict):
     #: the frame budget of a wheel step: the longest a step's render may take (ms) before the
     #: runner warns at the start (it measures one on the chosen backend); the paper updated the
-    #: test half "in real-time" (section 6.1)
+    #: test half "in real-time" (section 5.1)
     max_step_ms: float = Field(default=DEFAULT_MAX_STEP_MS, gt=0, le=60_000)
 
 
@@ -190,7 +190,7 @@ class Protocol(_Strict):
     repetitions: int = Field(default=1, ge=1, le=100)
     seed: int = Field(ge=0, le=2**31 - 1)
     practice_trials: int = Field(default=2, ge=0, le=50)
-    #: methods of the practice trials (default: ``methods``). Paper section 7.1 practised on a
+    #: methods of the practice trials (default: ``methods``). Paper section 6.1 practised on a
     #: foveation method other than the evaluated ones, so as not to bias the participants.
     practice_methods: list[MethodName] | None = Field(default=None, min_length=1)
     break_every: int = Field(default=0, ge=0)
@@ -393,7 +393,7 @@ class LoadedProtocol:
         out[adj] = float(value)
         br = float(out["blur_rate"])  # type: ignore[arg-type]
         needs = METHOD_NEEDS[trial.method]
-        # s_f first: an s_k line needs it (section 6.2, "Bandwidth scaling").
+        # s_f first: an s_k line needs it (section 5.2, "Bandwidth scaling").
         for name in ("s_f", "f_e", "s_k"):
             if name == adj or name not in needs:
                 continue
@@ -594,7 +594,7 @@ def _snapshot(path: Path, deps: _Dependencies, name: str, src: ParamSource,
             table = _call(where + ".table", lambda f: parameter_table(
                 f, real_only=deps.real_only, include_pilots=deps.include_pilots), tpath)
         return {"kind": "table", "from": src.table, "table": table.model_dump()}
-    # values derived from an earlier experiment's results folder (section 6.2's chain)
+    # values derived from an earlier experiment's results folder (section 5.2's chain)
     derived = (
         ("fe_results", "fe_by_blur_rate",
          lambda fe: {"f_e": [[float(b), float(v)] for b, v in sorted(fe.items())]}),

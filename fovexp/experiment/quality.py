@@ -10,7 +10,7 @@ per target:
   direction into a 2-D offset; the offsets are averaged and the length of the mean is the
   accuracy: the offset of the mean gaze from the target. Averaged over targets; the central
   target (where the fixation cross is) is reported on its own, since the 1.25 deg window of
-  paper section 6.1 is what the experiment relies on.
+  paper section 5.1 is what the experiment relies on.
 - **precision**: RMS of the angles between successive gaze rays (RMS-S2S; pairs with an invalid
   sample left out), as Titta's Python version computes it (its MATLAB version differences the
   2-D offsets instead, the same to well under 0.001 deg at these angles); also the standard

@@ -1,7 +1,7 @@
 """The test half of the screen, rendered by the enhancer on a worker thread, display-ready.
 
 Per trial the processed half of the split screen (the reference's mirrored left half, paper
-section 6.1) is given to :meth:`fovexp.Enhancer.set_image` once, as the right half of the
+section 5.1) is given to :meth:`fovexp.Enhancer.set_image` once, as the right half of the
 full-screen frame (``viewport``), so the enhancer computes only that half while eccentricity is
 still measured from the screen centre; each wheel step then calls ``enhance`` with the new
 parameters, and the enhancer's stage cache redoes only what the changed parameter affects. The

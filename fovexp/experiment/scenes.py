@@ -1,8 +1,8 @@
 """The fifteen generated scenes: synthetic stand-ins for the paper's rendered frames, drawn at
 any resolution, byte for byte the same on every machine.
 
-Paper section 6.1 ("Stimuli") chose 4K frames "such that they include both dark and bright
-scenes with high-contrast and high-spatial-frequency details"; section 7.1 chose the validation
+Paper section 5.1 ("Stimuli") chose 4K frames "such that they include both dark and bright
+scenes with high-contrast and high-spatial-frequency details"; section 6.1 chose the validation
 scenes for "diversity in illumination, contrast and spatial frequencies". Each scene here is a
 street: a sky (flat, or a night sky with single-pixel stars), 1 px wires, buildings with flat
 walls and sharp-edged windows or 1 px siding, a ground plane in perspective (bricks,

@@ -1,5 +1,5 @@
 """Stimuli: the generated scenes, a lab's own frames, the folder they are kept in, and the checks
-that a session shows exactly the pixels it was meant to (paper section 6.1, "Stimuli").
+that a session shows exactly the pixels it was meant to (paper section 5.1, "Stimuli").
 
 Protocols name images by id. Two kinds of id:
 
@@ -583,7 +583,7 @@ def resize_area(img: np.ndarray, size: Size) -> np.ndarray:
 
 
 def split_screen(reference: np.ndarray) -> np.ndarray:
-    """The frame the enhancer processes (paper section 6.1, "Task"): the reference's left half on
+    """The frame the enhancer processes (paper section 5.1, "Task"): the reference's left half on
     the left and its mirror image on the right, meeting at the screen centre where the fixation
     cross is. Width must be even so the seam is exactly at the centre."""
     h, w = reference.shape[:2]

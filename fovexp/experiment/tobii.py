@@ -1,4 +1,4 @@
-"""Tobii Pro eye trackers through tobii-research (paper section 6.1: Tobii Pro Spectrum, 600 Hz).
+"""Tobii Pro eye trackers through tobii-research (paper section 5.1: Tobii Pro Spectrum, 600 Hz).
 
 The gaze callback runs on the SDK's thread and only appends the SDK's sample dictionary to a
 :class:`~fovexp.experiment.gaze.SampleBuffer`; conversion, the blanking decision and disk writes

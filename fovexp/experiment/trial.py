@@ -1,7 +1,7 @@
 """One adjustment trial, without a window: value stepping, input events, frame timing, blanking
 episodes, and the trial's result row.
 
-Paper section 6.1 ("Task"): the participant changes one parameter with the mouse wheel, the test
+Paper section 5.1 ("Task"): the participant changes one parameter with the mouse wheel, the test
 half updates in real time, Enter confirms. Here each wheel notch moves the value by the
 protocol's coarse step, or by the fine step while the modifier (Shift) is held; values are clamped
 to the protocol's range.

@@ -1,6 +1,6 @@
 """The PsychoPy window: the only module that imports psychopy (lazily, when a session opens).
 
-It draws the split screen of paper section 6.1 (reference half left, processed mirror right,
+It draws the split screen of paper section 5.1 (reference half left, processed mirror right,
 fixation cross on the seam), black frames when the gaze check says so (the cross stays, so the
 participant can find it again), text screens and the calibration screens (the views of
 ``fovexp.experiment.calibration``: head-position box, animated targets, per-point results), and

@@ -2,9 +2,9 @@
 
 ``format``: the log formats (columns, types, the participant-ID rule, the ``trials.csv`` reader
 that drops a torn last row; docs/LOGS.md). ``loading``: every results folder read with the
-stated exclusion rules (docs/ANALYSIS.md). ``calibration``: the reductions of paper section 6.3
+stated exclusion rules (docs/ANALYSIS.md). ``calibration``: the reductions of paper section 5.3
 (mean f_e per blur-rate, the s_k-against-s_f lines, Table 2). ``derive``: what a calibration
-experiment hands to the next one (section 6.2). The runner (``fovexp.experiment``) and the
+experiment hands to the next one (section 5.2). The runner (``fovexp.experiment``) and the
 analysis (``fovexp.analysis``) both import from here; neither imports the other.
 """
 

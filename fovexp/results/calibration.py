@@ -1,6 +1,6 @@
-"""Calibration results (paper section 6.3, Figure "calibration_results", Table 2).
+"""Calibration results (paper section 5.3, Figure "calibration_results", Table 2).
 
-Three experiments, each adjusting one parameter per foveation level (blur-rate, section 6.2):
+Three experiments, each adjusting one parameter per foveation level (blur-rate, section 5.2):
 
 * ``calibration-fe``: f_e alone -> mean f_e per blur-rate;
 * ``calibration-sk``: s_k at fixed s_f (1, 1.9, 3.61, 6.81) -> mean s_k per (blur-rate, s_f) and
@@ -61,12 +61,12 @@ def summarize(trials: pd.DataFrame, by: list[str], value: str = "final_value") -
 
 
 def fe_summary(trials: pd.DataFrame) -> pd.DataFrame:
-    """Per blur-rate mean +- SEM of the adjusted f_e (section 6.2, "Contrast enhancement")."""
+    """Per blur-rate mean +- SEM of the adjusted f_e (section 5.2, "Contrast enhancement")."""
     return summarize(_require(trials, "f_e", "calibration-fe"), ["blur_rate"])
 
 
 def sk_summary(trials: pd.DataFrame) -> pd.DataFrame:
-    """Per (blur-rate, s_f) mean +- SEM of the adjusted s_k (section 6.2, "Amplitude scaling")."""
+    """Per (blur-rate, s_f) mean +- SEM of the adjusted s_k (section 5.2, "Amplitude scaling")."""
     sel = _require(trials, "s_k", "calibration-sk")
     bad = sel[sel["s_f"].isna()]
     if len(bad):
@@ -105,7 +105,7 @@ def participant_sk_lines(trials: pd.DataFrame) -> dict[float, list[Line]]:
 
 def sf_summary(trials: pd.DataFrame, lines: dict[float, Line],
                participant_lines: dict[float, list[Line]] | None = None) -> pd.DataFrame:
-    """Final s_f per blur-rate (mean +- SEM) and its s_k from the s_k line (section 6.2,
+    """Final s_f per blur-rate (mean +- SEM) and its s_k from the s_k line (section 5.2,
     "Bandwidth scaling").
 
     The s_k SEM combines the two experiments' uncertainties: sqrt((slope * SEM(s_f))^2 +
@@ -134,7 +134,7 @@ def sf_summary(trials: pd.DataFrame, lines: dict[float, Line],
 
 @dataclass
 class Calibration:
-    """Everything of section 6.3: the three panels' data and Table 2."""
+    """Everything of section 5.3: the three panels' data and Table 2."""
 
     fe: pd.DataFrame
     sk: pd.DataFrame
@@ -155,7 +155,7 @@ class Calibration:
 
 def calibrate(fe_trials: pd.DataFrame, sk_trials: pd.DataFrame,
               sf_trials: pd.DataFrame) -> Calibration:
-    """Table 2 (section 6.3) from the trials of the three calibration experiments.
+    """Table 2 (section 5.3) from the trials of the three calibration experiments.
 
     The table's blur-rates are those of calibration-sf; f_e and the s_k line must exist at each.
     """

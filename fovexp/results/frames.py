@@ -3,7 +3,7 @@ showed and what drove it.
 
 Each frame names the newest gaze sample its blanking decision used (``gaze_system_time_us``,
 ``gaze_ecc_deg``) and its flip (``flip_system_time_us``), both on the tracker's system clock:
-their difference is the frame's gaze-to-flip latency, and the blanking rule of paper section 6.1
+their difference is the frame's gaze-to-flip latency, and the blanking rule of paper section 5.1
 ("stimuli are hidden by rendering a black frame whenever participants' gaze position moved
 outside a small circular region with radius 1.25 deg") can be checked from the log alone.
 Logs written before these columns existed read with them empty.

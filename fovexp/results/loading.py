@@ -1,4 +1,4 @@
-"""Load and validate the runner's trial logs (docs/LOGS.md) for paper sections 6.3 and 7.1.
+"""Load and validate the runner's trial logs (docs/LOGS.md) for paper sections 5.3 and 6.1.
 
 Every row that does not reach the statistics is accounted for: it is either an error
 (:class:`~fovexp.FovexpError` naming the file, line and problem) or an :class:`Exclusion`

@@ -1,5 +1,5 @@
 """Mean with its standard error, and the least-squares line: what the calibration chain needs
-(paper section 6.2). Both go through :mod:`scipy.stats`.
+(paper section 5.2). Both go through :mod:`scipy.stats`.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from fovexp import FovexpError
 def mean_sem(values: Sequence[float] | np.ndarray) -> tuple[float, float, int]:
     """(mean, standard error of the mean, n); SEM = sd(ddof=1) / sqrt(n), NaN for n < 2.
 
-    The error bars of the paper's calibration and validation plots are SEMs (section 6.2).
+    The error bars of the paper's calibration and validation plots are SEMs (section 5.2).
     """
     x = np.asarray(values, dtype=float)
     x = x[np.isfinite(x)]
@@ -31,7 +31,7 @@ def mean_sem(values: Sequence[float] | np.ndarray) -> tuple[float, float, int]:
 
 @dataclass(frozen=True)
 class Line:
-    """Least-squares line y = slope * x + intercept (paper section 6.2: s_k against s_f)."""
+    """Least-squares line y = slope * x + intercept (paper section 5.2: s_k against s_f)."""
 
     slope: float
     intercept: float

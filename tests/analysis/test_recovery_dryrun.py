@@ -1,7 +1,7 @@
 """Recovery through the real runner: dry-run sessions of simulated participants with a known
-ground truth, chained calibration-fe -> calibration-sk -> calibration-sf (paper section 6.2) and
-analysed with ``fovexp analyze``, give back that truth's Table 2 (section 6.3); a validation dry
-run with a known ours-vs-contrast difference gives the t-test of section 7.1.
+ground truth, chained calibration-fe -> calibration-sk -> calibration-sf (paper section 5.2) and
+analysed with ``fovexp analyze``, give back that truth's Table 2 (section 5.3); a validation dry
+run with a known ours-vs-contrast difference gives the t-test of section 6.1.
 
 Unlike tests/test_analysis_calibration.py (trial logs written directly), every trial here is run
 by ``fovexp run --dry-run`` (PsychoPy window under Xvfb, simulated gaze, simulated participant
@@ -163,7 +163,7 @@ def test_recovered_sk_lines(calibration: Path) -> None:
 
 def test_chain_used_earlier_results(calibration: Path) -> None:
     """The runner set calibration-sk's f_e and calibration-sf's s_k from the earlier dry runs'
-    results, with the same numbers the analysis reports (the contract of section 6.2)."""
+    results, with the same numbers the analysis reports (the contract of section 5.2)."""
     report = calibration / "report" / "tables"
     fe = {float(r["blur_rate"]): float(r["mean"]) for r in _csv(report / "calibration-fe.csv")}
     lines = {float(r["blur_rate"]): (float(r["slope"]), float(r["intercept"]))
@@ -180,7 +180,7 @@ def test_chain_used_earlier_results(calibration: Path) -> None:
 
 
 def test_validation_ttest(tmp_path_factory, xvfb_display) -> None:  # noqa: F811
-    """Validation (section 7.1): simulated participants whose highest invisible blur-rate is 0.30
+    """Validation (section 6.1): simulated participants whose highest invisible blur-rate is 0.30
     with contrast and 0.45 with ours (sd 0.04 per trial). 3 participants x 4 scenes = 12 pairs:
     the expected SE of a method's mean is 0.012 and of the mean difference 0.016; tolerances 0.045
     (means) and 0.06 (difference), about 3.7 SE. The paired t-test must find ours > contrast

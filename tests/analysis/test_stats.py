@@ -1,4 +1,4 @@
-"""Statistics of the analysis against hand computation and scipy (paper sections 6.3, 7.1, 7.3)."""
+"""Statistics of the analysis against hand computation and scipy (paper sections 5.3, 6.1, 6.3)."""
 
 from __future__ import annotations
 
@@ -87,7 +87,7 @@ def test_linear_fit_by_hand() -> None:
 
 
 def test_sampling_rate_ratio() -> None:
-    # section 7.3: SR_2 / SR_1 = blur_rate_1 / blur_rate_2
+    # section 6.3: SR_2 / SR_1 = blur_rate_1 / blur_rate_2
     assert sampling_rate_ratio(0.5, 0.4) == pytest.approx(0.8)
     assert 1 - sampling_rate_ratio(0.5, 0.4) == pytest.approx(0.2)
     assert math.isnan(sampling_rate_ratio(0.0, 0.4))

@@ -1,4 +1,4 @@
-"""Validation analysis (paper section 7.1) and the sampling-rate estimate (section 7.3) on a
+"""Validation analysis (paper section 6.1) and the sampling-rate estimate (section 6.3) on a
 hand-computed data set, checked against scipy on the same numbers."""
 
 from __future__ import annotations
@@ -65,7 +65,7 @@ def test_paired_tests_by_hand_and_scipy() -> None:
 def test_sampling_rate_reduction_by_hand() -> None:
     res = validate(frame())
     s = res.sampling.set_index("scope")
-    # section 7.3: SR_ours / SR_contrast = blur_rate_contrast / blur_rate_ours
+    # section 6.3: SR_ours / SR_contrast = blur_rate_contrast / blur_rate_ours
     assert s.loc["s1", "sr_ratio"] == pytest.approx(0.30 / 0.38)
     assert s.loc["s1", "reduction_pct"] == pytest.approx(100 * (1 - 0.30 / 0.38))
     assert s.loc["all scenes", "sr_ratio"] == pytest.approx(2.12 / 2.56)

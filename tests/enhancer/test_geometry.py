@@ -1,4 +1,4 @@
-"""Viewing geometry against the hand checks of ALGORITHM-NOTES section 2."""
+"""Viewing geometry against the hand checks of docs/METHOD.md, section 4."""
 
 import math
 

@@ -96,8 +96,8 @@ def _std_over_k(n: int, **kw) -> float:
 ])
 @pytest.mark.parametrize("n", [12, 64])
 def test_faster_noise_variants_keep_the_noise_std_at_k_over_6(kw, n):
-    """notes 3.9: std / K = 1/6 whatever the impulses; the variants keep the density (and the
-    normalisation follows E[w^2]), so they keep it too."""
+    """docs/METHOD.md, 5.9: std / K = 1/6 whatever the impulses; the variants keep the density
+    (and the normalisation follows E[w^2]), so they keep it too."""
     assert _std_over_k(n, **kw) == pytest.approx(1 / 6, rel=0.04)
 
 

@@ -1,6 +1,6 @@
-"""Dry runs of the four shipped protocols under Xvfb, chained as in the paper (section 6.2:
+"""Dry runs of the four shipped protocols under Xvfb, chained as in the paper (section 5.2:
 calibration-sk takes f_e from calibration-fe's results, calibration-sf takes the s_f -> s_k line
-from calibration-sk's; section 7.1: validation), checking the logs' content."""
+from calibration-sk's; section 6.1: validation), checking the logs' content."""
 
 from __future__ import annotations
 
@@ -182,7 +182,7 @@ def test_dry_run_calibration_sf(ws: Path) -> None:
     for r in rows:
         assert r["adjusted_parameter"] == "s_f" and r["s_f"] == r["final_value"]
         slope, icpt = lines[r["blur_rate"]]
-        # s_k follows the s_f -> s_k line of calibration-sk (section 6.2, bandwidth scaling).
+        # s_k follows the s_f -> s_k line of calibration-sk (section 5.2, bandwidth scaling).
         assert r["s_k"] == pytest.approx(min(max(slope * r["s_f"] + icpt, 0.0), 200.0))
 
 
@@ -192,7 +192,7 @@ def test_dry_run_validation(ws: Path, tmp_path: Path) -> None:
     folder = dry(ws, "validation", "S01", "--practice", "1", "--limit-trials", "4",
                  "--sim-truth", str(truth), "--sim-noise-scale", "0")
     rows = check_common(folder, 5, 1)
-    # practice on plain foveation, a method not under test (paper section 7.1)
+    # practice on plain foveation, a method not under test (paper section 6.1)
     assert rows[0]["practice"] and rows[0]["method"] == "foveated" and rows[0]["f_e"] is None
     for r in rows[1:]:
         assert r["adjusted_parameter"] == "blur_rate" and r["start_value"] == 0.0

@@ -153,7 +153,7 @@ def test_blanked_fraction_counts_how_long_a_black_frame_stayed() -> None:
 # -- blanking decision -----------------------------------------------------------------------
 
 def test_blanking_switches_exactly_at_radius(fix: FixationGeometry) -> None:
-    """Paper section 6.1: gaze farther than 1.25 deg from the cross -> black; back -> shown."""
+    """Paper section 5.1: gaze farther than 1.25 deg from the cross -> black; back -> shown."""
     mon = BlankingMonitor(fix, 1.25, timeout_s=0.05)
     eccs = [0.0, 0.5, 1.0, 1.2, 1.249, 1.2499, 1.2501, 1.251, 1.5, 3.0, 1.2501, 1.2499, 0.3]
     for angle in (0.0, math.pi / 2, 2.3, -0.7):

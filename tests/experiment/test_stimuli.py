@@ -174,7 +174,7 @@ def test_4k_scenes_have_pixel_level_detail(scenes_4k: dict[int, np.ndarray]) -> 
 
 
 def test_dark_and_bright_scenes() -> None:
-    """Paper section 6.1: dark and bright scenes; in both sets (calibration, validation)."""
+    """Paper section 5.1: dark and bright scenes; in both sets (calibration, validation)."""
     means = {s.index: _luma(scenes.render_scene(s.index, 480, 270)).mean() for s in scenes.SCENES}
     dark = {i for i, s in enumerate(scenes.SCENES) if s.dark}
     assert dark & set(range(5)) and dark & set(range(5, 15))

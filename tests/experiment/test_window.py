@@ -83,7 +83,7 @@ def point_at(fix: FixationGeometry, ecc: float) -> tuple[float, float]:
 
 
 def test_black_frame_exactly_when_gaze_crosses_radius(screen) -> None:
-    """Paper section 6.1: the next frame after gaze leaves the 1.25 deg window is black; the
+    """Paper section 5.1: the next frame after gaze leaves the 1.25 deg window is black; the
     stimulus is back on the first frame after it returns."""
     fix = FixationGeometry(load_display("lg-oled55cx"))
     eccs = [0.2, 1.0, 1.24, 1.249, 1.2501, 1.26, 2.0, 5.0, 1.251, 1.2499, 0.5, None, 0.5,

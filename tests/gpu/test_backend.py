@@ -429,10 +429,21 @@ def test_a_context_the_caller_holds_current_stays_current(ctx, frame):
     back the EGL context that was current (here the fixture's, entered by the caller), for an
     enhancer in that context and for one in its own."""
     from fovexp.gpu import GpuEnhancer
+    from fovexp.gpu.programs import _libegl
 
+    egl = _libegl()
     p = EnhanceParams(blur_rate=0.57, impulses=12)
     with GpuEnhancer(LG) as own, GpuEnhancer(LG, ctx=ctx) as same, ctx:
+        # the fixture's context, entered above, as libEGL sees it (None where this process's
+        # libEGL does not see moderngl's, as after PsychoPy's GLX windows in the whole suite:
+        # then only the buffer below checks it)
+        caller = egl.eglGetCurrentContext() if egl is not None else None
         for enh in (own, same):
             enh.set_image(frame)
-            enh.enhance((0.5, 0.5), p).map("noise")
-            ctx.buffer(reserve=16).release()  # "cannot create buffer" with no context current
+            noise = enh.enhance((0.5, 0.5), p).map("noise")
+            assert np.abs(noise).max() > 0  # the calls did run
+            if caller:
+                assert egl.eglGetCurrentContext() == caller
+            buf = ctx.buffer(reserve=16)  # raises "cannot create buffer" with none current
+            assert buf.size == 16
+            buf.release()

@@ -1,4 +1,4 @@
-"""Calibration analysis (paper section 6.3): hand cases, Table 2 formats, the runner's contract
+"""Calibration analysis (paper section 5.3): hand cases, Table 2 formats, the runner's contract
 (analysis/derive.py) and the recovery of known ground truth from simulated participants.
 
 Recovery tolerance (docs/ANALYSIS.md): with 12 simulated participants x 2 repetitions, every

@@ -1,5 +1,5 @@
 // Acuity limits: fovexp/acuity.py (paper section 4.1; Thibos et al. 1996, extended as the
-// release does, notes section 3.6). The tables come from the Python module (header).
+// release does, docs/METHOD.md, 5.6). The tables come from the Python module (header).
 
 // numpy.interp on the Thibos table: linear, held constant past both ends
 float thibos_interp(float ecc_deg, float table[THIBOS_N]) {

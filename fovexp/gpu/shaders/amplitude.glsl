@@ -1,5 +1,5 @@
-// Noise amplitude and the clipping control: fovexp/amplitude.py (paper section 4.2, eqs. 6-8
-// as corrected in notes section 1; the release's smoothing and gain, notes 3.7).
+// Noise amplitude and the clipping control: fovexp/amplitude.py (paper section 4.2, eqs. 7-9
+// as corrected in docs/METHOD.md, 3.1-3.2; the release's smoothing and gain, docs/METHOD.md, 5.7).
 
 #include "pyramids.glsl"
 
@@ -12,7 +12,7 @@ uniform int headroom_block;
 layout(std430, binding = B_ABSLAP) readonly buffer AbsLap { float abs_lap[]; };
 layout(std430, binding = B_HEADROOM) readonly buffer Headroom { float headroom[]; };  // lo, hi
 
-// amplitude.laplacian_level (eq. 7): the continuous level whose centre 2^-(l + 0.5) the blur
+// amplitude.laplacian_level (eq. 8): the continuous level whose centre 2^-(l + 0.5) the blur
 // attenuates to `attenuation`, at least 1; sigma 0 gives level 1
 float laplacian_level(float sigma_px) {
     if (!(sigma_px > 0.0)) return 1.0;
@@ -30,7 +30,7 @@ float abs_laplacian_sample(int k, vec2 p_px) {
 }
 
 // amplitude.laplacian_amplitude_at: |L| at a continuous level, linear between the two
-// bracketing levels (the level index is log2 of frequency: the log domain of eq. 8)
+// bracketing levels (the level index is log2 of frequency: the log domain of eq. 9)
 float laplacian_amplitude_at(float level, vec2 p_px) {
     level = min(level, float(lap_top));
     int k0 = lap_top > 1 ? min(int(floor(level)), lap_top - 1) : 1;
@@ -48,7 +48,7 @@ float headroom_limit_at(vec2 p_px) {
     return max(2.0 * min(1.0 - headroom[n + i], headroom[i]), 0.0);
 }
 
-// eq. 8 with the release's gain, then the clipping control
+// eq. 9 with the release's gain, then the clipping control
 float amplitude_k(float s_k, float laplacian_amplitude, float limit) {
     return min(s_k * RELEASE_AMPLITUDE_GAIN * laplacian_amplitude, limit);
 }

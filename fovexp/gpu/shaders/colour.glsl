@@ -1,4 +1,4 @@
-// Colour: fovexp/colour.py (paper section 4.5; notes 3.1, 3.4). Linearise with the display's
+// Colour: fovexp/colour.py (paper section 4.5; docs/METHOD.md, 5.1, 5.4). Linearise with the display's
 // power law, luminance by the BT.601 weights, and the displayed frame: the grey contrast change
 // and noise added to every channel of the linear foveated image, clipped, encoded.
 

@@ -1,5 +1,5 @@
 // Contrast enhancement: fovexp/contrast.py (Patney et al. 2016 as the release applies it,
-// notes 3.3). Per integer blur level k a box mean of width box_width_px(k) (MATLAB
+// docs/METHOD.md, 5.3). Per integer blur level k a box mean of width box_width_px(k) (MATLAB
 // anchoring); the change out_k - in = (1 - f_e (1 + k)) (avg_k - in), and each pixel
 // interpolates between the two levels that bracket its sigma. Box sums from an exact integer
 // summed-area table of the luminance in fixed point (contrast.SAT_FRACTION_BITS; 64-bit

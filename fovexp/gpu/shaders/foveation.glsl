@@ -1,4 +1,4 @@
-// Foveation: fovexp/foveation.py. The sigma map (paper section 6.2) and the fast blur stack:
+// Foveation: fovexp/foveation.py. The sigma map (paper section 5.2) and the fast blur stack:
 // Gaussian blurs at fixed sigmas, each on the pyramid level its plan names (the plan is
 // foveation.blur_stack_plan, computed once in Python for both backends), and per pixel the
 // linear interpolation between the two stack levels that bracket its sigma, as the pixel's

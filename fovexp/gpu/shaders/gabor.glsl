@@ -1,4 +1,4 @@
-// Sparse Gabor noise: fovexp/gabor.py (Lagae et al. 2009; paper section 4.4; notes 2, 3.9).
+// Sparse Gabor noise: fovexp/gabor.py (Lagae et al. 2009; paper section 4.4; docs/METHOD.md, 4, 5.9).
 // n(x) = sum_i A_i exp(-pi a^2 |d|^2) cos(k_i . d), d = x - x_i, over the impulses whose
 // kernel square |d_x|, |d_y| <= r reaches x; A_i = w_i K_i / (6 sqrt(V)) and the carrier
 // wave vector k_i = 2 pi F_i (cos t_i, sin t_i) come from the per-impulse stage. Each pixel

@@ -1,4 +1,4 @@
-// Viewing geometry: fovexp/geometry.py (ViewingGeometry; notes section 2).
+// Viewing geometry: fovexp/geometry.py (ViewingGeometry; docs/METHOD.md, 4).
 // Pixel centres at integer (x, y), x right, y down. The image covers the part of a
 // geom_screen_px frame that starts at geom_origin_px; gaze_px is in the image's pixels.
 
@@ -16,8 +16,8 @@ vec2 screen_cm(vec2 p_px) {
 }
 
 // ViewingGeometry.eccentricity_deg: the angle between the eye's rays to p and to the gaze
-// (exact), on-screen px over a constant px/deg (linear, paper section 6.1), or atan(R / D)
-// (release, notes section 3)
+// (exact), on-screen px over a constant px/deg (linear, paper section 5.1), or atan(R / D)
+// (release, docs/METHOD.md, 5)
 float eccentricity_deg(vec2 p_px) {
     if (geom_model == GEOM_LINEAR) return length(p_px - gaze_px) / geom_ppd_constant;
     if (geom_model == GEOM_RELEASE)

@@ -1,4 +1,4 @@
-// Noise orientation: fovexp/orientation.py (paper section 4.3; notes section 3.5). Sobel
+// Noise orientation: fovexp/orientation.py (paper section 4.3; docs/METHOD.md, 5.5). Sobel
 // gradients on Gaussian level ORIENTATION_LEVEL, brought to full-resolution points by Keys
 // cubic convolution (a = KEYS_A: MATLAB's imresize 'bicubic'); omega = atan2(G_y, G_x) - pi/2.
 

@@ -1,4 +1,4 @@
-// Image pyramids: fovexp/pyramids.py (paper sections 4.2, 4.3; notes sections 3.5, 3.7, 3.8).
+// Image pyramids: fovexp/pyramids.py (paper sections 4.2, 4.3; docs/METHOD.md, 5.5, 5.7, 5.8).
 // Levels of one pyramid are packed in one buffer at offsets the backend keeps; sample j of
 // level m sits on full-resolution pixel j * 2^m.
 
@@ -172,7 +172,7 @@ void main() {
 #endif
 
 #ifdef ENTRY_BOX3
-// 3 x 3 mean, borders replicated (notes 3.7): the smoothed |L_k| on G_{k-1}'s grid
+// 3 x 3 mean, borders replicated (docs/METHOD.md, 5.7): the smoothed |L_k| on G_{k-1}'s grid
 LOCAL_2D
 uniform ivec2 grid_hw;
 uniform int dst_offset;
