@@ -14,9 +14,9 @@ resident memory is its own and Numba's allocations, which tracemalloc does not s
   (Numba's cache loaded, the GPU's shaders compiled); fewer frames when they pass the time
   budget; per stage too (``timings_s``; on the GPU each stage's GL timer-query time,
   ``GpuEnhancer(profile="gpu")``, with the device's GL_RENDERER);
-- peak memory: the process's peak resident set (``getrusage`` ``ru_maxrss``) over the warm-up
-  and the timed frames, and its resident set before the frame was loaded (the interpreter,
-  NumPy, Numba);
+- peak memory: the process's peak resident set (Linux's VmHWM, which counts Numba's and
+  NumPy's allocations alike; ``getrusage`` ``ru_maxrss`` elsewhere) over the warm-up and the
+  timed frames, and its peak before the frame was loaded (the interpreter, NumPy, Numba);
 - the output's RMSE in 8-bit display codes (the display-encoded output times 255, before
   rounding) against the reference (``rmse_ref_8bit``), and against the reference's options at
   the configuration's own impulse count (``rmse_paired_8bit``: the same random field, so it is
@@ -365,6 +365,15 @@ class Job:
 
 
 def _maxrss_mb() -> float:
+    """Peak resident memory of this process, MB: Linux's VmHWM (the high-water mark of this
+    process's own address space), else ``getrusage``'s ru_maxrss, which Linux carries over
+    an exec from the forking parent (a spawned child would start at its parent's peak)."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) / 1024.0
+    except (OSError, ValueError, IndexError):
+        pass
     import resource
 
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux: KiB
@@ -675,8 +684,9 @@ def write_markdown(rows: list[dict[str, Any]], info: dict[str, Any], path: Path,
         "`Enhancer.enhance` on a frame whose foveation is simulated (new image, moved gaze, "
         f"impulses kept), median of up to {s['repeats']} frames after a warm-up on a frame an "
         f"eighth the size, fewer once {s['budget_s']:g} s were spent (column frames). Peak "
-        "RSS = the process's `getrusage` ru_maxrss over the warm-up and the timed frames "
-        "(Numba's allocations included; the process holds "
+        "RSS = the process's peak resident set (Linux VmHWM, /proc/self/status) over the "
+        "warm-up and the timed frames (Numba's allocations included, which tracemalloc "
+        "does not see; the process holds "
         + (f"{np.median([r['base_rss_mb'] for r in ok]):.0f} MB" if ok else "-")
         + " before the frame is loaded). On the GPU, the stage times are GL timer-query "
         "times where the driver's query works (column timing in bench.csv), and the device "
