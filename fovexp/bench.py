@@ -47,7 +47,7 @@ import shlex
 import sys
 import tempfile
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass, field
 from datetime import datetime, timezone
@@ -519,10 +519,11 @@ class BenchSettings:
     progress: bool = True
 
 
-def run_all(s: BenchSettings) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+def run_all(s: BenchSettings, on_row: Callable[[list[dict[str, Any]]], None] | None = None,
+            ) -> tuple[list[dict[str, Any]], dict[str, Any]]:
     """Run the reference and every configuration, each in a fresh spawned process, one at a
     time (so that each has the machine's cores to itself). Returns the rows and the run's
-    description (machine, frame, settings)."""
+    description (machine, frame, settings); ``on_row(rows)`` is called after each."""
     import multiprocessing as mp
 
     from tqdm import tqdm
@@ -568,6 +569,8 @@ def run_all(s: BenchSettings) -> tuple[list[dict[str, Any]], dict[str, Any]]:
                 # this configuration only, not the run's other figures
                 result = {"skipped": f"failed: {type(exc).__name__}: {exc}"}
             rows.append(_row(cfg, result))
+            if on_row is not None:
+                on_row(rows)
     info["frame_sizes"] = scaled
     info["total_s"] = time.perf_counter() - started
     info["machine"]["load_average_end"] = _load()
@@ -934,8 +937,10 @@ def bench_command(args: argparse.Namespace) -> int:
     from .geometry import load_display
 
     load_display(settings.display)  # likewise a missing display profile
+    find_frame(settings.image)  # and a missing image
     args.out.mkdir(parents=True, exist_ok=True)
-    rows, info = run_all(settings)
+    # the CSV after every configuration: an interrupted run keeps what it measured
+    rows, info = run_all(settings, lambda done: write_csv(done, args.out / "bench.csv"))
     write_csv(rows, args.out / "bench.csv")
     (args.out / "bench.json").write_text(json.dumps({**info, "rows": rows}, indent=1,
                                                     default=str) + "\n")

@@ -129,6 +129,8 @@ def test_bad_arguments_are_one_line(capsys, tmp_path):
     with pytest.raises(SystemExit):
         main(["bench", "--resolution", "4k"])
     assert "WIDTHxHEIGHT" in capsys.readouterr().err
+    assert main(["bench", "--image", str(tmp_path / "none.png"), "--out", str(tmp_path / "b")]) == 2
+    assert "none.png: no such image" in capsys.readouterr().err
     assert not (tmp_path / "b").exists()  # nothing written before the arguments are checked
 
 
