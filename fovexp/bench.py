@@ -48,7 +48,6 @@ import sys
 import tempfile
 import time
 from collections.abc import Callable, Iterable, Sequence
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
@@ -403,6 +402,34 @@ def run_job(job: Job) -> dict[str, Any]:
         return {"skipped": str(exc)}
 
 
+def _child(job: Job, conn: Any) -> None:
+    """A spawned process's body: the result (or why it failed) back through ``conn``."""
+    try:
+        result = run_job(job)
+    except Exception as exc:  # noqa: BLE001  a bug costs this configuration, not the run
+        result = {"skipped": f"failed: {type(exc).__name__}: {exc}"}
+    conn.send(result)
+    conn.close()
+
+
+def _in_process_of_its_own(ctx: Any, job: Job) -> dict[str, Any]:
+    """:func:`run_job` in a fresh spawned process; the process is ended if this one is
+    interrupted, and a process that dies (out of memory) is reported, not waited for."""
+    recv, send = ctx.Pipe(duplex=False)
+    proc = ctx.Process(target=_child, args=(job, send), daemon=True)
+    proc.start()
+    send.close()
+    try:
+        return recv.recv()
+    except EOFError:
+        proc.join()
+        return {"skipped": f"failed: its process ended with exit code {proc.exitcode}"}
+    finally:
+        if proc.is_alive():
+            proc.terminate()
+        proc.join()
+
+
 def _run_job(job: Job) -> dict[str, Any]:
     from .geometry import load_display
     from .params import make_params
@@ -523,7 +550,9 @@ def run_all(s: BenchSettings, on_row: Callable[[list[dict[str, Any]]], None] | N
             ) -> tuple[list[dict[str, Any]], dict[str, Any]]:
     """Run the reference and every configuration, each in a fresh spawned process, one at a
     time (so that each has the machine's cores to itself). Returns the rows and the run's
-    description (machine, frame, settings); ``on_row(rows)`` is called after each."""
+    description (machine, frame, settings); ``on_row(rows)`` is called after each. An
+    interrupt (Ctrl-C, SIGINT) ends the running configuration's process and the run, keeping
+    what it measured (``info["interrupted"]`` says so)."""
     import multiprocessing as mp
 
     from tqdm import tqdm
@@ -551,26 +580,26 @@ def run_all(s: BenchSettings, on_row: Callable[[list[dict[str, Any]]], None] | N
         todo = ([reference] if needs_ref else []) + configs
         bar = tqdm(todo, desc="fovexp bench", unit="config", file=sys.stderr,
                    disable=not s.progress)
-        for cfg in bar:
-            bar.set_postfix_str(cfg.name)
-            if cfg.size not in frames:
-                img, how = frame_at(path, cfg.size)
-                frames[cfg.size] = str(Path(tmp) / f"frame-{cfg.size[0]}x{cfg.size[1]}.npy")
-                np.save(frames[cfg.size], img)
-                scaled[f"{cfg.size[0]}x{cfg.size[1]}"] = how
-                del img
-            job = Job(cfg, frames[cfg.size], tmp, s.display, s.blur_rate, s.seed,
-                      1 if cfg.knob == "reference" else s.repeats, s.budget_s,
-                      paired if cfg.knob == "reference" else ())
-            try:
-                with ProcessPoolExecutor(max_workers=1, mp_context=ctx) as pool:
-                    result = pool.submit(run_job, job).result()
-            except Exception as exc:  # noqa: BLE001  a crash (out of memory, a bug) costs
-                # this configuration only, not the run's other figures
-                result = {"skipped": f"failed: {type(exc).__name__}: {exc}"}
-            rows.append(_row(cfg, result))
-            if on_row is not None:
-                on_row(rows)
+        info["configurations"] = len(todo)
+        try:
+            for cfg in bar:
+                bar.set_postfix_str(cfg.name)
+                if cfg.size not in frames:
+                    img, how = frame_at(path, cfg.size)
+                    frames[cfg.size] = str(Path(tmp) / f"frame-{cfg.size[0]}x{cfg.size[1]}.npy")
+                    np.save(frames[cfg.size], img)
+                    scaled[f"{cfg.size[0]}x{cfg.size[1]}"] = how
+                    del img
+                ref = cfg.knob == "reference"
+                job = Job(cfg, frames[cfg.size], tmp, s.display, s.blur_rate, s.seed,
+                          1 if ref else s.repeats, s.budget_s, paired if ref else ())
+                rows.append(_row(cfg, _in_process_of_its_own(ctx, job)))
+                if on_row is not None:
+                    on_row(rows)
+        except KeyboardInterrupt:
+            info["interrupted"] = (f"interrupted after {len(rows)} of {len(todo)} "
+                                   "configurations")
+        bar.close()
     info["frame_sizes"] = scaled
     info["total_s"] = time.perf_counter() - started
     info["machine"]["load_average_end"] = _load()
@@ -671,7 +700,8 @@ def write_markdown(rows: list[dict[str, Any]], info: dict[str, Any], path: Path,
         f"(1, 5, 15 min) at the start: {m['load_average_start']}; at the end: "
         f"{m.get('load_average_end', 'n/a')}.",
         "",
-        f"Command: `{info['command']}` (total {info.get('total_s', float('nan')):.0f} s).",
+        f"Command: `{info['command']}` (total {info.get('total_s', float('nan')):.0f} s"
+        + (f"; **{info['interrupted']}**" if info.get("interrupted") else "") + ").",
         "",
         f"Frame: {info['frame']}; sizes: "
         + ", ".join(f"{k} {v}" for k, v in info.get("frame_sizes", {}).items())
@@ -949,6 +979,9 @@ def bench_command(args: argparse.Namespace) -> int:
     print(table_text(rows))
     print(f"wrote {args.out / 'BENCH.md'}, bench.csv, bench.json and {len(plots)} plots "
           f"({info['total_s']:.0f} s)")
+    if info.get("interrupted"):
+        print(f"fovexp: {info['interrupted']}", file=sys.stderr)
+        return 130
     return 0
 
 
