@@ -137,7 +137,7 @@ def test_bad_arguments_are_one_line(capsys, tmp_path):
 @pytest.mark.slow
 def test_a_tiny_run_writes_every_file(tmp_path, capsys):
     out = tmp_path / "bench"
-    assert main(["bench", "--quick", "--resolution", "320x180", "--knobs",
+    assert main(["bench", "--quick", "--knobs",
                  "impulses=12,dtype=float64", "--repeats", "1", "--out", str(out),
                  "--no-progress"]) == 0
     printed = capsys.readouterr().out
