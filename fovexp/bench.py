@@ -445,7 +445,12 @@ def _run_job(job: Job) -> dict[str, Any]:
     warm.enhance((0.5, 0.5), params)
     _close(warm)
     enh = _make(cfg, display, profile=True)
-    device = getattr(enh, "renderer", None) or _cpu_device()
+    device = _cpu_device()
+    if cfg.backend == "gpu":
+        from .gpu import is_software
+
+        device = f"GPU: {enh.renderer}" + (" [software renderer: the CPU's cores, not a GPU]"
+                                           if is_software(enh.ctx) else "")
     timing = getattr(enh, "timing_method", None) or "wall clock per stage (perf_counter)"
     times: list[float] = []
     stages: list[dict[str, float]] = []
