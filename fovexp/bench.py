@@ -691,6 +691,21 @@ def _md_table(head: Sequence[str], lines: Iterable[Sequence[str]]) -> str:
     return "\n".join(out)
 
 
+def _load_warning(m: dict[str, Any]) -> str:
+    """A sentence when other work shared the machine (load average above its cores)."""
+    try:
+        loads = [float(m[k].split(",")[0]) for k in ("load_average_start", "load_average_end")
+                 if k in m]
+    except (ValueError, AttributeError):
+        return ""
+    if loads and max(loads) > (m.get("cores") or 1):
+        return (" **The machine was shared and loaded** (load average above its "
+                f"{m.get('cores')} cores): the times are slower and noisier than on a quiet "
+                "machine (compare configurations only roughly; re-run it quiet). The errors "
+                "and the noise statistics do not depend on the load.")
+    return ""
+
+
 def write_markdown(rows: list[dict[str, Any]], info: dict[str, Any], path: Path,
                    plots: Sequence[str]) -> None:
     m = info["machine"]
@@ -706,7 +721,7 @@ def write_markdown(rows: list[dict[str, Any]], info: dict[str, Any], path: Path,
         f"NumPy {m['numpy']}, SciPy {m['scipy']}, Numba {m['numba']} "
         f"({m['numba_threads']} threads); {m['os']}. Date: {m['date_utc']}. Load average "
         f"(1, 5, 15 min) at the start: {m['load_average_start']}; at the end: "
-        f"{m.get('load_average_end', 'n/a')}.",
+        f"{m.get('load_average_end', 'n/a')}." + _load_warning(m),
         "",
         f"Command: `{info['command']}` (total {info.get('total_s', float('nan')):.0f} s"
         + (f"; **{info['interrupted']}**" if info.get("interrupted") else "") + ").",
