@@ -267,6 +267,17 @@ def main() -> None:
     print(report(results))
 
 
+#: The other records in benchmarks/ (RESULTS.md lists them first).
+INDEX = [
+    "Other records in this folder: [BENCH.md](BENCH.md) (`fovexp bench`: run time against "
+    "error of every engine option, noise statistics, time and memory against resolution), "
+    "[SKIPPING.md](SKIPPING.md) (skipping flat regions), [GPU.md](GPU.md) (the GPU backend, "
+    "per stage), [CLI.md](CLI.md) (the command line), [SCENES.md](SCENES.md) (generated "
+    "scenes), [DISPLAY_LOOP.md](DISPLAY_LOOP.md) (the runner's display loop), "
+    "[WHEEL_STEPS.md](WHEEL_STEPS.md) (wheel-step cost).",
+]
+
+
 def report(r: dict) -> str:
     m = r["machine"]
     lines = [
@@ -276,6 +287,7 @@ def report(r: dict) -> str:
         f"({m['numba_threads']} threads); {m['date']}.",
         "Command: `.venv/bin/python benchmarks/run.py` (medians of 7 frames after 2 warm-up "
         "frames; peak RSS of the case's own process).", "",
+        *INDEX, "",
         "## Speed and memory (4K, blur-rate 0.34, LG OLED55CX profile)", "",
         "| case | median s | min s | peak RSS MB | target |", "|---|---|---|---|---|",
     ]
