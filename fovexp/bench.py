@@ -59,8 +59,8 @@ from .errors import FovexpError
 
 #: The converged configuration every error is measured against (docs/API.md, "Engine options").
 REFERENCE_IMPULSES = 256
-#: The kernel keeps the method's 0.01 cut (docs/METHOD.md, 4): ``kernel_truncation`` also sets the reach
-#: of clipping control's extremes (N_min, N_max over the pixels the kernel reaches, section
+#: The kernel keeps the method's 0.01 cut (docs/METHOD.md, 4): ``kernel_truncation`` also sets
+#: the reach of clipping control's extremes (N_min, N_max over the pixels the kernel reaches, section
 #: 4.2), so another cut is another headroom neighbourhood, not a more converged kernel.
 REFERENCE_OPTIONS: dict[str, Any] = {"foveation": "exact", "extremes": "exact",
                                      "dtype": "float64"}
