@@ -60,8 +60,8 @@ from .errors import FovexpError
 #: The converged configuration every error is measured against (docs/API.md, "Engine options").
 REFERENCE_IMPULSES = 256
 #: The kernel keeps the method's 0.01 cut (docs/METHOD.md, 4): ``kernel_truncation`` also sets
-#: the reach of clipping control's extremes (N_min, N_max over the pixels the kernel reaches, section
-#: 4.2), so another cut is another headroom neighbourhood, not a more converged kernel.
+#: the reach of clipping control's extremes (N_min, N_max over the pixels the kernel reaches,
+#: section 4.2), so another cut is another headroom neighbourhood, not a more converged kernel.
 REFERENCE_OPTIONS: dict[str, Any] = {"foveation": "exact", "extremes": "exact",
                                      "dtype": "float64"}
 #: Eccentricity rings of the noise statistics, deg (the paper preset's fovea ends at 8 deg).
