@@ -19,10 +19,37 @@ def eps(dtype: np.dtype) -> float:
 
 
 def colour_of(image: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
-    """(colour, alpha) of a test image (grey + alpha and RGBA carry their alpha last)."""
-    if image.ndim == 3 and image.shape[2] in (2, 4):
-        return image[..., :-1], image[..., -1]
+    """(colour, alpha) of a test image (grey + alpha and RGBA carry their alpha last); grey
+    colour as (H, W)."""
+    if image.ndim == 3 and image.shape[2] == 2:
+        return image[..., 0], image[..., 1]
+    if image.ndim == 3 and image.shape[2] == 4:
+        return image[..., :3], image[..., 3]
     return image, None
+
+
+#: the round trip through the display's transfer function in float32 (linearise, encode) is
+#: exact to this much of a value in [0, 1]: a few float32 ulps, far below half a 16-bit step
+#: (7.6e-6), so an input at 8 or 16 bits comes back sample for sample at its depth (a float
+#: input can land on the other side of a rounding boundary, so it is compared to this bound)
+ROUND_TRIP_TOL = 2e-6
+
+
+def assert_same_samples(out: np.ndarray, image: np.ndarray, depth: int) -> None:
+    """``out`` holds ``image``'s samples: at its bit depth and at 16 bits for an 8-bit input
+    (k / 255 = 257 k / 65535), within :data:`ROUND_TRIP_TOL` for a float input (depth 0)."""
+    if depth == 0:
+        diff = np.abs(out.astype(np.float64) - image.astype(np.float64))
+        assert diff.max(initial=0.0) <= ROUND_TRIP_TOL, diff.max()
+        return
+    for d in sorted({depth, 16}):
+        assert np.array_equal(quantise(out, d), quantise(image, d)), d
+
+
+def quantise(image: np.ndarray, depth: int) -> np.ndarray:
+    """What write_image stores at ``depth`` bits (its rounding: clip, scale, round half even)."""
+    top = np.float32(2**depth - 1)
+    return np.rint(np.clip(image, 0, 1).astype(np.float32) * top).astype(np.int64)
 
 
 def check_result(enh: Enhancer, res: EnhanceResult, image: np.ndarray) -> dict[str, np.ndarray]:

@@ -9,6 +9,8 @@ The profile is chosen by ``--hypothesis-profile NAME`` (hypothesis's own option)
 ``$FOVEXP_HYPOTHESIS_PROFILE``, else ``long`` when the run selects ``-m stress_long``, else
 ``ci``. Every test under tests/stress is marked ``stress`` and ``stress_long``, so
 ``pytest tests/stress -m stress_long`` is the long mode and ``-m "not stress"`` leaves them out.
+NumPy's RuntimeWarnings (overflow, division by zero, invalid values) fail a stress test: each
+is a numerical defect, whatever the value that comes out.
 """
 
 from __future__ import annotations
@@ -52,3 +54,5 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         if str(item.path).startswith(here + os.sep):
             item.add_marker(pytest.mark.stress)
             item.add_marker(pytest.mark.stress_long)
+            # overflow, division by zero, invalid operations: a numerical defect to find
+            item.add_marker(pytest.mark.filterwarnings("error::RuntimeWarning"))

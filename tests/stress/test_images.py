@@ -13,7 +13,7 @@ import io
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import event, given, settings
 from hypothesis import strategies as st
 
 from fovexp import Enhancer, FovexpError, gabor, load_display, make_params
@@ -89,6 +89,8 @@ def test_the_noise_leaves_the_range_no_more_than_its_tail_before_clipping(setup)
     beyond = beyond.any(axis=2) if beyond.ndim == 3 else beyond
     noisy = noise != 0
     n = int(noisy.sum())
+    event(f"noisy pixels >= {NOISE_CLIP_MIN_PIXELS}" if n >= NOISE_CLIP_MIN_PIXELS else
+          "too few noisy pixels to judge")
     if n >= NOISE_CLIP_MIN_PIXELS:
         tail = three_std_tail(res.params.impulses)
         allowed = tail + 4.0 * np.sqrt(tail * EXCURSION_PX / n)
