@@ -2,7 +2,7 @@
 
 ``ci`` (the default): few examples per property, no deadline, derandomised, so that CI is
 reproducible and the whole of tests/stress runs in well under two minutes on two cores.
-``long``: hundreds of examples per property (thousands in all), random, for ``./dev stress``
+``long``: 200 examples per property (about 3000 in all), random, for ``./dev stress``
 (which records its result in benchmarks/STRESS.md). ``dev``: the ``ci`` counts, random.
 
 The profile is chosen by ``--hypothesis-profile NAME`` (hypothesis's own option), else by
@@ -29,7 +29,7 @@ _COMMON = dict(
 #: examples per property: ``ci`` and ``long`` (properties that cost more take a fraction,
 #: :func:`examples`)
 CI_EXAMPLES = 12
-LONG_EXAMPLES = 400
+LONG_EXAMPLES = 200
 settings.register_profile("ci", max_examples=CI_EXAMPLES, derandomize=True, database=None,
                           **_COMMON)
 settings.register_profile("dev", max_examples=CI_EXAMPLES, **_COMMON)
@@ -56,3 +56,9 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
             item.add_marker(pytest.mark.stress_long)
             # overflow, division by zero, invalid operations: a numerical defect to find
             item.add_marker(pytest.mark.filterwarnings("error::RuntimeWarning"))
+
+
+def pytest_report_header(config: pytest.Config) -> str:
+    s = settings.default
+    return (f"stress: hypothesis profile {settings.get_current_profile_name()!r} "
+            f"({s.max_examples} examples per property, derandomize={s.derandomize})")
