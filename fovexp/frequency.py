@@ -73,11 +73,15 @@ def draw_truncated(
     section 4.1; docs/METHOD.md, 6.1).
 
     ``u`` are uniform variates in (0, 1), one per impulse (fixed per impulse, so a frame
-    sequence keeps each impulse's quantile).
+    sequence keeps each impulse's quantile). Where ``sigma_n`` is 0 (an ``s_f`` at the bottom
+    of its range underflows it) the distribution is the point ``exp(mu_n)``, its limit.
     """
-    z_high = (np.log(f_high_cpp) - mu) / sigma_n
-    z = ndtri(np.clip(u * ndtr(z_high), 1e-300, 1.0))
-    return np.minimum(np.exp(mu + sigma_n * z), f_high_cpp)
+    point = sigma_n == 0  # s_f so small that sigma_n underflows: the limit, f = exp(mu_n)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z_high = (np.log(f_high_cpp) - mu) / sigma_n
+        z = ndtri(np.clip(u * ndtr(z_high), 1e-300, 1.0))
+        f = np.exp(np.where(point, mu, mu + sigma_n * z))
+    return np.minimum(f, f_high_cpp)
 
 
 def draw_release(

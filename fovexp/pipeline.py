@@ -678,7 +678,10 @@ class Enhancer:
         s, f_lo, f_hi = self._band_at(geom, c.get("gaze"), c.get("sigma_given"), c.get("sigma"),
                                       c.get("blur_rate"), x, y)
         if name == "f_low_cpp":
-            return f_lo.reshape(h, w).astype(self._dtype)
+            # +Inf where the blur removes nothing at this precision (sigma = 0, or so small
+            # that 3 / (2 pi sigma) overflows float32): the band is empty there either way
+            with np.errstate(over="ignore"):
+                return f_lo.reshape(h, w).astype(self._dtype)
         if name == "f_high_cpp":
             return f_hi.reshape(h, w).astype(self._dtype)
         # amplitude, with the method "ours" (Enhancer._map)
