@@ -1,4 +1,4 @@
-"""The experiment runner: the paper's calibration (section 6) and validation (section 7.1)
+"""The experiment runner: the paper's calibration (section 5) and validation (section 6.1)
 adjustment experiments with gaze-contingent blanking (docs/EXPERIMENT.md).
 
 PsychoPy is imported only by :mod:`fovexp.experiment.window`, when a session opens a window.

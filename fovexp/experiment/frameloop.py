@@ -1,4 +1,4 @@
-"""The frame loop of one attempt at a trial (paper section 6.1, "Task"), without PsychoPy.
+"""The frame loop of one attempt at a trial (paper section 5.1, "Task"), without PsychoPy.
 
 The session runs every trial through :class:`TrialLoop`, and ``benchmarks/display_loop.py``
 drives the same class at 4K to measure it. Per frame, on the display thread, in this order:
@@ -35,6 +35,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from .gaze import BlankDecision, BlankingMonitor, GazeSample
+from .interfaces import GazeSource, Renderer, Screen
 from .trial import InputEvent, TrialState
 
 #: While a session runs, a thread that wants the GIL waits at most about this long for another
@@ -115,7 +116,8 @@ class TrialLoop:
     ``timings``, when a list, gets one :class:`FrameTiming` per frame.
     """
 
-    def __init__(self, *, screen: Any, gaze: Any, renderer: Any, monitor: BlankingMonitor,
+    def __init__(self, *, screen: Screen, gaze: GazeSource, renderer: Renderer,
+                 monitor: BlankingMonitor,
                  state: TrialState, params_for: Callable[[float], Any], parameter: str,
                  trial_index: int, attempt: int, io: TrialIO,
                  participant: Callable[[float, float, bool], list[InputEvent]] | None = None,

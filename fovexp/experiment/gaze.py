@@ -1,6 +1,6 @@
 """Gaze sources behind one interface, and the gaze-contingent blanking decision.
 
-Paper section 6.1 ("Task"): participants fixate a cross at the screen centre; "stimuli are hidden
+Paper section 5.1 ("Task"): participants fixate a cross at the screen centre; "stimuli are hidden
 by rendering a black frame whenever participants' gaze position moved outside a small circular
 region with radius 1.25 deg at the center of the screen". Gaze arrives in normalised display-area
 coordinates (origin top-left, x right, y down, as Tobii's ``gaze_point_on_display_area``);
@@ -19,17 +19,17 @@ import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, NamedTuple, Protocol
+from typing import Any, NamedTuple
 
 import numpy as np
 
 from fovexp import FovexpError, ViewingGeometry
 
-#: Paper section 6.1: gaze farther than this from the cross blanks the next frame (deg).
+#: Paper section 5.1: gaze farther than this from the cross blanks the next frame (deg).
 BLANKING_RADIUS_DEG = 1.25
 #: No sample newer than this: gaze "lost", the next frame is black (s).
 GAZE_TIMEOUT_S = 0.05
-#: Tobii Pro Spectrum's rate in the paper (section 6.1), and the simulated sources' (Hz).
+#: Tobii Pro Spectrum's rate in the paper (section 5.1), and the simulated sources' (Hz).
 TRACKER_RATE_HZ = 600.0
 #: Seconds of samples a tracker's buffer holds before the oldest are dropped.
 GAZE_BUFFER_S = 120.0
@@ -80,21 +80,6 @@ class SourceEvent:
     kind: str  # connection_lost / connection_restored / frequency_changed / rate_deviation
     system_time_us: int
     detail: dict[str, Any] = field(default_factory=dict)
-
-
-class GazeSource(Protocol):
-    """What the runner needs from a gaze source."""
-
-    name: str
-
-    def start(self) -> None: ...
-    def stop(self) -> None: ...
-    def now_us(self) -> int: ...
-    def poll(self) -> list[GazeSample]: ...
-    def poll_events(self) -> list[SourceEvent]: ...
-    @property
-    def connected(self) -> bool: ...
-    def info(self) -> dict[str, Any]: ...
 
 
 def monotonic_us() -> int:
@@ -283,7 +268,7 @@ class BlankDecision:
 
 
 class BlankingMonitor:
-    """Decides per frame whether the next frame is black (paper section 6.1).
+    """Decides per frame whether the next frame is black (paper section 5.1).
 
     The most recent sample decides: farther than ``radius_deg`` from the cross, invalid (no eye
     valid), or none newer than ``timeout_s`` (lost) -> black; otherwise the stimulus is shown.
