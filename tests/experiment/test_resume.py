@@ -28,6 +28,7 @@ from fovexp.experiment.session import Session, SessionOptions
 
 from experiment_helpers import REPO, make_workspace, popen_cli, run_cli, xvfb_display  # noqa: F401
 
+
 @pytest.mark.gui
 @pytest.mark.slow
 def test_sigkill_then_resume(tmp_path: Path, xvfb_display) -> None:  # noqa: F811
