@@ -8,6 +8,7 @@
 - :mod:`.sessionfile`: the session file, written off the frame loop by its own thread;
 - :mod:`.tracker_setup`: the tracker's display area, calibration, validation, drift checks;
 - :mod:`.sequence`: the announcements and breaks around the trials, the console's position;
+- :mod:`.render_budget`: whether the renderer shows a wheel step within the protocol's budget;
 - :mod:`.frameloop`: the frames of one attempt at a trial (paper section 5.1, "Task": the
   reference's left half on the left, the mirrored half processed with the current value on
   the right, a fixation cross on the seam; the wheel changes the value, Enter confirms;
@@ -32,7 +33,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -43,7 +44,6 @@ from .frameloop import TrialIO, TrialLoop, display_thread_first
 from .gaze import (
     BlankingMonitor,
     FixationGeometry,
-    GazeSample,
     MouseGaze,
     SimGazeParams,
     SimulatedGaze,
@@ -61,6 +61,7 @@ from .logs import (
 from .operator import DISPLAY_CHECKLIST, checklist_text, eta_s, trial_line
 from .participant import SimTruth, SimulatedParticipant
 from .protocol import LoadedProtocol, Trial
+from .render_budget import step_result, step_values, step_warning, time_renders
 from .resume import attempts_so_far, choose_session, done_trials, find_sessions, new_session_id
 from .rows import GazeItem, blanking_rows, gaze_items, gaze_row, trial_row
 from .sequence import TrialSequence
@@ -83,6 +84,9 @@ from .tracker_setup import (
 )
 from .trial import Key, TrialState, ValueAdjuster
 from .validation import check_participant
+
+if TYPE_CHECKING:
+    from fovexp import EnhanceParams
 
 EXIT_OK = 0
 EXIT_ERROR = 2
@@ -207,15 +211,6 @@ class Session:
                          n_completed=len(self.done))
         self.release()
 
-    def _session_path(self) -> Path:
-        return self.file.path
-
-    def _write_info(self, **update: Any) -> None:
-        self.file.update(**update)
-
-    def _event(self, kind: str, **detail: Any) -> None:
-        self.file.event(kind, **detail)
-
     def _start_info(self) -> None:
         """This run's entry in the session file (a new session's record first)."""
         proto, opts = self.protocol, self.opts
@@ -261,10 +256,6 @@ class Session:
         if kind == "mouse":
             return MouseGaze()
         raise FovexpError(f"--tracker {kind!r}: choose tobii, simulated or mouse")
-
-    def _gaze_rows(self, trial_index: int | None, samples: list[GazeSample],
-                   attempt: int | None = None) -> list[GazeItem]:
-        return gaze_items(trial_index, samples, attempt)
 
     def _gaze_row(self, item: GazeItem) -> tuple[Any, ...]:
         """A gaze log row (made on the log's flusher thread)."""
@@ -342,7 +333,7 @@ class Session:
             state, failure = "failed", f"{type(exc).__name__}: {exc}"
             self.info["failure_traceback"] = traceback.format_exc()
             raise FovexpError(f"internal error: {failure} (traceback in "
-                              f"{self._session_path()})") from None
+                              f"{self.file.path})") from None
         finally:
             self._restore_signals(old_handlers)
             self._close(flusher, state, failure)
@@ -441,32 +432,20 @@ class Session:
         w = frame.shape[1]
         self.renderer.set_image(frame[:, w // 2:], (w, frame.shape[0]))
         adj = spec.adjust
-        v0 = trial.start_value
-        v1 = v0 + adj.step if v0 + adj.step <= adj.range[1] else v0 - adj.step
-        times = []
-        for v in (v0, v1):
-            deadline = time.monotonic() + 300
-            serial = self.renderer.request(self._params(trial, v))
-            while True:  # the cross alone meanwhile
-                try:
-                    times.append(self.renderer.wait(serial, timeout=0.05).seconds)
-                    break
-                except TimeoutError:
-                    if time.monotonic() > deadline:
-                        raise FovexpError("the warm-up render took more than 300 s") from None
-                    self.screen.draw(blank=True)
-                    self._drain_gaze()
-        step_ms = 1e3 * times[1]
+
+        def cross_alone() -> None:
+            self.screen.draw(blank=True)
+            self._drain_gaze()
+
+        first_s, step_s = time_renders(
+            self.renderer, [self._params(trial, v) for v in step_values(
+                trial.start_value, adj.step, adj.range[1])], cross_alone)
         budget = spec.render.max_step_ms
-        result = {"parameter": adj.parameter, "first_render_ms": round(1e3 * times[0], 1),
-                  "step_ms": round(step_ms, 1), "max_step_ms": budget,
-                  "within_budget": step_ms <= budget}
+        result = step_result(adj.parameter, first_s, step_s, budget)
         self.file.update(render={**info, "wheel_step": result})
-        if step_ms > budget:
-            self._operator_note(
-                f"a wheel step ({adj.parameter}) takes {step_ms:.0f} ms on the "
-                f"{info['backend']} backend, above the protocol's render.max_step_ms = "
-                f"{budget:g} ms", "render_budget_exceeded", **result)
+        warning = step_warning(adj.parameter, step_s, budget, info["backend"])
+        if warning is not None:
+            self._operator_note(warning, "render_budget_exceeded", **result)
 
     def _operator_note(self, text: str, event: str, **detail: Any) -> None:
         """A warning for the operator: console, session file (event), instruction screen."""
@@ -623,7 +602,7 @@ class Session:
                 self.confirm_quit(trial.index)
         self.file.event("tracker_reconnected", trial_index=trial.index)
 
-    def _params(self, trial: Trial, value: float) -> Any:
+    def _params(self, trial: Trial, value: float) -> EnhanceParams:
         return self.protocol.make_params(trial, value, self.seed)
 
     def _load_frame(self, trial: Trial) -> np.ndarray:
