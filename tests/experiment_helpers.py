@@ -121,7 +121,7 @@ class ScriptedGaze(ClockedGaze):
 
 
 class StubScreen:
-    """A window-free :class:`fovexp.experiment.session.Screen` for session tests: it draws
+    """A window-free :class:`fovexp.experiment.interfaces.Screen` for session tests: it draws
     nothing, records what each frame would show, gives scripted input per frame-loop poll
     (``inputs``: poll number from 1 -> events) and answers messages with
     ``answer(text, keys, timeout_s)`` (default: the first key; Q on the failed-validation

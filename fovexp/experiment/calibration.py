@@ -28,7 +28,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from .gaze import DisplayArea, GazeSample, Vec3
+from .gaze import DisplayArea, GazeSample, SimulatedGaze, Vec3
 from .quality import (
     CENTRE,
     DriftResult,
@@ -127,7 +127,7 @@ class SimulatedCalibration:
     the parameters' ``target_offset_deg`` (whatever drift was added since); its position guide
     comes from the simulated eyes' positions (:func:`guide_from_origins`)."""
 
-    def __init__(self, gaze: Any) -> None:
+    def __init__(self, gaze: SimulatedGaze) -> None:
         self.gaze = gaze
 
     def begin(self) -> None:

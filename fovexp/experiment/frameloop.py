@@ -32,10 +32,14 @@ import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from .gaze import BlankDecision, BlankingMonitor, GazeSample
+from .interfaces import GazeSource, Renderer, Screen
 from .trial import InputEvent, TrialState
+
+if TYPE_CHECKING:
+    from fovexp import EnhanceParams
 
 #: While a session runs, a thread that wants the GIL waits at most about this long for another
 #: to give it up (Python's default is 5 ms, most of a 120 Hz frame; sys.setswitchinterval).
@@ -115,8 +119,9 @@ class TrialLoop:
     ``timings``, when a list, gets one :class:`FrameTiming` per frame.
     """
 
-    def __init__(self, *, screen: Any, gaze: Any, renderer: Any, monitor: BlankingMonitor,
-                 state: TrialState, params_for: Callable[[float], Any], parameter: str,
+    def __init__(self, *, screen: Screen, gaze: GazeSource, renderer: Renderer,
+                 monitor: BlankingMonitor,
+                 state: TrialState, params_for: Callable[[float], EnhanceParams], parameter: str,
                  trial_index: int, attempt: int, io: TrialIO,
                  participant: Callable[[float, float, bool], list[InputEvent]] | None = None,
                  timings: list[FrameTiming] | None = None) -> None:

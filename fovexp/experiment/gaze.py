@@ -19,7 +19,7 @@ import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, NamedTuple, Protocol
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -80,21 +80,6 @@ class SourceEvent:
     kind: str  # connection_lost / connection_restored / frequency_changed / rate_deviation
     system_time_us: int
     detail: dict[str, Any] = field(default_factory=dict)
-
-
-class GazeSource(Protocol):
-    """What the runner needs from a gaze source."""
-
-    name: str
-
-    def start(self) -> None: ...
-    def stop(self) -> None: ...
-    def now_us(self) -> int: ...
-    def poll(self) -> list[GazeSample]: ...
-    def poll_events(self) -> list[SourceEvent]: ...
-    @property
-    def connected(self) -> bool: ...
-    def info(self) -> dict[str, Any]: ...
 
 
 def monotonic_us() -> int:

@@ -73,12 +73,14 @@ def add_stimuli_parser(subparsers: Any) -> argparse.ArgumentParser:
     a.add_argument("--stimuli", type=Path, default=None, metavar="DIR", help=_folder_help())
     a.set_defaults(func=add_command)
 
-    c = sub.add_parser("check", help="list a protocol's images with size and status",
-                       description="Every image a protocol names: file, size, sha256 and "
+    c = sub.add_parser("check", help="list protocols' images with size and status",
+                       description="Every image each protocol names: file, size, sha256 and "
                        "whether a session can show it. Exits 2 when a real session (or, with "
-                       "--dry-run, a dry run) would refuse one.")
-    c.add_argument("protocol", help="protocol YAML, or the name of one in ./protocols or shipped "
-                   "with fovexp (calibration-fe, calibration-sk, calibration-sf, validation)")
+                       "--dry-run, a dry run) would refuse one, or a protocol cannot be read.")
+    c.add_argument("protocol", nargs="+",
+                   help="protocol YAML, or the name of one in ./protocols or shipped with "
+                   "fovexp (calibration-fe, calibration-sk, calibration-sf, validation); "
+                   "several at once (protocols/*.yaml)")
     c.add_argument("--display", default=None, metavar="PROFILE",
                    help="check for this display profile instead of the protocol's")
     c.add_argument("--dry-run", action="store_true",
@@ -256,12 +258,27 @@ def check_command(args: argparse.Namespace) -> int:
 
 
 def _check(args: argparse.Namespace) -> int:
+    """Each protocol in turn (a blank line between them); 2 when any would refuse an image or
+    cannot be read (its error on one line, the others still checked)."""
+    code = 0
+    for n, name in enumerate(args.protocol):
+        if n:
+            print()
+        try:
+            code = max(code, _check_one(name, args))
+        except FovexpError as exc:
+            print(f"fovexp stimuli check: error: {exc}", file=sys.stderr)
+            code = 2
+    return code
+
+
+def _check_one(name: str, args: argparse.Namespace) -> int:
     from fovexp import find_protocol, load_display
 
     from .protocol import protocol_display, protocol_stimuli, read_protocol
     from .stimuli import DRY_RUN_SIZE, parse_size, size_text
 
-    path = find_protocol(args.protocol)
+    path = find_protocol(name)
     _, spec = read_protocol(path)
     if args.display is not None:
         display = load_display(args.display)

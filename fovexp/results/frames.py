@@ -12,7 +12,9 @@ Logs written before these columns existed read with them empty.
 from __future__ import annotations
 
 import io
+from collections.abc import Iterable, Mapping
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -116,5 +118,52 @@ def trial_quality(frames: pd.DataFrame) -> pd.DataFrame:
     return out.reset_index()
 
 
-__all__ = ["FRAME_INT_COLUMNS", "gaze_to_flip_ms", "latency_summary", "read_frame_log",
-           "trial_quality", "unblanked_violations"]
+#: slack on the Enter time recomputed from the trial log (``response_time_s`` is rounded to
+#: 0.1 ms; the flip times to 1 us)
+ENTER_SLACK_S = 1e-4
+
+
+def final_value_violations(frames: pd.DataFrame, trials: Iterable[Mapping[str, Any]],
+                           value_tol: float = 1e-9) -> pd.DataFrame:
+    """Trials whose frames contradict their row in the trial log: what is logged must be what
+    was on screen (docs/LOGS.md). For each trial row (``trial_index``, ``start_value``,
+    ``final_value``, ``response_time_s``), the frames of its last attempt (the confirmed one):
+    the first shows ``start_value``; Enter came ``response_time_s`` after the first flip; the
+    last frame flipped before Enter shows ``final_value`` (a render still pending at Enter is
+    dropped, never shown); and no frame of the attempt was flipped after Enter (from the first
+    flip after Enter only the cross is on screen). ``frames`` is one session's frame log
+    (:func:`read_frame_log`), ``trials`` that session's rows. Returns one row per violation
+    (``trial_index``, ``attempt``, ``problem``); empty when the logs keep the rule."""
+    out: list[dict[str, Any]] = []
+    for r in trials:
+        i = int(r["trial_index"])
+        f = frames[frames["trial_index"] == i]
+        if f.empty:
+            out.append({"trial_index": i, "attempt": None, "problem": "no frames"})
+            continue
+        attempt = int(f["attempt"].max())
+        f = f[f["attempt"] == attempt].sort_values("frame")
+        t = f["flip_time_s"].to_numpy(float)
+        values = f["value"].to_numpy(float)
+
+        problems = []
+        if not abs(values[0] - float(r["start_value"])) <= value_tol:
+            problems.append(f"first frame shows {values[0]:g}, start_value is "
+                            f"{float(r['start_value']):g}")
+        enter_s = t[0] + float(r["response_time_s"])
+        after = int((t > enter_s + ENTER_SLACK_S).sum())
+        if after:
+            problems.append(f"{after} frame(s) flipped after Enter")
+        before = values[t <= enter_s + ENTER_SLACK_S]
+        final = float(r["final_value"])
+        if not before.size:
+            problems.append("no frame before Enter")
+        elif not abs(before[-1] - final) <= value_tol:
+            problems.append(f"the last frame before Enter shows {before[-1]:g}, final_value "
+                            f"is {final:g}")
+        out += [{"trial_index": i, "attempt": attempt, "problem": p} for p in problems]
+    return pd.DataFrame(out, columns=["trial_index", "attempt", "problem"])
+
+
+__all__ = ["ENTER_SLACK_S", "FRAME_INT_COLUMNS", "final_value_violations", "gaze_to_flip_ms",
+           "latency_summary", "read_frame_log", "trial_quality", "unblanked_violations"]

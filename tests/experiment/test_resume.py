@@ -1,5 +1,6 @@
 """SIGKILL mid-session, then ``--resume``: no completed trial lost, none repeated, and a row torn
-by the kill never makes a file unreadable (issue 3, item 7)."""
+by the kill never makes a file unreadable (issue 3, item 7); and, without a window, the choice
+of the session a run continues (:mod:`fovexp.experiment.resume`)."""
 
 from __future__ import annotations
 
@@ -15,13 +16,21 @@ import pytest
 from fovexp import FovexpError
 from fovexp.experiment.logs import GAZE_COLUMNS, read_trials
 from fovexp.experiment.protocol import load_protocol
+from fovexp.experiment.resume import (
+    attempts_so_far,
+    choose_session,
+    done_trials,
+    find_sessions,
+    incomplete_sessions,
+    new_session_id,
+)
 from fovexp.experiment.session import Session, SessionOptions
 
-from experiment_helpers import make_workspace, popen_cli, run_cli, xvfb_display  # noqa: F401
-
-pytestmark = [pytest.mark.gui, pytest.mark.slow]
+from experiment_helpers import REPO, make_workspace, popen_cli, run_cli, xvfb_display  # noqa: F401
 
 
+@pytest.mark.gui
+@pytest.mark.slow
 def test_sigkill_then_resume(tmp_path: Path, xvfb_display) -> None:  # noqa: F811
     ws = make_workspace(tmp_path / "ws")
     args = ["run", "protocols/calibration-fe.yaml", "--participant", "K01", "--dry-run",
@@ -109,3 +118,82 @@ def test_sigkill_then_resume(tmp_path: Path, xvfb_display) -> None:  # noqa: F81
     # Running again has nothing left to do.
     r = run_cli([*args, "--resume"], ws)
     assert r.returncode == 2 and "no incomplete session" in r.stderr
+
+
+# -- the choice of the session, without a window ---------------------------------------------------
+def write_session(folder: Path, sid: str, **info) -> None:
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / f"session-{sid}.json").write_text(json.dumps({"session": sid, **info}))
+
+
+def test_incomplete_sessions_and_their_order(tmp_path: Path) -> None:
+    """Sessions in the order of their ids; an unreadable file is left out; a session that
+    failed before its first trial blocks nothing, one that failed later can be resumed."""
+    write_session(tmp_path, "20260102-000000", completed=False, state="failed", n_completed=0)
+    write_session(tmp_path, "20260101-000000", completed=True, state="completed")
+    write_session(tmp_path, "20260103-000000", completed=False, state="failed", n_completed=2)
+    write_session(tmp_path, "20260104-000000", completed=False, state="aborted")
+    (tmp_path / "session-20260105-000000.json").write_text("{torn")
+    found = find_sessions(tmp_path)
+    assert [s["session"] for s in found] == ["20260101-000000", "20260102-000000",
+                                             "20260103-000000", "20260104-000000"]
+    assert all(s["_path"].endswith(f"session-{s['session']}.json") for s in found)
+    assert [s["session"] for s in incomplete_sessions(found)] == ["20260103-000000",
+                                                                  "20260104-000000"]
+    sid = new_session_id(tmp_path)
+    assert len(sid) == 15 and not (tmp_path / f"session-{sid}.json").exists()
+
+
+def test_choose_session_refusals_and_resume(tmp_path: Path) -> None:
+    lp = load_protocol(REPO / "protocols" / "calibration-fe.yaml")
+    kw = dict(resume=False, new_session=False, dry_run=True, tracker="simulated",
+              limit_trials=3, practice_trials=1)
+    new = choose_session(tmp_path, lp, "P01", **kw)
+    assert not new.resumed and (new.limit_trials, new.practice_trials) == (3, 1)
+    with pytest.raises(FovexpError, match="--resume: no incomplete session of calibration-fe"):
+        choose_session(tmp_path, lp, "P01", **{**kw, "resume": True})
+    runs = [{"dry_run": True, "tracker": "simulated"}]
+    write_session(tmp_path, "20260101-000000", completed=False, state="aborted",
+                  protocol_sha256=lp.sha256, runs=runs, derived=lp.derived,
+                  plan={"limit_trials": 5, "practice_trials": 0})
+    with pytest.raises(FovexpError, match="add --resume to continue it, or --new-session"):
+        choose_session(tmp_path, lp, "P01", **kw)
+    assert not choose_session(tmp_path, lp, "P01", **{**kw, "new_session": True}).resumed
+    # resumed: the limits it started with, not this run's
+    got = choose_session(tmp_path, lp, "P01", **{**kw, "resume": True})
+    assert got.resumed and got.session_id == "20260101-000000"
+    assert (got.limit_trials, got.practice_trials) == (5, 0) and "_path" not in got.info
+    # never by a real session, nor another gaze source
+    with pytest.raises(FovexpError, match="started as a dry run with --tracker simulated"):
+        choose_session(tmp_path, lp, "P01", **{**kw, "resume": True, "dry_run": False})
+    with pytest.raises(FovexpError, match="resume it the same way"):
+        choose_session(tmp_path, lp, "P01", **{**kw, "resume": True, "tracker": "mouse"})
+    write_session(tmp_path, "20260101-000000", completed=False, state="aborted",
+                  protocol_sha256="0" * 64, runs=runs)
+    with pytest.raises(FovexpError, match="changed since session 20260101-000000 started"):
+        choose_session(tmp_path, lp, "P01", **{**kw, "resume": True})
+
+
+def test_done_trials_and_attempts_from_the_logs(tmp_path: Path) -> None:
+    """Trials done: the rows of this session only. Attempts: the session file's count, or
+    more where the frame or blanking log saw a later attempt (its start killed before the
+    session file said so); a torn last line is skipped."""
+    from fovexp.experiment.logs import TRIAL_COLUMNS, TrialLog
+
+    log = TrialLog(tmp_path / "trials.csv")
+    for sid, i in (("A", 0), ("A", 2), ("B", 1)):
+        r = dict.fromkeys(TRIAL_COLUMNS)
+        r.update(participant="P01", session=sid, experiment="calibration-fe",
+                 protocol_sha256="ab" * 32, trial_index=i, practice=False, repetition=0,
+                 image="scene-00", blur_rate=0.34, method="contrast", adjusted_parameter="f_e",
+                 f_e=0.1, start_value=0.2, final_value=0.1, response_time_s=1.5,
+                 wheel_events=4, blanked_fraction=0.0, dropped_frames=0, tracker="simulated",
+                 seed=1, software_version="0.1.0", timestamp="2026-01-01T00:00:00+00:00")
+        log.append(r)
+    assert done_trials(tmp_path / "trials.csv", "A") == {0, 2}
+    assert done_trials(tmp_path / "missing.csv", "A") == set()
+    (tmp_path / "frames-A.csv").write_text("trial_index,attempt,frame\n0,0,0\n3,1,0\n3,")
+    (tmp_path / "blanking-A.csv").write_text("trial_index,attempt,start_s\n4,2,0.1\n")
+    got = attempts_so_far(tmp_path, "A", {"attempts": {"0": 1, "3": 1}})
+    assert got == {0: 1, 3: 2, 4: 3}
+    assert attempts_so_far(tmp_path, "B", {}) == {}

@@ -472,6 +472,29 @@ def test_check_lists_every_image_and_exits_2_on_a_refusal(tmp_path: Path, capsys
         assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
 
 
+def test_check_takes_several_protocols(tmp_path: Path, capsys) -> None:
+    """``fovexp stimuli check protocols/*.yaml``: each protocol's table in turn; exit 0 only
+    when every one passes; a protocol that cannot be read is one error line, the others are
+    still checked."""
+    disp = tiny_display(tmp_path)
+    lab = tmp_path / "lab"
+    assert cli(capsys, ["stimuli", "generate", "--display", str(disp), "--only",
+                        "scene-00,scene-01", "--stimuli", str(lab)]).returncode == 0
+    p0 = protocol_with(tmp_path / "p0", ["scene-00"], display=str(disp))
+    p1 = protocol_with(tmp_path / "p1", ["scene-01"], display=str(disp))
+    r = cli(capsys, ["stimuli", "check", str(p0), str(p1), "--stimuli", str(lab)])
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert r.stdout.count("all 1 images can be shown by a real session") == 2
+    assert r.stdout.count("protocol ") == 2
+    p2 = protocol_with(tmp_path / "p2", ["scene-02"], display=str(disp))  # not generated
+    r = cli(capsys, ["stimuli", "check", str(p0), str(p2), str(p1), "--stimuli", str(lab)])
+    assert r.returncode == 2 and r.stdout.count("can be shown by a real session") == 2
+    assert "1 of 1 images would be refused" in r.stdout
+    r = cli(capsys, ["stimuli", "check", "no-such-protocol", str(p1), "--stimuli", str(lab)])
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1
+    assert "can be shown by a real session" in r.stdout
+
+
 def test_from_any_folder(tmp_path: Path) -> None:
     """From a folder with no ./stimuli and no $FOVEXP_STIMULI, the commands share the per-user
     data folder: generate, then check the shipped validation protocol by name."""

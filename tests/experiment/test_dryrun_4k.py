@@ -1,0 +1,141 @@
+"""Issue 9, "Done when": a 4K dry run of the validation protocol (``--window 3840x2160`` in a
+3840x2160 X screen, the scenes generated at 3840x2160, nothing scaled) writes frame logs whose
+blanking rule and ``final_value`` rule hold, checked from the logs alone with the checkers of
+:mod:`fovexp.results.frames` (tested on synthetic and doctored logs in
+tests/results/test_frames.py); and ``fovexp stimuli check protocols/*.yaml --display
+lg-oled55cx`` passes after ``fovexp stimuli generate --display lg-oled55cx``.
+
+The protocol is a short copy of the shipped validation protocol (one scene, both methods: two
+trials) with a simulated participant whose answer is two wheel steps away: on a 2-core machine
+without a GPU each 4K render takes seconds and Xvfb draws a few 4K frames a second, so the
+shipped truth (0.4 and 0.6, 20-30 steps) would take tens of minutes.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+
+from fovexp.experiment.logs import read_trials
+from fovexp.results.frames import (
+    final_value_violations,
+    latency_summary,
+    read_frame_log,
+    unblanked_violations,
+)
+
+from experiment_helpers import _free_display, make_workspace, run_cli
+
+pytestmark = [pytest.mark.gui, pytest.mark.slow]
+
+W, H = 3840, 2160
+
+
+@pytest.fixture(scope="module")
+def xvfb_4k():
+    """A private Xvfb whose screen is 3840x2160 (the shared one is smaller than the window)."""
+    pytest.importorskip("psychopy", reason="PsychoPy is not installed (fovexp[experiment])")
+    exe = shutil.which("Xvfb")
+    if exe is None:
+        pytest.skip("Xvfb is not installed (apt-get install xvfb)")
+    n = _free_display()
+    proc = subprocess.Popen([exe, f":{n}", "-screen", "0", f"{W}x{H}x24", "-nolisten", "tcp"],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    sock = Path(f"/tmp/.X11-unix/X{n}")
+    for _ in range(100):
+        if sock.exists() or proc.poll() is not None:
+            break
+        time.sleep(0.05)
+    if proc.poll() is not None or not sock.exists():
+        proc.kill()
+        pytest.fail(f"Xvfb :{n} did not start")
+    try:
+        yield f":{n}"
+    finally:
+        proc.terminate()
+        try:
+            proc.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+
+
+def test_validation_dry_run_at_4k_keeps_the_logging_rules(tmp_path: Path, xvfb_4k: str) -> None:
+    ws = make_workspace(tmp_path / "ws")
+    path = ws / "protocols" / "validation.yaml"
+    spec = yaml.safe_load(path.read_text())
+    spec.update(images=["scene-05"], practice_trials=0)
+    path.write_text(yaml.safe_dump(spec))
+    stim = tmp_path / "stimuli"
+    r = run_cli(["stimuli", "generate", "--size", f"{W}x{H}", "--only", "scene-05",
+                 "--stimuli", str(stim)], cwd=ws)
+    assert r.returncode == 0, r.stderr
+    (ws / "truth.yaml").write_text("validation_blur_rate: {contrast: 0.04, ours: 0.04}\n")
+    r = run_cli(["run", "protocols/validation.yaml", "--participant", "K01", "--dry-run",
+                 "--window", f"{W}x{H}", "--stimuli", str(stim), "--backend", "cpu",
+                 "--sim-speed", "40", "--sim-truth", "truth.yaml", "--sim-noise-scale", "0"],
+                cwd=ws, timeout=1200, env_update={"DISPLAY": xvfb_4k})
+    assert r.returncode == 0, r.stderr[-3000:]
+    folder = ws / "results" / "validation" / "K01"
+    rows, _ = read_trials(folder / "trials.csv")
+    assert len(rows) == 2 and {r["method"] for r in rows} == {"contrast", "ours"}
+    (sid,) = {r["session"] for r in rows}
+    info = json.loads((folder / f"session-{sid}.json").read_text())
+    assert info["completed"] and info["stimuli"]["frame_size"] == [W, H]
+    assert info["stimuli"]["scaled"] == []  # the 4K scene as it is, not scaled
+    frames = read_frame_log(folder / f"frames-{sid}.csv")
+    assert len(frames) >= 4 and (frames["blanked"] == 0).any()
+    print(f"4K dry run: {len(frames)} frames, latency {latency_summary(frames)}")
+    # the blanking rule: no frame drawn with the stimulus whose newest sample was invalid,
+    # beyond 1.25 deg, or older than the gaze timeout when the frame was decided. A frame is
+    # decided after the previous flip; an attempt's first frame has none in the log, and its
+    # sample may be older by its drawing time: in a 4K software-rendered Xvfb window that is
+    # hundreds of ms, bounded here by the longest flip-to-flip interval of the run.
+    period_s = 1 / info["display_check"]["refresh_hz"]
+    slack_s = max(2 * period_s, float(frames["interval_s"].max()))
+    fix = spec["fixation"]
+    timeout_s = fix.get("gaze_timeout_s", 0.05)
+    bad = unblanked_violations(frames, fix["radius_deg"], timeout_s, slack_s)
+    assert bad.empty, bad.to_string()
+    # not vacuous on this log: a shown frame doctored to a sample beyond 1.25 deg is caught
+    shown = frames.index[frames["blanked"] == 0][-1]
+    doctored = frames.copy()
+    doctored.loc[shown, "gaze_ecc_deg"] = 1.3
+    assert len(unblanked_violations(doctored, fix["radius_deg"], timeout_s, slack_s)) == 1
+    # what is logged is what was on screen: the last frame before Enter shows final_value
+    bad = final_value_violations(frames, rows)
+    assert bad.empty, bad.to_string()
+    # the checker is not vacuous on this log: a doctored final_value is caught
+    doctored = [{**r, "final_value": r["final_value"] + 0.02} for r in rows]
+    assert len(final_value_violations(frames, doctored)) == 2
+
+
+def test_generate_then_check_every_protocol_at_the_display(tmp_path: Path) -> None:
+    """All fifteen scenes at the display's 3840x2160 (pinned sha256), then every shipped
+    protocol checked at once for a real session on that display: exit 0."""
+    ws = make_workspace(tmp_path / "ws")
+    stim = tmp_path / "stimuli"
+    t0 = time.monotonic()
+    r = run_cli(["stimuli", "generate", "--display", "lg-oled55cx", "--stimuli", str(stim)],
+                cwd=ws, timeout=900)
+    assert r.returncode == 0, r.stderr
+    print(f"generate --display lg-oled55cx: {time.monotonic() - t0:.1f} s "
+          f"({os.cpu_count()} CPUs)")
+    assert len(list((stim / "generated" / f"{W}x{H}").glob("scene-*.png"))) == 15
+    protocols = sorted(str(p.relative_to(ws)) for p in (ws / "protocols").glob("*.yaml"))
+    assert len(protocols) == 4
+    r = run_cli(["stimuli", "check", *protocols, "--display", "lg-oled55cx",
+                 "--stimuli", str(stim)], cwd=ws)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert r.stdout.count("can be shown by a real session") == 4
+    # one missing scene makes the whole check fail, naming the fix
+    (stim / "generated" / f"{W}x{H}" / "scene-07.png").unlink()
+    r = run_cli(["stimuli", "check", *protocols, "--display", "lg-oled55cx",
+                 "--stimuli", str(stim)], cwd=ws)
+    assert r.returncode == 2 and "fovexp stimuli generate" in r.stdout
