@@ -121,7 +121,8 @@ FP64_DIVISION = 10
 
 #: What one invocation of each entry is (its work group's threads)
 INVOCATION_UNITS = {
-    "LINEARIZE": "px", "SIGMA": "px", "REDUCE": "level sample", "STACK_INIT": "px",
+    "LINEARIZE": "px", "TILE_EXTREMES": "px", "SIGMA": "px", "REDUCE": "level sample",
+    "STACK_INIT": "px",
     "BLUR": "level sample, needed groups", "STACK_ACCUMULATE": "px, needed tiles",
     "LUMINANCE": "px", "ABS_LAPLACIAN": "level sample", "BOX3": "level sample",
     "SOBEL": "level-3 sample", "SAT_ROWS": "padded row", "SAT_COLS": "padded column",
@@ -263,6 +264,10 @@ def frame_costs(width: int = 3840, height: int = 2160, channels: int = 3, impuls
             f.add("REDUCE", "foveated", dst, 4 * c * (src + dst), 60 * c * dst)
         levels = plan.sigmas_px
         n_lv = levels.size
+        # TILE_EXTREMES (skipping): each tile's min and max per channel of the linear image,
+        # a shared-memory tree (2 compares per sample and channel)
+        f.add("TILE_EXTREMES", "foveated", n_px, 4 * c * n_px + 8 * c * n_px / tile**2,
+              2 * c * n_px)
         # STACK_INIT: the bracketing search over the levels, t, level 0's weight per channel
         f.add("STACK_INIT", "foveated", n_px, (4 + 8 + 8 * c) * n_px,
               (n_lv + 4 + 2 * c) * n_px, n_px)
@@ -294,6 +299,8 @@ def frame_costs(width: int = 3840, height: int = 2160, channels: int = 3, impuls
         facts["blur_samples_per_px"] = round(blur_samples / n_px, 2)
 
     f.add("LUMINANCE", "luma", n_px, (4 * c + 4) * n_px, (5 if c == 3 else 0) * n_px)
+    # the luminance's tile extremes, which the |L|, contrast and noise early exits read
+    f.add("TILE_EXTREMES", "luma", n_px, 4 * n_px + 8 * n_px / tile**2, 2 * n_px)
     luma = [(h, w)]
     while len(luma) <= MAX_LAPLACIAN_LEVEL and min(luma[-1]) >= 2:
         luma.append(((luma[-1][0] + 1) // 2, (luma[-1][1] + 1) // 2))

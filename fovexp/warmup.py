@@ -42,10 +42,11 @@ def _textured(h: int, w: int, channels: int) -> np.ndarray:
 def _exercise() -> None:
     """Every path of the CPU enhancer that reaches a kernel, on small frames: foveation
     (simulated, given as a blur-rate or a sigma map), contrast, noise, every map, both presets
-    and the viewing-geometry models, colour and grey, full screen and a viewport."""
+    and the viewing-geometry models, colour and grey, full screen and a viewport, a frame with
+    flat regions (skipping), and the engine options' float64 and variant paths."""
     from .foveation import foveate_exact
     from .geometry import load_display
-    from .params import EnhanceParams
+    from .params import EngineOptions, EnhanceParams
     from .pipeline import MAP_NAMES, Enhancer
 
     display = load_display("lg-oled55cx")
@@ -72,6 +73,22 @@ def _exercise() -> None:
     enh.set_image(frame, sigma_px=sigma, viewport=viewport)
     enh.enhance((0.5, 0.5), EnhanceParams(impulses=4))
     foveate_exact(frame[:8, :8], sigma[:8, :8])  # the reference the benchmarks measure against
+    # Skipping's own kernels (flat blocks left out of the contrast and the foveation) run only
+    # on a frame with flat regions: sky, walls, black borders.
+    # (A frame filling the screen: its blur is small enough in its own pixels that whole
+    # blocks with their boxes lie in the flat half.)
+    mixed = _textured(96, 160, 3)
+    mixed[:, :80] = 0.5
+    enh.set_image(mixed)
+    enh.enhance((0.5, 0.5), EnhanceParams(impulses=4))
+    # The engine options' other paths (fovexp bench, the reference configuration): float64
+    # stages, exact extremes, the noise variants.
+    for options in (EngineOptions(dtype="float64", extremes="exact"),
+                    EngineOptions(impulse_count="jittered", weights="sign", cell_scale=0.5)):
+        enh = Enhancer(display, options=options)
+        for img, vp in ((frame, viewport), (mixed, None)):
+            enh.set_image(img, viewport=vp)
+            enh.enhance((0.5, 0.5), EnhanceParams(impulses=4))
 
 
 def kernels() -> dict[str, object]:

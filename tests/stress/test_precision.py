@@ -138,14 +138,14 @@ MARGIN_PX = 24  # the region's border, where the impulses outside the image are 
 @settings(max_examples=examples(0.5))
 @given(case=noise_cases())
 def test_noise_std_is_k_over_6(case):
-    """The noise at a constant K has std K / 6 (docs/METHOD.md, 5.9;
-    fovexp.gabor.normalisation) whatever the impulse count, count law, weights, cell size and
-    kernel truncation (a kernel cut closer than 0.01 loses energy, which the normalisation
-    makes up for: without that, 0.90 K / 6 at a cut of 0.5). Frequencies in the band's range 0.05 .. 0.5 cycles/px, random
-    orientations. Tolerance: 5 standard errors of the estimate, 5 * sqrt((0.7^2 / impulses) +
-    (1.3 / side)^2) (the second term: a Gaussian field's std measured over side^2 px, 0.6 % at
-    208 px), plus 0.5 % for the normalisation's fixed frequency (exp(-2 pi F^2 / a^2) at 0.05
-    cycles/px) and the truncation."""
+    """The noise at a constant K has std K / 6 (docs/METHOD.md, 5.9; fovexp.gabor.normalisation)
+    whatever the impulse count, count law, weights, cell size and kernel truncation (a
+    kernel cut closer than 0.01 loses energy, which the normalisation makes up for: without
+    that, 0.90 K / 6 at a cut of 0.5). Frequencies in the band's range 0.05 .. 0.5
+    cycles/px, random orientations. Tolerance: 5 standard errors of the estimate, 5 *
+    sqrt((0.7^2 / impulses) + (1.3 / side)^2) (the second term: a Gaussian field's std
+    measured over side^2 px, 0.6 % at 208 px), plus 0.5 % for the normalisation's fixed
+    frequency (exp(-2 pi F^2 / a^2) at 0.05 cycles/px) and the truncation."""
     n, opts, truncation, seed = case
     a = PAPER.gabor_a_cpp
     density = gabor.impulse_density(n, a)
