@@ -3,13 +3,14 @@ running ``python -m fovexp`` in a subprocess."""
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import shutil
 import subprocess
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
@@ -27,18 +28,15 @@ def _free_display() -> int:
     raise RuntimeError("no free X display number")
 
 
-@pytest.fixture(scope="session")
-def xvfb_display():
-    """A DISPLAY for PsychoPy windows: the existing one, or a private ``Xvfb`` started here."""
-    pytest.importorskip("psychopy", reason="PsychoPy is not installed (fovexp[experiment])")
-    if os.environ.get("DISPLAY"):
-        yield os.environ["DISPLAY"]
-        return
+@contextlib.contextmanager
+def private_xvfb(size: str = "1280x720") -> Iterator[str]:
+    """A private ``Xvfb`` with one ``size`` screen (24-bit) for the block: its DISPLAY name.
+    Skips when Xvfb is not installed; fails when it does not start."""
     exe = shutil.which("Xvfb")
     if exe is None:
-        pytest.skip("Xvfb is not installed (apt-get install xvfb) and DISPLAY is unset")
+        pytest.skip("Xvfb is not installed (apt-get install xvfb)")
     n = _free_display()
-    proc = subprocess.Popen([exe, f":{n}", "-screen", "0", "1280x720x24", "-nolisten", "tcp"],
+    proc = subprocess.Popen([exe, f":{n}", "-screen", "0", f"{size}x24", "-nolisten", "tcp"],
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     sock = Path(f"/tmp/.X11-unix/X{n}")
     for _ in range(100):
@@ -48,16 +46,29 @@ def xvfb_display():
     if proc.poll() is not None or not sock.exists():
         proc.kill()
         pytest.fail(f"Xvfb :{n} did not start")
-    os.environ["DISPLAY"] = f":{n}"
     try:
         yield f":{n}"
     finally:
-        del os.environ["DISPLAY"]
         proc.terminate()
         try:
             proc.wait(timeout=5)
         except subprocess.TimeoutExpired:
             proc.kill()
+
+
+@pytest.fixture(scope="session")
+def xvfb_display():
+    """A DISPLAY for PsychoPy windows: the existing one, or a private ``Xvfb`` started here."""
+    pytest.importorskip("psychopy", reason="PsychoPy is not installed (fovexp[experiment])")
+    if os.environ.get("DISPLAY"):
+        yield os.environ["DISPLAY"]
+        return
+    with private_xvfb() as display:
+        os.environ["DISPLAY"] = display
+        try:
+            yield display
+        finally:
+            del os.environ["DISPLAY"]
 
 
 def make_workspace(root: Path) -> Path:

@@ -15,8 +15,6 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
-import subprocess
 import time
 from pathlib import Path
 
@@ -31,7 +29,7 @@ from fovexp.results.frames import (
     unblanked_violations,
 )
 
-from experiment_helpers import _free_display, make_workspace, run_cli
+from experiment_helpers import make_workspace, private_xvfb, run_cli
 
 pytestmark = [pytest.mark.gui, pytest.mark.slow]
 
@@ -42,28 +40,8 @@ W, H = 3840, 2160
 def xvfb_4k():
     """A private Xvfb whose screen is 3840x2160 (the shared one is smaller than the window)."""
     pytest.importorskip("psychopy", reason="PsychoPy is not installed (fovexp[experiment])")
-    exe = shutil.which("Xvfb")
-    if exe is None:
-        pytest.skip("Xvfb is not installed (apt-get install xvfb)")
-    n = _free_display()
-    proc = subprocess.Popen([exe, f":{n}", "-screen", "0", f"{W}x{H}x24", "-nolisten", "tcp"],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    sock = Path(f"/tmp/.X11-unix/X{n}")
-    for _ in range(100):
-        if sock.exists() or proc.poll() is not None:
-            break
-        time.sleep(0.05)
-    if proc.poll() is not None or not sock.exists():
-        proc.kill()
-        pytest.fail(f"Xvfb :{n} did not start")
-    try:
-        yield f":{n}"
-    finally:
-        proc.terminate()
-        try:
-            proc.wait(timeout=5)
-        except subprocess.TimeoutExpired:
-            proc.kill()
+    with private_xvfb(f"{W}x{H}") as display:
+        yield display
 
 
 def test_validation_dry_run_at_4k_keeps_the_logging_rules(tmp_path: Path, xvfb_4k: str) -> None:
