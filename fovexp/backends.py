@@ -45,6 +45,10 @@ def make_enhancer(
     window's, so that its output can be drawn without a read-back); by default a standalone one
     through EGL. ``auto`` then judges that context (hardware or software).
 
+    ``options``: the :class:`~fovexp.EngineOptions` of either backend; the GPU implements
+    ``skip`` only, so ``auto`` takes the CPU for any other non-default option, and ``gpu``
+    refuses it by name.
+
     The enhancer's ``fallback_reason`` says why ``auto`` chose the CPU (None when it did not
     fall back: the GPU was chosen, or the CPU was asked for), so a caller can show it.
 

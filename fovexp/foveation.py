@@ -36,6 +36,7 @@ import numba
 import numpy as np
 
 from ._parallel import interleave
+from .errors import FovexpError
 from .geometry import arcmin_to_px
 from .jit import FASTMATH
 from .pyramids import (
@@ -48,6 +49,10 @@ from .pyramids import (
     level_scale,
 )
 
+#: The largest padded copy of the image the blur stack may make, past which the blur is far
+#: beyond any real display's (a 4K frame at the largest blur-rate, gaze in a corner: sigma
+#: 370 px, pad 2048 px, 0.55 GiB in float32; an 8K frame in float64 4.4 GiB).
+MAX_PADDED_BYTES = 8 * 2**30
 #: Gaussians are truncated at 4 sigma, as scipy.ndimage.gaussian_filter does.
 TRUNCATE_SIGMAS = 4.0
 
@@ -371,6 +376,15 @@ def _foveate(
     else:  # one block, never flat
         flat, shift = np.zeros((1, 1), np.bool_), 62
     pad, top = plan.pad_px, plan.top
+    padded_bytes = (img.shape[0] + 2 * pad) * (img.shape[1] + 2 * pad) * img.shape[2] \
+        * img.itemsize
+    if padded_bytes > MAX_PADDED_BYTES:
+        raise FovexpError(
+            f"the foveation's blur reaches sigma = {max_sigma:.4g} px on a {img.shape[1]}x"
+            f"{img.shape[0]} image: its padded copy would take {padded_bytes / 2**30:.3g} GiB "
+            f"(at most {MAX_PADDED_BYTES / 2**30:g}); the display profile's size, resolution "
+            "and viewing distance with the blur-rate give this blur"
+        )
     padded = np.pad(img, ((pad, pad), (pad, pad), (0, 0)), mode="edge") if pad else img
     pyramid = gaussian_pyramid(padded, top)
     pyramid[0] = img  # level 0 is read unpadded (its borders replicate by clamping)

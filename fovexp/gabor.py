@@ -249,6 +249,7 @@ def _splat_band(
     pa2 = math.pi * a * a
     step_q = math.exp(-2.0 * pa2)
     rr = int(math.ceil(r))
+    width = out.shape[1] - 2 * pad - nwin  # the image's columns
     for i in range(lo, hi):
         yi = ys[i]
         ya = max(y0, int(math.ceil(yi - r)))
@@ -256,6 +257,11 @@ def _splat_band(
         if ya > yb:
             continue
         xi = xs[i]
+        # a kernel that reaches no column of the image adds nothing to it; the border cells'
+        # impulses lie up to a cell past the edge, farther than a kernel cut closer than the
+        # default reaches, and their window would start past the padded row's end
+        if xi + r < 0.0 or xi - r > width - 1:
+            continue
         x0 = int(math.floor(xi)) - rr  # window start, image columns
         # x factor by recurrence (envelope ratio and carrier rotation); zero outside |d| <= r
         d = x0 - xi

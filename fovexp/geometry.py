@@ -37,7 +37,7 @@ from typing import Literal
 
 import numba
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from .config import read_yaml
 from .errors import FovexpError, validation_error
@@ -59,6 +59,10 @@ RELEASE_WIDTH_PX = 3840
 _DISPLAY_DIRS_ENV = "FOVEXP_DISPLAYS"
 
 
+#: The narrowest pixel a display profile may describe, width / height (and its inverse).
+MIN_PIXEL_ASPECT = 0.5
+
+
 class Display(BaseModel):
     """A display profile: what the viewing geometry and colour stages need to know."""
 
@@ -73,6 +77,20 @@ class Display(BaseModel):
     refresh_hz: float = Field(gt=0, le=1000)
     peak_luminance_cd_m2: float = Field(gt=0, le=100000)
     gamma: float = Field(gt=0.5, le=5.0)
+
+    @model_validator(mode="after")
+    def _square_pixels(self) -> Display:
+        # The geometry takes one pitch per axis; a profile whose pixels are far from square is
+        # a typo in its size or resolution (the paper's LG OLED55CX: 1.000), not a display.
+        aspect = (self.width_cm / self.width_px) / (self.height_cm / self.height_px)
+        if not MIN_PIXEL_ASPECT <= aspect <= 1.0 / MIN_PIXEL_ASPECT:
+            raise ValueError(
+                f"its pixels would be {aspect:.3g} times as wide as tall ({self.width_cm:g} x "
+                f"{self.height_cm:g} cm at {self.width_px} x {self.height_px} px); a display's "
+                f"are square to within a factor {1 / MIN_PIXEL_ASPECT:g}: check the size and "
+                "the resolution"
+            )
+        return self
 
     @property
     def horizontal_field_deg(self) -> float:

@@ -45,3 +45,15 @@ def test_foveation_leaves_sigma_zero_pixels_bit_exact():
     assert zero.sum() > 1000
     assert np.array_equal(out[zero], img[zero])
     assert np.abs(out[~zero] - img[~zero]).max() > 0.01  # and it does blur elsewhere
+
+
+def test_a_blur_beyond_any_display_is_refused_in_one_line(monkeypatch):
+    """A blur whose padded copy would not fit is one clear error, not a MemoryError."""
+    from fovexp import FovexpError, foveation
+
+    monkeypatch.setattr(foveation, "MAX_PADDED_BYTES", 2**20)
+    img = textured_image(64, 64, seed=1)
+    sigma = np.full((64, 64), 200.0, np.float32)  # pad 4 sigma: (64 + 1600)^2 x 3 x 4 bytes
+    with pytest.raises(FovexpError, match=r"blur reaches sigma = 200 px on a 64x64 image"):
+        foveate(img, sigma)
+    assert foveate(img, np.full((64, 64), 2.0, np.float32)).shape == img.shape

@@ -106,3 +106,17 @@ def test_display_profile_with_a_missing_field_names_it(tmp_path):
         load_display(p)
     with pytest.raises(FovexpError, match="not found"):
         load_display("no-such-display")
+
+
+def test_a_profile_with_pixels_far_from_square_is_refused(tmp_path):
+    """A profile's size and resolution must give pixels square to within a factor 2 (the
+    geometry takes one pitch per axis); the stress suite's 1 px, 0.001 x 1000 cm profile made
+    a blur of 36 864 px and ran out of memory instead of saying so."""
+    path = tmp_path / "typo.yaml"
+    good = load_display("lg-oled55cx").model_dump()
+    path.write_text("\n".join(f"{k}: {v}" for k, v in {**good, "height_cm": 0.68}.items()))
+    with pytest.raises(FovexpError,
+                       match=r"its pixels would be 101 times as wide as tall \(121.8 x 0.68"):
+        load_display(path)
+    path.write_text("\n".join(f"{k}: {v}" for k, v in {**good, "height_cm": 68.5}.items()))
+    assert load_display(path).height_cm == 68.5

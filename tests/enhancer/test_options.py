@@ -40,7 +40,9 @@ def test_defaults_are_the_method_and_bad_values_are_named():
     enh = make_enhancer(LG, backend="cpu", options=EngineOptions(dtype="float64"))
     assert enh.options.dtype == "float64"
     # the GPU implements skip only: "auto" takes the CPU for the rest
-    assert make_enhancer(LG, options=EngineOptions(weights="sign")).backend == "cpu"
+    auto = make_enhancer(LG, options=EngineOptions(weights="sign"))
+    assert auto.backend == "cpu"
+    assert auto.fallback_reason is not None  # said, never silent (the runner shows it)
 
 
 # ------------------------------------------------------------------------------- float64

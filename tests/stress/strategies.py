@@ -7,10 +7,11 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from hypothesis import settings
+from hypothesis import assume, settings
 from hypothesis import strategies as st
 
 from fovexp import PARAMETER_RANGES, Display, load_display
+from fovexp.geometry import MIN_PIXEL_ASPECT
 
 #: smallest image side the enhancer accepts (fovexp.pipeline.check_image)
 MIN_SIDE_PX = 16
@@ -141,11 +142,19 @@ def displays(draw):
     if draw(st.booleans()):
         return load_display("lg-oled55cx")
     cm = st.sampled_from([1e-3, 1.0, 1000.0]) | st.floats(1e-3, 1000.0)
+    width_px = draw(st.sampled_from([1, 3840, 32768]) | st.integers(1, 32768))
+    height_px = draw(st.sampled_from([1, 2160, 32768]) | st.integers(1, 32768))
+    width_cm = draw(cm)
+    # pixels square to within the factor geometry.MIN_PIXEL_ASPECT allows (a hair inside it:
+    # the size computed back from the aspect is rounded)
+    lo, hi = MIN_PIXEL_ASPECT * (1 + 1e-9), (1 - 1e-9) / MIN_PIXEL_ASPECT
+    aspect = draw(st.sampled_from([lo, 1.0, hi]) | st.floats(lo, hi))
+    height_cm = width_cm / width_px * height_px / aspect
+    assume(1e-3 <= height_cm <= 1000.0)
     return Display(
         name="stress",
-        width_px=draw(st.sampled_from([1, 3840, 32768]) | st.integers(1, 32768)),
-        height_px=draw(st.sampled_from([1, 2160, 32768]) | st.integers(1, 32768)),
-        width_cm=draw(cm), height_cm=draw(cm), distance_cm=draw(cm),
+        width_px=width_px, height_px=height_px,
+        width_cm=width_cm, height_cm=height_cm, distance_cm=draw(cm),
         refresh_hz=draw(st.floats(1.0, 1000.0)),
         peak_luminance_cd_m2=draw(st.floats(1.0, 100000.0)),
         gamma=draw(st.sampled_from([math.nextafter(0.5, 1.0), 1.0, 2.2, 5.0])
