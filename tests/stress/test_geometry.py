@@ -54,7 +54,12 @@ def test_any_display_profile_keeps_every_invariant(display, case, kw, gaze, data
     img = case.image()
     enh = Enhancer(loaded, preset=kw["preset"])
     enh.set_image(img, viewport=data.draw(viewports(case.height, case.width)))
-    check_result(enh, enh.enhance(gaze, make_params(**kw)), img)
+    try:
+        res = enh.enhance(gaze, make_params(**kw))
+    except FovexpError as exc:  # a blur beyond any display's (a screen at 0.001 cm): one line
+        assert "blur reaches sigma" in str(exc) and "\n" not in str(exc), exc
+        return
+    check_result(enh, res, img)
 
 
 @given(x=gazes.map(lambda g: g[0]) | bad_coordinates, y=bad_coordinates, swap=st.booleans())
