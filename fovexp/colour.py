@@ -18,6 +18,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from ._parallel import power
 from .jit import FASTMATH
 
 #: BT.601 luma weights. The release's Y of YCbCr, normalised as (Y - 16/255) / (219/255), equals
@@ -38,12 +39,13 @@ def linearize(
     ``power``: ``v ** gamma`` (the display profile's gamma). ``release``: the release's
     ``((v + 0.055) / 1.055) ** 2.2`` (docs/METHOD.md, 5.1).
     """
+    scalar = np.dtype(dtype).type
+    if transfer != "release":  # straight from the input: no copy
+        return power(np.ascontiguousarray(encoded, dtype=dtype), scalar(gamma))
     out = np.array(encoded, dtype=dtype)  # a copy: worked on in place below
-    scalar = out.dtype.type
-    if transfer == "release":
-        out += scalar(_RELEASE_OFFSET)
-        out *= scalar(1.0 / (1.0 + _RELEASE_OFFSET))
-    return np.power(out, scalar(gamma), out=out)
+    out += scalar(_RELEASE_OFFSET)
+    out *= scalar(1.0 / (1.0 + _RELEASE_OFFSET))
+    return power(out, scalar(gamma), out)
 
 
 @numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
@@ -62,8 +64,8 @@ def encode(
 ) -> np.ndarray:
     """Inverse of :func:`linearize`, after adding up to two grey (H, W) images (the contrast
     change, the noise) to every channel; values outside [0, 1] are clipped first (a display
-    shows nothing else). One pass adds and clips, then NumPy's vectorised power. Float32, or
-    float64 when ``linear`` is."""
+    shows nothing else). One pass adds and clips, then NumPy's vectorised power (on
+    threads). Float32, or float64 when ``linear`` is."""
     lin = np.asarray(linear)
     if lin.dtype != np.float64:
         lin = lin.astype(np.float32, copy=False)
@@ -73,15 +75,14 @@ def encode(
     if grey:
         if len(grey) > 2:
             raise ValueError("encode adds at most two grey images")
-        a = np.ascontiguousarray(grey[0], dtype=dtype)
-        b = np.ascontiguousarray(grey[1], dtype=dtype) if len(grey) == 2 else (
-            np.zeros_like(a))
+        a = np.asarray(grey[0], dtype=dtype)  # views of padded rows (the noise) as they are
+        b = np.asarray(grey[1], dtype=dtype) if len(grey) == 2 else np.zeros(a.shape, dtype)
         three = lin.ndim == 3
         _add_grey_clip(np.ascontiguousarray(lin if three else lin[..., None]), a, b,
                        out if three else out[..., None])
     else:
         np.clip(lin, 0.0, 1.0, out=out)
-    np.power(out, scalar(1.0 / gamma), out=out)
+    power(out, scalar(1.0 / gamma), out)
     if transfer == "release":
         out *= scalar(1.0 + _RELEASE_OFFSET)
         out -= scalar(_RELEASE_OFFSET)

@@ -37,7 +37,7 @@ import numpy as np
 
 from ._parallel import interleave
 from .errors import FovexpError
-from .geometry import arcmin_to_px
+from .geometry import ViewingGeometry, arcmin_to_px
 from .jit import FASTMATH
 from .pyramids import (
     FLAT_BLOCK_LEVEL,
@@ -72,6 +72,19 @@ def sigma_px(
     np.maximum(out, 0.0, out=out)
     out *= dtype(blur_rate)  # arcmin
     return arcmin_to_px(out, ppd).astype(dtype, copy=False)
+
+
+def sigma_bound_px(
+    geom: ViewingGeometry, gaze_px: tuple[float, float], blur_rate: float, fovea_deg: float,
+) -> float:
+    """An upper bound of :func:`sigma_px` over the image without evaluating the map: sigma
+    grows with eccentricity and ppd, each largest at a corner
+    (:meth:`~fovexp.geometry.ViewingGeometry.max_eccentricity_and_ppd`); a relative margin of
+    1e-5 covers the map's float32 rounding. The blur stack and the contrast's boxes are sized
+    by it (both backends), so that the map need not be evaluated where the image is flat."""
+    ecc, ppd = geom.max_eccentricity_and_ppd(gaze_px)
+    bound = float(sigma_px(np.float64(ecc), np.float64(ppd), blur_rate, fovea_deg, np.float64))
+    return bound * (1.0 + 1e-5) + 1e-6
 
 
 #: Ratio of consecutive blur-stack sigmas past 1.5 px (the speed / error trade-off:
@@ -114,17 +127,34 @@ def _float_array(a: np.ndarray) -> np.ndarray:
     return a if a.dtype in (np.float32, np.float64) else a.astype(np.float32)
 
 
+#: A sigma map asked for block by block: ``sigma_on_blocks(need, shift)`` gives an (H, W) map
+#: that is the sigma map (px) on the ``2**shift`` px square blocks ``need`` marks (anything
+#: elsewhere), for the filters that know where their result is not needed (flat regions).
+SigmaOnBlocks = Callable[[np.ndarray, int], np.ndarray]
+
+
 def per_pixel_sigma(
-    linear: np.ndarray, sigma_map_px: np.ndarray, run: Callable[..., np.ndarray], *args: object
+    linear: np.ndarray, sigma_map_px: np.ndarray | SigmaOnBlocks,
+    run: Callable[..., np.ndarray], *args: object, max_sigma_px: float | None = None,
 ) -> np.ndarray:
     """Shared shell of the sigma-driven filters (foveation, contrast): run
-    ``run(image (H, W, C), sigma (H, W), max_sigma, *args)`` (float32, or float64 kept) and
-    give back the input's shape; an image with no sigma above 0 is returned as a copy,
-    untouched."""
+    ``run(image (H, W, C), sigma, max_sigma, *args)`` (float32, or float64 kept) and give
+    back the input's shape; an image with no sigma above 0 is returned as a copy, untouched.
+    ``max_sigma`` is ``max_sigma_px`` when given (an upper bound of the map), else the map's
+    maximum; ``sigma`` is the map, or a :data:`SigmaOnBlocks` (``max_sigma_px`` then
+    required) that ``run`` calls."""
     grey = linear.ndim == 2
     img = _float_array(linear[..., None] if grey else linear)
-    sigma = _float_array(sigma_map_px)
-    max_sigma = float(sigma.max()) if sigma.size else 0.0
+    if callable(sigma_map_px):
+        if max_sigma_px is None:
+            raise ValueError("a sigma map asked for by blocks needs max_sigma_px")
+        sigma = sigma_map_px
+    else:
+        sigma = _float_array(sigma_map_px)
+    if max_sigma_px is not None:
+        max_sigma = float(max_sigma_px)
+    else:
+        max_sigma = float(sigma.max()) if sigma.size else 0.0
     if max_sigma <= 0.0:
         return img[..., 0].copy() if grey else img.copy()
     out = run(img, sigma, max_sigma, *args)
@@ -237,8 +267,11 @@ def _foveate_bands(
             m = lvl_m[lv]
             sc = 1 << m
             off = pad if m > 0 else 0
-            ps, ph_, pw_ = pmeta[m, 0], pmeta[m, 1], pmeta[m, 2]
-            src = pbuf[ps : ps + ph_ * pw_ * c].reshape((ph_, pw_, c))
+            if m == 0:
+                src = img
+            else:
+                ps, ph_, pw_ = pmeta[m, 0], pmeta[m, 1], pmeta[m, 2]
+                src = pbuf[ps : ps + ph_ * pw_ * c].reshape((ph_, pw_, c))
             g = kbuf[kmeta[lv, 0] : kmeta[lv, 0] + 2 * kmeta[lv, 1] + 1]
             gap = 2 * kmeta[lv, 1] * sc + 32
             x = 0
@@ -294,8 +327,9 @@ BAND_ROWS = 32
 
 
 def foveate(
-    linear: np.ndarray, sigma_map_px: np.ndarray, ratio: float = STACK_RATIO,
+    linear: np.ndarray, sigma_map_px: np.ndarray | SigmaOnBlocks, ratio: float = STACK_RATIO,
     min_residual_px: float = MIN_RESIDUAL_LEVEL_PX, skip: bool = True,
+    max_sigma_px: float | None = None,
 ) -> np.ndarray:
     """Spatially varying Gaussian blur of a linear image, ``sigma_map_px`` per pixel (fast).
 
@@ -305,8 +339,14 @@ def foveate(
     exactly, in this arithmetic); with ``skip`` those are found from 8 x 8 block extremes and
     not computed (the result is the same bit for bit). ``ratio`` and ``min_residual_px``
     trade speed for accuracy; error against :func:`foveate_exact`: ``benchmarks/RESULTS.md``.
+
+    The blur stack covers sigmas up to ``max_sigma_px`` (at least the map's maximum; by
+    default that maximum). With it, ``sigma_map_px`` may be a :data:`SigmaOnBlocks`: the
+    map is then asked for only on the blocks that are not flat (all of them without
+    ``skip``).
     """
-    return per_pixel_sigma(linear, sigma_map_px, _foveate, ratio, min_residual_px, skip)
+    return per_pixel_sigma(linear, sigma_map_px, _foveate, ratio, min_residual_px, skip,
+                           max_sigma_px=max_sigma_px)
 
 
 @dataclass(frozen=True)
@@ -367,14 +407,18 @@ def _flat_blocks(img: np.ndarray, reach_px: int) -> np.ndarray:
 
 
 def _foveate(
-    img: np.ndarray, sigma: np.ndarray, max_sigma: float, ratio: float, min_residual_px: float,
-    skip: bool,
+    img: np.ndarray, sigma: np.ndarray | SigmaOnBlocks, max_sigma: float, ratio: float,
+    min_residual_px: float, skip: bool,
 ) -> np.ndarray:
     plan = blur_stack_plan(max_sigma, ratio, min_residual_px, img.dtype.type)
     if skip:
         flat, shift = _flat_blocks(img, plan.reach_px()), FLAT_BLOCK_LEVEL
     else:  # one block, never flat
         flat, shift = np.zeros((1, 1), np.bool_), 62
+    if callable(sigma):
+        if flat.all():  # every pixel is its input
+            return img.copy()
+        sigma = _float_array(sigma(~flat, shift))
     pad, top = plan.pad_px, plan.top
     padded_bytes = (img.shape[0] + 2 * pad) * (img.shape[1] + 2 * pad) * img.shape[2] \
         * img.itemsize
@@ -387,13 +431,15 @@ def _foveate(
         )
     padded = np.pad(img, ((pad, pad), (pad, pad), (0, 0)), mode="edge") if pad else img
     pyramid = gaussian_pyramid(padded, top)
-    pyramid[0] = img  # level 0 is read unpadded (its borders replicate by clamping)
+    # level 0 is the image itself, read unpadded (its borders replicate by clamping); the
+    # coarser levels go into one buffer (not the image: a copy of it would cost more)
     pmeta = np.zeros((top + 1, 3), dtype=np.int64)
     start = 0
-    for m, lvl in enumerate(pyramid):
+    for m, lvl in enumerate(pyramid[1:], start=1):
         pmeta[m] = (start, lvl.shape[0], lvl.shape[1])
         start += lvl.size
-    pbuf = np.concatenate([lvl.ravel() for lvl in pyramid])
+    pbuf = (np.concatenate([lvl.ravel() for lvl in pyramid[1:]]) if top
+            else np.zeros(0, img.dtype))
     kmeta = np.zeros((len(plan.kernels), 2), dtype=np.int64)
     start = 0
     for k, g in enumerate(plan.kernels):

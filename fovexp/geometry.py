@@ -39,6 +39,7 @@ import numba
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
+from ._parallel import interleave
 from .config import read_yaml
 from .errors import FovexpError, validation_error
 from .jit import FASTMATH
@@ -183,16 +184,26 @@ def _ppd_ufunc(ux, uy, d, pitch):  # pragma: no cover - compiled
 
 
 @numba.njit(parallel=True, cache=True, nogil=True, fastmath=FASTMATH)
-def _exact_grids(ux, uy, vx, vy, d, pitch):  # pragma: no cover - compiled
-    """Eccentricity and ppd of every pixel (float32), rows in parallel."""
+def _exact_grids(ux, uy, vx, vy, d, pitch, need, shift, ecc, ppd):  # pragma: no cover
+    """Eccentricity and ppd (float32), written into ``ecc`` and ``ppd`` at the pixels whose
+    ``2**shift`` square block ``need`` marks; rows in parallel, interleaved
+    (:func:`fovexp._parallel.interleave`: the blocks needed may be all in one part of the
+    frame)."""
     h, w = uy.shape[0], ux.shape[0]
-    ecc = np.empty((h, w), dtype=np.float32)
-    ppd = np.empty((h, w), dtype=np.float32)
-    for y in numba.prange(h):
-        for x in range(w):
-            ecc[y, x] = _angle_deg(ux[x], uy[y], vx, vy, d)
-            ppd[y, x] = _ppd_at(ux[x], uy[y], d, pitch)
-    return ecc, ppd
+    stride = interleave(h)
+    for i in numba.prange(h):
+        y = (i * stride) % h
+        by = y >> shift
+        for bx in range(need.shape[1]):
+            if not need[by, bx]:
+                continue
+            for x in range(bx << shift, min((bx + 1) << shift, w)):
+                ecc[y, x] = _angle_deg(ux[x], uy[y], vx, vy, d)
+                ppd[y, x] = _ppd_at(ux[x], uy[y], d, pitch)
+
+
+#: ``need`` and ``shift`` of :func:`_exact_grids` for every pixel: one block, the whole frame.
+_EVERY_PIXEL = (np.ones((1, 1), dtype=np.bool_), 62)
 
 
 @dataclass(frozen=True)
@@ -320,18 +331,46 @@ class ViewingGeometry:
         return _ppd_ufunc(ux, uy, self.distance_cm, pitch)
 
     def eccentricity_and_ppd_maps(
-        self, gaze_px: tuple[float, float]
+        self, gaze_px: tuple[float, float], need: np.ndarray | None = None, shift: int = 0,
+        out: tuple[np.ndarray, np.ndarray] | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         """Per-pixel eccentricity (deg) and pixels per degree, float32 (H, W): the same
-        formulas as :meth:`eccentricity_deg` and :meth:`ppd`, evaluated on the pixel grid."""
+        formulas as :meth:`eccentricity_deg` and :meth:`ppd`, evaluated on the pixel grid.
+
+        ``need``: a boolean map of ``2**shift`` px square blocks; the ``exact`` model then
+        evaluates only the pixels of the blocks it marks, the same values, and leaves the
+        others as they are: 0, or what ``out`` (two float32 (H, W) arrays, written in place
+        and returned) holds there. The other models evaluate every pixel."""
         x, y = self.grid()
         if self.model != "exact":
             ecc = self.eccentricity_deg(x, y, gaze_px).astype(np.float32)
-            return ecc, np.full(ecc.shape, self.ppd_constant, dtype=np.float32)
+            ppd = np.full(ecc.shape, self.ppd_constant, dtype=np.float32)
+            if out is None:
+                return ecc, ppd
+            out[0][...], out[1][...] = ecc, ppd
+            return out
         ux, uy = self._screen_cm(x[0], y[:, 0])
         vx, vy = self._screen_cm(np.float64(gaze_px[0]), np.float64(gaze_px[1]))
         pitch = math.sqrt(self.pitch_x_cm * self.pitch_y_cm)
-        return _exact_grids(ux, uy, float(vx), float(vy), self.distance_cm, pitch)
+        if need is None:
+            need, shift = _EVERY_PIXEL
+        # NumPy's zeros: pages the kernel does not write are never touched (calloc)
+        ecc, ppd = out if out is not None else (np.zeros(self.shape, dtype=np.float32),
+                                                np.zeros(self.shape, dtype=np.float32))
+        _exact_grids(ux, uy, float(vx), float(vy), self.distance_cm, pitch,
+                     np.ascontiguousarray(need, dtype=np.bool_), int(shift), ecc, ppd)
+        return ecc, ppd
+
+    def max_eccentricity_and_ppd(self, gaze_px: tuple[float, float]) -> tuple[float, float]:
+        """The largest eccentricity (deg) and px/deg over the image, float64: both are at
+        its corners. On a flat screen the points within an angle of the line of sight form
+        an ellipse (a plane cut through a cone), a convex set, so the angle is largest at a
+        corner of the rectangle; ppd grows with the eye-to-point distance, a convex function
+        (the ``linear`` and ``release`` models: a distance on the screen, convex too)."""
+        x = np.array([0.0, self.width_px - 1.0, 0.0, self.width_px - 1.0])
+        y = np.array([0.0, 0.0, self.height_px - 1.0, self.height_px - 1.0])
+        return (float(self.eccentricity_deg(x, y, gaze_px).max()),
+                float(np.max(self.ppd(x, y))))
 
     def grid(self) -> tuple[np.ndarray, np.ndarray]:
         """Broadcastable pixel-centre coordinates ``(x[None, :], y[:, None])``."""

@@ -48,9 +48,9 @@ from scipy import ndimage
 
 from . import amplitude as amp
 from . import colour, frequency, gabor, orientation, pyramids
-from .contrast import contrast_change
+from .contrast import contrast_change, contrast_change_where_needed
 from .errors import FovexpError
-from .foveation import foveate, foveate_exact, sigma_px
+from .foveation import SigmaOnBlocks, foveate, foveate_exact, sigma_bound_px, sigma_px
 from .geometry import Display, GeometryModel, ViewingGeometry
 from .params import EngineOptions, EnhanceParams, ParameterTable, Preset, get_preset
 from .pyramids import FLAT_BLOCK_LEVEL
@@ -235,6 +235,43 @@ class EnhanceResult:
             raise FovexpError("this result is stale: the enhancer has processed another frame")
 
 
+class _SigmaBlocks:
+    """The sigma map (px, section 5.2) of one geometry, gaze and blur-rate, evaluated block by
+    block as stages ask for blocks (:meth:`on`) and kept: the pixels evaluated are the whole
+    map's, bit for bit, and a frame sequence with the same gaze evaluates each block once.
+    :attr:`bound_px` bounds the whole map from above without evaluating it
+    (:func:`fovexp.foveation.sigma_bound_px`). Float32, the ``exact`` geometry model."""
+
+    def __init__(self, geom: ViewingGeometry, gaze, blur_rate: float, fovea_deg: float) -> None:
+        self._geom, self._gaze_px = geom, geom.gaze_px(gaze)
+        self._blur_rate, self._fovea_deg = blur_rate, fovea_deg
+        self.bound_px = sigma_bound_px(geom, self._gaze_px, blur_rate, fovea_deg)
+        self._grids: tuple[np.ndarray, np.ndarray] | None = None
+        self._sigma: np.ndarray | None = None
+        self.done: np.ndarray | None = None  # the blocks evaluated
+        self._shift = -1
+
+    def on(self, need: np.ndarray, shift: int) -> np.ndarray:
+        """The map, evaluated (at least) on the ``2**shift`` px blocks ``need`` marks; 0 where
+        nothing asked for it yet."""
+        shape = self._geom.shape
+        if self._sigma is None or shift != self._shift:
+            self._grids = (np.zeros(shape, np.float32), np.zeros(shape, np.float32))
+            self._sigma = np.zeros(shape, np.float32)
+            self.done, self._shift = np.zeros(need.shape, np.bool_), shift
+        todo = need & ~self.done
+        if todo.any():
+            ecc, ppd = self._geom.eccentricity_and_ppd_maps(self._gaze_px, todo, shift,
+                                                            self._grids)
+            rows, cols = np.flatnonzero(todo.any(axis=1)), np.flatnonzero(todo.any(axis=0))
+            box = (slice(rows[0] << shift, (rows[-1] + 1) << shift),
+                   slice(cols[0] << shift, (cols[-1] + 1) << shift))
+            # elementwise: the blocks evaluated before get the same values again
+            self._sigma[box] = sigma_px(ecc[box], ppd[box], self._blur_rate, self._fovea_deg)
+            self.done |= todo
+        return self._sigma
+
+
 class Enhancer:
     """Foveation simulation, contrast enhancement and noise enhancement of frames.
 
@@ -299,7 +336,8 @@ class Enhancer:
         c.stage("linear", ("image",), self._linear)
         c.stage("grids", ("geometry", "gaze"), self._grids)
         c.stage("sigma", ("sigma_given", "?grids", "blur_rate"), self._sigma)
-        c.stage("foveated", ("linear", "sigma", "already_foveated"), self._foveated)
+        c.stage("foveated", ("linear", "?sigma", "already_foveated", "?sigma_blocks"),
+                self._foveated)
         c.stage("luma", ("foveated",), colour.luminance)
         # level-3 block extremes of the luminance: where it is flat (skipping only)
         c.stage("luma_blocks", ("luma",), lambda luma: tuple(e[..., 0] for e in (
@@ -311,11 +349,14 @@ class Enhancer:
             pyramids.smoothed_abs_laplacian(pyr, len(pyr) - 1)))  # the maps'
         c.stage("gradients", ("pyramid",), lambda pyr: orientation.sobel_gradients(
             pyr[orientation.ORIENTATION_LEVEL]))
-        c.stage("contrast", ("luma", "sigma", "f_e", "?luma_blocks"), self._contrast)
+        # the sigma map's bound, and the map block by block as the stages that skip ask for it
+        c.stage("sigma_blocks", ("geometry", "gaze", "blur_rate"), self._sigma_blocks)
+        c.stage("contrast", ("luma", "?sigma", "f_e", "?luma_blocks", "?sigma_blocks"),
+                self._contrast)
         c.stage("headroom", ("foveated", "luma", "contrast"), self._headroom)
         c.stage("impulses", ("shape", "n_impulses", "seed"), self._impulses)
-        c.stage("imp_band", ("impulses", "geometry", "gaze", "sigma_given", "sigma",
-                             "blur_rate"), self._imp_band)
+        c.stage("imp_band", ("impulses", "geometry", "gaze", "sigma_given", "blur_rate"),
+                self._imp_band)
         c.stage("imp_active", ("imp_band", "?luma_blocks", "shape"), self._imp_active)
         c.stage("imp_frequency", ("imp_active", "impulses", "s_f"), self._imp_frequency)
         c.stage("imp_laplacian", ("imp_active", "abs_laplacian"), lambda b, lap:
@@ -436,12 +477,15 @@ class Enhancer:
         ecc, ppd = grids()
         return sigma_px(ecc, ppd, blur_rate, self.preset.fovea_deg, self._dtype)
 
-    def _foveated(self, linear, sigma, already_foveated) -> np.ndarray:
+    def _foveated(self, linear, sigma, already_foveated, sigma_blocks) -> np.ndarray:
         if already_foveated:
             return linear
         if self.options.foveation == "exact":
-            return foveate_exact(linear, sigma)
-        return foveate(linear, sigma, skip=self.options.skip)
+            return foveate_exact(linear, sigma())
+        # the blur stack covers sigmas up to the map's bound, with skipping and without
+        blocks = sigma_blocks()
+        source = self._sigma_source(sigma, sigma_blocks) if self.options.skip else sigma()
+        return foveate(linear, source, skip=self.options.skip, max_sigma_px=blocks.bound_px)
 
     def _abs_laplacian(self, pyr: list[np.ndarray], active: ImpulseParams) -> dict[int, np.ndarray]:
         """|L_k| of every level (section 4.2); when skipping, only on the tiles the active
@@ -479,12 +523,32 @@ class Enhancer:
             need[k] = mask
         return need
 
-    def _contrast(self, luma, sigma, f_e, luma_blocks) -> np.ndarray:
+    def _contrast(self, luma, sigma, f_e, luma_blocks, sigma_blocks) -> np.ndarray:
         """The change of luminance the contrast enhancement makes (grey, linear). The method
         processes luminance only (section 4.5): like the noise, this change is added to
         every channel of the foveated image. Skipping leaves out the blocks whose boxes are
-        flat (the change is exactly 0 there)."""
-        return contrast_change(luma, sigma, f_e, luma_blocks() if self.options.skip else None)
+        flat (the change is exactly 0 there), and asks for the sigma map only on the others
+        (:meth:`_sigma_source`)."""
+        if not self.options.skip:
+            return contrast_change(luma, sigma(), f_e)
+        source = self._sigma_source(sigma, sigma_blocks)
+        if not callable(source):
+            return contrast_change(luma, source, f_e, luma_blocks())
+        return contrast_change_where_needed(luma, source, sigma_blocks().bound_px, f_e,
+                                            luma_blocks())
+
+    def _sigma_source(self, sigma, sigma_blocks) -> np.ndarray | SigmaOnBlocks:
+        """The sigma map for a stage that skips flat blocks: the whole map when it is given,
+        already computed, or in float64 or a constant-ppd model; else evaluated block by
+        block as the stages ask (:class:`_SigmaBlocks`)."""
+        c = self._c
+        if (c.get("sigma_given") is not None or c.cached("sigma")
+                or self._dtype != np.float32 or c.get("geometry").model != "exact"):
+            return sigma()
+        return sigma_blocks().on
+
+    def _sigma_blocks(self, geom: ViewingGeometry, gaze, blur_rate: float) -> _SigmaBlocks:
+        return _SigmaBlocks(geom, gaze, blur_rate, self.preset.fovea_deg)
 
     def _headroom(self, foveated, luma, delta) -> tuple[str, np.ndarray, np.ndarray, int]:
         """Local minimum and maximum of the image the noise is added to (section 4.2).
@@ -525,7 +589,7 @@ class Enhancer:
         return gabor.generate_impulses(shape[1], shape[0], n, self.preset.gabor_a_cpp, seed,
                                        o.impulse_count, o.weights, o.cell_scale)
 
-    def _band_at(self, geom, gaze, sigma_given, sigma, blur_rate, x, y):
+    def _band_at(self, geom, gaze, sigma_given, blur_rate, x, y):
         """F_L, F_H and sigma at points (section 4.1): sigma exactly from the geometry when
         the foveation is simulated here, else sampled from the given sigma map."""
         ecc = geom.eccentricity_deg(x, y, geom.gaze_px(gaze))
@@ -534,16 +598,16 @@ class Enhancer:
             s = sigma_px(ecc, ppd, blur_rate, self.preset.fovea_deg, self._dtype)
             s = s.astype(np.float64)
         else:
-            s = pyramids.sample_bilinear(sigma, x, y, 0).astype(np.float64)
+            s = pyramids.sample_bilinear(sigma_given, x, y, 0).astype(np.float64)
         f_lo, f_hi = frequency.frequency_band_cpp(ecc, ppd, s)
         return s, f_lo, f_hi
 
-    def _imp_band(self, imp, geom, gaze, sigma_given, sigma, blur_rate) -> ImpulseParams:
+    def _imp_band(self, imp, geom, gaze, sigma_given, blur_rate) -> ImpulseParams:
         """The band at each impulse (section 4.1); when skipping, only the impulses whose band
         is open are kept (the others have no noise)."""
         x, y = imp.x_px, imp.y_px
         # impulses whose kernel cannot reach the image are dropped with the others
-        s, f_lo, f_hi = self._band_at(geom, gaze, sigma_given, sigma, blur_rate,
+        s, f_lo, f_hi = self._band_at(geom, gaze, sigma_given, blur_rate,
                                       np.clip(x, 0, geom.width_px - 1),
                                       np.clip(y, 0, geom.height_px - 1))
         open_ = f_lo < f_hi
@@ -675,7 +739,7 @@ class Enhancer:
         if name == "orientation_rad":
             gx, gy = c.get("gradients")
             return orientation.orientation_at(gx, gy, x, y, dtype=self._dtype).reshape(h, w)
-        s, f_lo, f_hi = self._band_at(geom, c.get("gaze"), c.get("sigma_given"), c.get("sigma"),
+        s, f_lo, f_hi = self._band_at(geom, c.get("gaze"), c.get("sigma_given"),
                                       c.get("blur_rate"), x, y)
         if name == "f_low_cpp":
             # +Inf where the blur removes nothing at this precision (sigma = 0, or so small

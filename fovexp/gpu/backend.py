@@ -31,7 +31,7 @@ from .. import gabor
 from ..amplitude import MAX_LAPLACIAN_LEVEL
 from ..contrast import check_sat_fits, sat_pad_px
 from ..errors import FovexpError
-from ..foveation import blur_stack_plan
+from ..foveation import blur_stack_plan, sigma_bound_px
 from ..geometry import Display, GeometryModel, ViewingGeometry
 from ..orientation import ORIENTATION_LEVEL
 from ..params import EngineOptions, ParameterTable, get_preset
@@ -403,7 +403,9 @@ class GpuEnhancer(Enhancer):
         return lin
 
     def _gpu_sigma(self, given, geom, gaze, blur_rate) -> float:
-        """The sigma map in its buffer; returns its maximum (px), which sizes the blur stack."""
+        """The sigma map in its buffer; returns what sizes the blur stack and the contrast's
+        boxes (px): the given map's maximum, else the CPU's bound of the map
+        (:func:`fovexp.foveation.sigma_bound_px`; no read-back)."""
         h, w, _ = self._hwc()
         sigma = self._buffer("SIGMA", h * w * _F4)
         tx, ty, _ = self._groups_2d(h, w)  # one tile per full-resolution work group
@@ -416,12 +418,10 @@ class GpuEnhancer(Enhancer):
             ranges = np.stack([blocks.min(axis=(1, 3)), blocks.max(axis=(1, 3))], axis=-1)
             tiles.write(ranges.astype(np.float32).tobytes())
             return float(given.max())
-        top = self._buffer("SIGMA_MAX", 16)
-        top.write(np.zeros(4, np.uint32).tobytes())
         self._run("foveation.glsl", "SIGMA", (tx, ty, 1),
-                  {"SIGMA": sigma, "SIGMA_MAX": top, "TILES": tiles}, size_wh=(w, h),
+                  {"SIGMA": sigma, "TILES": tiles}, size_wh=(w, h),
                   **self._geometry_uniforms())
-        return float(np.frombuffer(top.read(size=4), dtype=np.float32)[0])
+        return sigma_bound_px(geom, geom.gaze_px(gaze), blur_rate, self.preset.fovea_deg)
 
     def _gpu_foveated(self, linear: Any, max_sigma: float, already_foveated: bool) -> Any:
         """foveation.foveate: the blur stack of foveation.blur_stack_plan."""

@@ -38,7 +38,7 @@ SHADER_DIR = Path(__file__).resolve().parent / "shaders"
 
 #: Storage-buffer binding points, one per buffer the stages exchange.
 BINDINGS: dict[str, int] = {name: i for i, name in enumerate((
-    "IMAGE", "LINEAR", "SIGMA", "SIGMA_MAX", "BLUR_SRC", "BLUR_DST", "KERNELS", "LEVELS",
+    "IMAGE", "LINEAR", "SIGMA", "BLUR_SRC", "BLUR_DST", "KERNELS", "LEVELS",
     "BRACKET", "FOVEATED", "REDUCE_SRC", "REDUCE_DST", "LUMA_PYR", "LAP_TMP", "ABSLAP",
     "GRADIENTS", "SAT", "CONTRAST", "EXTREMES", "HEADROOM", "IMPULSES", "QUANTILES", "CELLS",
     "IMP_PARAMS", "NOISE", "OUTPUT", "MAP", "TILES", "TILE_SRC", "FLAT_TILES", "FLAT_FLAGS",

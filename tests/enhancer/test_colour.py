@@ -10,3 +10,28 @@ from fovexp.colour import encode, linearize
 def test_transfer_round_trip(transfer):
     v = np.linspace(0, 1, 101, dtype=np.float32)
     assert np.abs(encode(linearize(v, 2.2, transfer), 2.2, transfer) - v).max() < 1e-5
+
+
+@pytest.mark.parametrize("n", [7, 65536 * 2 + 3, 3 * 1000 * 777])
+def test_the_power_on_threads_is_one_call_bit_for_bit(n):
+    import numba
+
+    from fovexp._parallel import power
+
+    x = np.random.default_rng(n).random(n, dtype=np.float32)
+    want = np.power(x, np.float32(1 / 2.2))
+    before = numba.get_num_threads()
+    try:
+        for threads in range(1, numba.config.NUMBA_NUM_THREADS + 1):
+            numba.set_num_threads(threads)
+            got = x.copy()
+            assert power(got, np.float32(1 / 2.2), got) is got
+            assert np.array_equal(got.view(np.uint32), want.view(np.uint32))
+            assert np.array_equal(power(x, np.float32(1 / 2.2)).view(np.uint32),
+                                  want.view(np.uint32))
+    finally:
+        numba.set_num_threads(before)
+    block = x[: n // 6 * 6].reshape(-1, 6)
+    strided = np.array(block, order="F")  # not C-contiguous (past one row): one call
+    assert np.array_equal(power(strided, np.float32(2.2), strided),
+                          np.power(block, np.float32(2.2)))

@@ -41,3 +41,31 @@ def test_contrast_interpolates_between_integer_levels_and_keeps_the_fovea():
     change = contrast_change(grey, ramp, 0.3)
     assert np.abs(change - (contrast_enhance(grey, ramp, 0.3) - grey)).max() < 1e-6
     assert np.all(change[:, 0] == 0)
+
+
+def test_the_contrast_asks_for_sigma_only_where_its_change_is_not_zero():
+    """contrast_change_where_needed reads the sigma map only on the blocks it asks for (NaN
+    elsewhere changes nothing) and gives contrast_change's result bit for bit."""
+    from fovexp import pyramids
+    from fovexp.contrast import contrast_change_where_needed
+
+    grey = textured_image(240, 320, rgb=False)
+    grey[:, 150:] = 0.25  # flat right part
+    yy, xx = np.mgrid[0:240, 0:320]
+    sigma = (0.02 * np.hypot(xx - 60, yy - 100)).astype(np.float32)
+    blocks = tuple(e[..., 0] for e in pyramids.channel_block_extremes(grey[..., None], 3))
+    asked = []
+
+    def on_blocks(need, shift):
+        asked.append(need.copy())
+        px = np.kron(need, np.ones((1 << shift, 1 << shift), bool))[:240, :320]
+        return np.where(px, sigma, np.nan).astype(np.float32)
+
+    got = contrast_change_where_needed(grey, on_blocks, float(sigma.max()), 0.3, blocks)
+    want = contrast_change(grey, sigma, 0.3, blocks)
+    assert np.array_equal(got.view(np.uint32), want.view(np.uint32))
+    assert len(asked) == 1 and 0.3 < asked[0].mean() < 0.8  # the flat part was not asked for
+    assert np.abs(want).max() > 1e-3
+    # a bound above the map's maximum reaches farther: the same result
+    got = contrast_change_where_needed(grey, on_blocks, 2 * float(sigma.max()), 0.3, blocks)
+    assert np.array_equal(got.view(np.uint32), want.view(np.uint32))

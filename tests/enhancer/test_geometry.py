@@ -120,3 +120,40 @@ def test_a_profile_with_pixels_far_from_square_is_refused(tmp_path):
         load_display(path)
     path.write_text("\n".join(f"{k}: {v}" for k, v in {**good, "height_cm": 68.5}.items()))
     assert load_display(path).height_cm == 68.5
+
+
+@pytest.mark.parametrize("viewport", [None, (1000, 300, 3840, 2160)])
+def test_grids_of_some_blocks_are_the_whole_grids_there(viewport):
+    """The eccentricity and ppd of the blocks asked for are the whole maps' values bit for
+    bit; the other pixels are left as they were."""
+    w, h = (600, 400) if viewport else (960, 540)
+    g = ViewingGeometry.for_image(LG, w, h, viewport=viewport)
+    gaze = g.gaze_px((0.37, 0.61))
+    ecc, ppd = g.eccentricity_and_ppd_maps(gaze)
+    rng = np.random.default_rng(4)
+    need = rng.random((-(-h // 8), -(-w // 8))) < 0.3
+    px = np.kron(need, np.ones((8, 8), bool))[:h, :w]
+    out = (np.full((h, w), -1.0, np.float32), np.full((h, w), -2.0, np.float32))
+    e2, p2 = g.eccentricity_and_ppd_maps(gaze, need, 3, out)
+    assert e2 is out[0] and p2 is out[1]
+    assert np.array_equal(e2[px], ecc[px]) and np.array_equal(p2[px], ppd[px])
+    assert (e2[~px] == -1.0).all() and (p2[~px] == -2.0).all()
+    e3, _ = g.eccentricity_and_ppd_maps(gaze, need, 3)
+    assert (e3[~px] == 0).all() and np.array_equal(e3[px], ecc[px])
+
+
+@pytest.mark.parametrize("model", ["exact", "linear", "release"])
+def test_the_largest_eccentricity_and_ppd_are_at_a_corner(model):
+    """What bounds the sigma map without evaluating it (the skipping's contrast stage): the
+    largest eccentricity and ppd of an image, for gazes inside and outside it."""
+    rng = np.random.default_rng(11)
+    for _ in range(12):
+        w, h = int(rng.integers(40, 400)), int(rng.integers(40, 300))
+        x0, y0 = int(rng.integers(0, 3840 - w)), int(rng.integers(0, 2160 - h))
+        g = ViewingGeometry.for_image(LG, w, h, model, (x0, y0, 3840, 2160))
+        gaze = g.gaze_px(tuple(rng.random(2)))
+        x, y = g.grid()
+        ecc = g.eccentricity_deg(x, y, gaze)
+        ppd = np.broadcast_to(g.ppd(x, y), ecc.shape)
+        e_max, p_max = g.max_eccentricity_and_ppd(gaze)
+        assert e_max == ecc.max() and p_max == ppd.max()

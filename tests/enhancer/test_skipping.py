@@ -186,8 +186,8 @@ def test_the_foveation_leaves_a_constant_region_exactly_as_it_is():
 
 def test_a_sequence_recomputes_only_what_depends_on_the_image(tmp_path):
     """`fovexp enhance frames/ out/` sets each frame on one enhancer with the same gaze and
-    parameters: the grids, sigma, the impulses and their band (none depends on the image) are
-    computed for the first frame only (the geometry, by set_image, too)."""
+    parameters: the sigma map's blocks, the impulses and their band (none depends on the
+    image) are computed for the first frame only (the geometry, by set_image, too)."""
     from fovexp import write_image
 
     for i in range(3):
@@ -195,9 +195,36 @@ def test_a_sequence_recomputes_only_what_depends_on_the_image(tmp_path):
     _, _, frames = iter_frames(tmp_path)
     enh = Enhancer(LG)
     p = EnhanceParams(blur_rate=0.34, impulses=12)
-    ran = [set(enh.enhance((0.5, 0.5), p, image=img).timings_s) for _, img, _ in frames]
-    independent = {"grids", "sigma", "impulses", "imp_band"}
+    ran, done = [], []
+    for _, img, _ in frames:
+        ran.append(set(enh.enhance((0.5, 0.5), p, image=img).timings_s))
+        done.append(enh._c.get("sigma_blocks").done.copy())
+    independent = {"sigma_blocks", "impulses", "imp_band"}
     assert independent <= ran[0]
-    for stages in ran[1:]:
+    assert not {"grids", "sigma"} & ran[0]  # the whole map: only when asked for
+    for stages, blocks in zip(ran[1:], done[1:], strict=True):
         assert not independent & stages
+        assert np.array_equal(blocks, done[0])  # a textured frame: every block, once
         assert {"linear", "foveated", "luma", "imp_active", "noise", "output"} <= stages
+
+
+def test_a_foveated_frame_evaluates_sigma_only_where_the_contrast_reads_it():
+    """A foveated frame described by its blur-rate: with skipping, nothing but the contrast
+    needs the sigma map, and it is evaluated on the blocks whose change is not 0 only, once
+    per gaze across a sequence; the output is the one without skipping (the tests above)."""
+    image = mixed_scene()
+    enh = Enhancer(LG)
+    p = EnhanceParams(blur_rate=0.57, impulses=12)
+    enh.set_image(image, foveated=True)
+    first = enh.enhance((0.5, 0.5), p)
+    assert not {"grids", "sigma"} & set(first.timings_s)
+    done = enh._c.get("sigma_blocks").done
+    assert 0.2 < done.mean() < 0.9  # the flat grey region was left out
+    enh.set_image(image.copy(), foveated=True)  # the next frame, the same gaze
+    enh.enhance((0.5, 0.5), p)
+    assert enh._c.get("sigma_blocks").done is done and "sigma_blocks" not in enh._c.timings_s
+    # the full map, asked for, is the same on the blocks evaluated
+    sigma_full = enh.enhance((0.5, 0.5), p).map("sigma_px")
+    px = np.kron(done, np.ones((8, 8), bool))[: image.shape[0], : image.shape[1]]
+    partial = enh._c.get("sigma_blocks").on(done, 3)
+    assert np.array_equal(_bits(partial[px]), _bits(sigma_full[px]))

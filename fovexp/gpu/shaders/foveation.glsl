@@ -18,11 +18,11 @@ float sigma_px(float ecc_deg, float ppd) {
 }
 
 #ifdef ENTRY_SIGMA
-// sigma per pixel from the geometry, and its maximum (the blur stack's extent)
+// sigma per pixel from the geometry, and each tile's range (the stack levels it needs); the
+// blur stack's extent is the CPU's bound of the map (foveation.sigma_bound_px)
 LOCAL_2D
 uniform ivec2 size_wh;
 layout(std430, binding = B_SIGMA) writeonly buffer Sigma { float sigma[]; };
-layout(std430, binding = B_SIGMA_MAX) buffer SigmaMax { uint sigma_max_bits; };
 layout(std430, binding = B_TILES) writeonly buffer Tiles { vec2 tiles[]; };
 shared uint group_min_bits, group_max_bits;
 void main() {
@@ -37,10 +37,9 @@ void main() {
         atomicMax(group_max_bits, floatBitsToUint(s));
     }
     barrier();
-    if (gl_LocalInvocationIndex == 0u) {  // the tile's sigma range, and one global atomic
+    if (gl_LocalInvocationIndex == 0u) {  // the tile's sigma range
         tiles[gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x] =
             vec2(uintBitsToFloat(group_min_bits), uintBitsToFloat(group_max_bits));
-        atomicMax(sigma_max_bits, group_max_bits);
     }
 }
 #endif
