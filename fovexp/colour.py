@@ -75,8 +75,10 @@ def encode(
     if grey:
         if len(grey) > 2:
             raise ValueError("encode adds at most two grey images")
-        a = np.asarray(grey[0], dtype=dtype)  # views of padded rows (the noise) as they are
-        b = np.asarray(grey[1], dtype=dtype) if len(grey) == 2 else np.zeros(a.shape, dtype)
+        # contiguous: on strided views the compiled loop measured 7x slower than a copy
+        a = np.ascontiguousarray(grey[0], dtype=dtype)
+        b = (np.ascontiguousarray(grey[1], dtype=dtype) if len(grey) == 2
+             else np.zeros(a.shape, dtype))
         three = lin.ndim == 3
         _add_grey_clip(np.ascontiguousarray(lin if three else lin[..., None]), a, b,
                        out if three else out[..., None])

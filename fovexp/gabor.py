@@ -349,8 +349,7 @@ def synthesize(
     ``frequency_cpp`` F per impulse, ``carrier_rad`` the carrier direction t per impulse.
     The kernels are cut where their envelope is ``truncation``. With ``skip``, impulses with
     zero amplitude (empty band, flat surround, no headroom) cost nothing; without, every
-    impulse is summed (adding exact zeros: the same result, for measuring the saving). The
-    result is a view of a buffer whose rows are padded on both sides (each row contiguous).
+    impulse is summed (adding exact zeros: the same result, for measuring the saving).
     """
     h, w = shape
     amp = impulses.weight * np.asarray(amplitude, np.float64) * normalisation(
@@ -372,5 +371,4 @@ def synthesize(
     out = np.zeros((h, w + 2 * pad + nwin), dtype=dtype)
     _splat(out, xs, ys, amp[keep], k * np.cos(t), k * np.sin(t), row_start, cell, r,
            gabor_a_cpp, BAND_ROWS, nwin, pad)
-    # the image's columns, a view (its rows are contiguous; a copy would cost a pass)
-    return out[:, pad : pad + w]
+    return np.ascontiguousarray(out[:, pad : pad + w])

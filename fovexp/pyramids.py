@@ -187,14 +187,14 @@ ABS_LAPLACIAN_TILE = 32
 
 
 @numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
-def _abs_laplacian_tiles(fine, coarse, need, tile):  # pragma: no cover - compiled
-    """``|fine - expand(coarse)|`` smoothed by a 3 x 3 mean (borders replicated), on the
-    ``tile`` x ``tile`` tiles where ``need`` is true; 0 elsewhere. A tile is computed with
-    a one-pixel border of the difference, so each value is the same whichever tiles run."""
+def _abs_laplacian_tiles(fine, coarse, need, tile, out):  # pragma: no cover - compiled
+    """``|fine - expand(coarse)|`` smoothed by a 3 x 3 mean (borders replicated), written into
+    ``out`` (zeros) on the ``tile`` x ``tile`` tiles where ``need`` is true. A tile is
+    computed with a one-pixel border of the difference, so each value is the same whichever
+    tiles run."""
     h, w = fine.shape
     wc = coarse.shape[1]
     th, tw = need.shape
-    out = np.zeros((h, w), dtype=fine.dtype)
     todo = np.flatnonzero(need.ravel())  # the tiles to compute, all of one cost
     for i in numba.prange(todo.shape[0]):
         ty, tx = todo[i] // tw, todo[i] % tw
@@ -254,7 +254,9 @@ def smoothed_abs_laplacian(
         mask = need.get(k) if need is not None else None
         if mask is None:
             mask = np.ones(tile_grid(fine.shape), dtype=np.bool_)
-        out[k] = _abs_laplacian_tiles(fine, coarse, mask, ABS_LAPLACIAN_TILE)
+        # NumPy's zeros: the tiles not computed are never touched (calloc)
+        out[k] = np.zeros(fine.shape, dtype=fine.dtype)
+        _abs_laplacian_tiles(fine, coarse, mask, ABS_LAPLACIAN_TILE, out[k])
     return out
 
 
@@ -409,12 +411,32 @@ def channel_block_extremes(image: np.ndarray, level: int) -> tuple[np.ndarray, n
     return _channel_block_extremes(np.ascontiguousarray(image), level_scale(level))
 
 
+@numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
+def _bilinear(grid, x, y, scale, out):  # pragma: no cover - compiled
+    """:func:`sample_bilinear`: each point's coordinates on the grid clamped to its extent
+    (borders held), then the two taps each way, in float64."""
+    h, w = grid.shape
+    for i in numba.prange(x.shape[0]):
+        fy = min(max(y[i] / scale, 0.0), h - 1.0)
+        fx = min(max(x[i] / scale, 0.0), w - 1.0)
+        iy = min(int(fy), max(h - 2, 0))
+        ix = min(int(fx), max(w - 2, 0))
+        ty, tx = fy - iy, fx - ix
+        iy1, ix1 = min(iy + 1, h - 1), min(ix + 1, w - 1)
+        top = (1.0 - tx) * np.float64(grid[iy, ix]) + tx * np.float64(grid[iy, ix1])
+        bottom = (1.0 - tx) * np.float64(grid[iy1, ix]) + tx * np.float64(grid[iy1, ix1])
+        out[i] = (1.0 - ty) * top + ty * bottom
+
+
 def sample_bilinear(grid: np.ndarray, x_px: np.ndarray, y_px: np.ndarray, level: int) -> np.ndarray:
     """Bilinear sample of a level-``level`` grid at full-resolution coordinates (borders held),
-    in the grid's dtype."""
-    s = float(level_scale(level))
-    return ndimage.map_coordinates(
-        grid, [np.asarray(y_px) / s, np.asarray(x_px) / s], order=1, mode="nearest")
+    in the grid's dtype (what ``scipy.ndimage.map_coordinates(order=1, mode="nearest")``
+    gives, to rounding; compiled, in parallel: the enhancer samples every impulse)."""
+    x = np.ascontiguousarray(x_px, dtype=np.float64).ravel()
+    y = np.ascontiguousarray(y_px, dtype=np.float64).ravel()
+    out = np.empty(x.shape, dtype=grid.dtype)
+    _bilinear(np.ascontiguousarray(grid), x, y, float(level_scale(level)), out)
+    return out.reshape(np.shape(x_px))
 
 
 def sample_nearest(grid: np.ndarray, x_px: np.ndarray, y_px: np.ndarray, block: int) -> np.ndarray:
