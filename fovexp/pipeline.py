@@ -272,6 +272,36 @@ class _SigmaBlocks:
         return self._sigma
 
 
+class _ImpulseBands:
+    """F_L, F_H and sigma (section 4.1) at the impulses, for one geometry, gaze, blur-rate and
+    sigma map, evaluated for the impulses asked for (:meth:`at`) and kept: the values are
+    those of evaluating every impulse (elementwise), and a frame sequence with the same gaze
+    evaluates each impulse once."""
+
+    def __init__(self, band_at: Callable[[np.ndarray, np.ndarray], tuple], x_px: np.ndarray,
+                 y_px: np.ndarray) -> None:
+        self._band_at, self._x, self._y = band_at, x_px, y_px
+        self._values = tuple(np.empty(len(x_px)) for _ in range(3))
+        self.done = np.zeros(len(x_px), dtype=np.bool_)
+
+    def at(self, index: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(sigma_px, f_low_cpp, f_high_cpp)`` of the impulses ``index`` (float64)."""
+        if not self.done.any() and len(index) == len(self.done):  # every impulse, at once
+            s, f_lo, f_hi = self._band_at(self._x, self._y)
+            for kept, v in zip(self._values, (s, f_lo, f_hi), strict=True):
+                kept[:] = v
+            self.done[:] = True
+            return s, f_lo, f_hi
+        todo = index[~self.done[index]]
+        if todo.size:
+            for kept, v in zip(self._values, self._band_at(self._x[todo], self._y[todo]),
+                               strict=True):
+                kept[todo] = v
+            self.done[todo] = True
+        s, f_lo, f_hi = (v[index] for v in self._values)
+        return s, f_lo, f_hi
+
+
 class Enhancer:
     """Foveation simulation, contrast enhancement and noise enhancement of frames.
 
@@ -355,9 +385,12 @@ class Enhancer:
                 self._contrast)
         c.stage("headroom", ("foveated", "luma", "contrast"), self._headroom)
         c.stage("impulses", ("shape", "n_impulses", "seed"), self._impulses)
-        c.stage("imp_band", ("impulses", "geometry", "gaze", "sigma_given", "blur_rate"),
-                self._imp_band)
-        c.stage("imp_active", ("imp_band", "?luma_blocks", "shape"), self._imp_active)
+        # the band per impulse, evaluated for the impulses asked for and kept (frame-free)
+        c.stage("imp_bands", ("impulses", "geometry", "gaze", "sigma_given", "blur_rate"),
+                self._imp_bands)
+        c.stage("imp_band", ("impulses", "imp_bands"), self._imp_band)
+        c.stage("imp_active", ("impulses", "?imp_band", "?imp_bands", "?luma_blocks", "shape",
+                               "sigma_given", "?sigma_blocks"), self._imp_active)
         c.stage("imp_frequency", ("imp_active", "impulses", "s_f"), self._imp_frequency)
         c.stage("imp_laplacian", ("imp_active", "abs_laplacian"), lambda b, lap:
                 amp.laplacian_amplitude_at(lap, b.level, b.x_px, b.y_px))
@@ -602,31 +635,62 @@ class Enhancer:
         f_lo, f_hi = frequency.frequency_band_cpp(ecc, ppd, s)
         return s, f_lo, f_hi
 
-    def _imp_band(self, imp, geom, gaze, sigma_given, blur_rate) -> ImpulseParams:
-        """The band at each impulse (section 4.1); when skipping, only the impulses whose band
-        is open are kept (the others have no noise)."""
-        x, y = imp.x_px, imp.y_px
+    def _imp_bands(self, imp, geom, gaze, sigma_given, blur_rate) -> _ImpulseBands:
         # impulses whose kernel cannot reach the image are dropped with the others
-        s, f_lo, f_hi = self._band_at(geom, gaze, sigma_given, blur_rate,
-                                      np.clip(x, 0, geom.width_px - 1),
-                                      np.clip(y, 0, geom.height_px - 1))
-        open_ = f_lo < f_hi
-        index = np.flatnonzero(open_) if self.options.skip else np.arange(len(imp))
+        return _ImpulseBands(
+            lambda x, y: self._band_at(geom, gaze, sigma_given, blur_rate, x, y),
+            np.clip(imp.x_px, 0, geom.width_px - 1), np.clip(imp.y_px, 0, geom.height_px - 1))
+
+    def _imp_band(self, imp, bands: _ImpulseBands) -> ImpulseParams:
+        """The band at every impulse (section 4.1); when skipping, only the impulses whose
+        band is open are kept (the others have no noise)."""
+        index = np.arange(len(imp))
+        return self._band_params(imp, index, *bands.at(index))
+
+    def _band_params(self, imp, index, s, f_lo, f_hi) -> ImpulseParams:
+        """:class:`ImpulseParams` of the impulses ``index``; when skipping, of those whose band
+        is open."""
+        x, y, open_ = imp.x_px[index], imp.y_px[index], f_lo < f_hi
         if self.options.skip:
-            x, y, s, f_lo, f_hi, open_ = (a[index] for a in (x, y, s, f_lo, f_hi, open_))
+            keep = np.flatnonzero(open_)
+            index, x, y, s, f_lo, f_hi, open_ = (
+                a[keep] for a in (index, x, y, s, f_lo, f_hi, open_))
         return ImpulseParams(index, x, y, s, f_lo, f_hi, open_,
                              amp.laplacian_level(s, self.preset.attenuation))
 
-    def _imp_active(self, band: ImpulseParams, luma_blocks, shape) -> ImpulseParams:
+    def _imp_active(self, imp, band, bands, luma_blocks, shape, sigma_given,
+                    sigma_blocks) -> ImpulseParams:
         """The impulses the amplitude, frequency and orientation are evaluated at. When
         skipping, those whose |L| samples read only a constant region of the luminance are
         left out: |L| is exactly 0 there, and so is K (section 4.2;
-        :func:`fovexp.amplitude.laplacian_reach_px`). Judged on the level-3 block extremes."""
-        if not self.options.skip or len(band.index) == 0:
-            return band
+        :func:`fovexp.amplitude.laplacian_reach_px`). Judged on the level-3 block extremes:
+        first at the reach of the largest sigma the frame can have (its bound), before the
+        band is evaluated at all (a block constant that far is constant nearer), then at each
+        impulse's own level."""
+        if not self.options.skip:
+            return band()
         lo, hi = luma_blocks()
         block = pyramids.level_scale(FLAT_BLOCK_LEVEL)
         top = max(min(amp.MAX_LAPLACIAN_LEVEL, pyramids.pyramid_depth(shape, 99)), 1)
+
+        def constant(k0: np.ndarray) -> np.ndarray:  # blocks constant as far as level k0 reads
+            radius = pyramids.blocks_reaching(amp.laplacian_reach_px(k0, top), block)
+            return pyramids.constant_blocks(lo, hi, int(np.asarray(radius).ravel()[0]))
+
+        everything = np.arange(len(imp))
+        if not constant(np.array([1])).any():  # nothing flat at the smallest reach: nothing is
+            return band()
+        bx = np.clip(imp.x_px, 0, shape[1] - 1).astype(np.int64) // block
+        by = np.clip(imp.y_px, 0, shape[0] - 1).astype(np.int64) // block
+        bound = (float(sigma_given.max()) if sigma_given is not None
+                 else sigma_blocks().bound_px)
+        k0_max, _ = amp.bracketing_levels(
+            amp.laplacian_level(np.array([bound]), self.preset.attenuation), top)
+        const = constant(k0_max)
+        index = np.flatnonzero(~const[by, bx]) if const.any() else everything
+        band = self._band_params(imp, index, *bands().at(index))
+        if len(band.index) == 0:
+            return band
         k0, _ = amp.bracketing_levels(band.level, top)
         levels = np.flatnonzero(np.bincount(k0, minlength=top + 1))  # the k0 present
         radii = np.asarray(pyramids.blocks_reaching(amp.laplacian_reach_px(levels, top), block))
@@ -637,9 +701,7 @@ class Enhancer:
             return band
         for k, r in zip(levels[1:], radii[1:], strict=True):
             const[k] = pyramids.constant_blocks(lo, hi, int(r))
-        bx = np.clip(band.x_px, 0, shape[1] - 1).astype(np.int64) // block
-        by = np.clip(band.y_px, 0, shape[0] - 1).astype(np.int64) // block
-        return band.subset(~const[k0, by, bx])
+        return band.subset(~const[k0, by[band.index], bx[band.index]])
 
     def _imp_frequency(self, band: ImpulseParams, imp, s_f: float) -> np.ndarray:
         """The per-impulse frequency draw (section 4.1) where the band is open; 0 elsewhere

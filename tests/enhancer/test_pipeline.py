@@ -127,7 +127,7 @@ def test_a_parameter_change_recomputes_only_what_depends_on_it(frame):
     r = enh.enhance((0.5, 0.5), p.model_copy(update={"method": "contrast", "f_e": 0.3}))
     assert set(r.timings_s) == {"output"}
     r = enh.enhance((0.5, 0.5), p.model_copy(update={"blur_rate": 0.4}))
-    assert {"sigma_blocks", "foveated", "pyramid", "imp_band"} <= set(r.timings_s)
+    assert {"sigma_blocks", "foveated", "pyramid", "imp_bands"} <= set(r.timings_s)
     assert "impulses" not in r.timings_s  # the same impulses for the whole sequence
 
 

@@ -106,6 +106,9 @@ def test_skipping_leaves_work_out():
     assert (k_all[left_out] == 0).all()
     need = on_enh._laplacian_need(on_enh._c.get("pyramid"), active)
     assert 0.1 < np.mean([m.mean() for m in need.values()]) < 0.9
+    # the impulses flat as far as the largest sigma reaches: their band is never evaluated
+    evaluated = on_enh._c.get("imp_bands").done
+    assert 0.5 < evaluated.mean() < 0.99 and evaluated[active.index].all()
 
 
 # ---------------------------------------------------------------- the arithmetic it relies on
@@ -199,7 +202,7 @@ def test_a_sequence_recomputes_only_what_depends_on_the_image(tmp_path):
     for _, img, _ in frames:
         ran.append(set(enh.enhance((0.5, 0.5), p, image=img).timings_s))
         done.append(enh._c.get("sigma_blocks").done.copy())
-    independent = {"sigma_blocks", "impulses", "imp_band"}
+    independent = {"sigma_blocks", "impulses", "imp_bands"}
     assert independent <= ran[0]
     assert not {"grids", "sigma"} & ran[0]  # the whole map: only when asked for
     for stages, blocks in zip(ran[1:], done[1:], strict=True):
