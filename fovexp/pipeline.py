@@ -673,12 +673,15 @@ class Enhancer:
         block = pyramids.level_scale(FLAT_BLOCK_LEVEL)
         top = max(min(amp.MAX_LAPLACIAN_LEVEL, pyramids.pyramid_depth(shape, 99)), 1)
 
-        def constant(k0: np.ndarray) -> np.ndarray:  # blocks constant as far as level k0 reads
-            radius = pyramids.blocks_reaching(amp.laplacian_reach_px(k0, top), block)
-            return pyramids.constant_blocks(lo, hi, int(np.asarray(radius).ravel()[0]))
+        memo: dict[int, np.ndarray] = {}
 
-        everything = np.arange(len(imp))
-        if not constant(np.array([1])).any():  # nothing flat at the smallest reach: nothing is
+        def constant(k0: int) -> np.ndarray:  # the blocks constant as far as level k0 reads
+            radius = int(pyramids.blocks_reaching(int(amp.laplacian_reach_px(k0, top)), block))
+            if radius not in memo:
+                memo[radius] = pyramids.constant_blocks(lo, hi, radius)
+            return memo[radius]
+
+        if not constant(1).any():  # nothing flat at the smallest reach: nothing is
             return band()
         bx = np.clip(imp.x_px, 0, shape[1] - 1).astype(np.int64) // block
         by = np.clip(imp.y_px, 0, shape[0] - 1).astype(np.int64) // block
@@ -686,21 +689,18 @@ class Enhancer:
                  else sigma_blocks().bound_px)
         k0_max, _ = amp.bracketing_levels(
             amp.laplacian_level(np.array([bound]), self.preset.attenuation), top)
-        const = constant(k0_max)
-        index = np.flatnonzero(~const[by, bx]) if const.any() else everything
+        const = constant(int(k0_max[0]))
+        index = np.flatnonzero(~const[by, bx]) if const.any() else np.arange(len(imp))
         band = self._band_params(imp, index, *bands().at(index))
         if len(band.index) == 0:
             return band
+        # per bracketing level present, the blocks around which the luminance is one constant
+        # as far as that level reads
         k0, _ = amp.bracketing_levels(band.level, top)
-        levels = np.flatnonzero(np.bincount(k0, minlength=top + 1))  # the k0 present
-        radii = np.asarray(pyramids.blocks_reaching(amp.laplacian_reach_px(levels, top), block))
-        # per bracketing level, the blocks around which the luminance is one constant that far
+        levels = np.flatnonzero(np.bincount(k0, minlength=top + 1))
         const = np.zeros((top + 1, *lo.shape), dtype=np.bool_)
-        const[levels[0]] = pyramids.constant_blocks(lo, hi, int(radii[0]))
-        if not const[levels[0]].any():  # nothing flat at the smallest reach: nothing is
-            return band
-        for k, r in zip(levels[1:], radii[1:], strict=True):
-            const[k] = pyramids.constant_blocks(lo, hi, int(r))
+        for k in levels:
+            const[k] = constant(int(k))
         return band.subset(~const[k0, by[band.index], bx[band.index]])
 
     def _imp_frequency(self, band: ImpulseParams, imp, s_f: float) -> np.ndarray:
