@@ -246,16 +246,17 @@ class _SigmaBlocks:
         self._geom, self._gaze_px = geom, geom.gaze_px(gaze)
         self._blur_rate, self._fovea_deg = blur_rate, fovea_deg
         self.bound_px = sigma_bound_px(geom, self._gaze_px, blur_rate, fovea_deg)
-        self._grids: tuple[np.ndarray, np.ndarray] | None = None
-        self._sigma: np.ndarray | None = None
-        self.done: np.ndarray | None = None  # the blocks evaluated
+        # allocated when first asked for (NumPy's zeros: pages never written stay untouched)
+        self._grids = (np.zeros((0, 0), np.float32), np.zeros((0, 0), np.float32))
+        self._sigma = np.zeros((0, 0), np.float32)
+        self.done = np.zeros((0, 0), np.bool_)  # the blocks evaluated
         self._shift = -1
 
     def on(self, need: np.ndarray, shift: int) -> np.ndarray:
         """The map, evaluated (at least) on the ``2**shift`` px blocks ``need`` marks; 0 where
         nothing asked for it yet."""
         shape = self._geom.shape
-        if self._sigma is None or shift != self._shift:
+        if shift != self._shift or self.done.shape != need.shape:
             self._grids = (np.zeros(shape, np.float32), np.zeros(shape, np.float32))
             self._sigma = np.zeros(shape, np.float32)
             self.done, self._shift = np.zeros(need.shape, np.bool_), shift
@@ -676,7 +677,8 @@ class Enhancer:
         memo: dict[int, np.ndarray] = {}
 
         def constant(k0: int) -> np.ndarray:  # the blocks constant as far as level k0 reads
-            radius = int(pyramids.blocks_reaching(int(amp.laplacian_reach_px(k0, top)), block))
+            reach = int(amp.laplacian_reach_px(np.asarray(k0), top))
+            radius = int(pyramids.blocks_reaching(reach, block))
             if radius not in memo:
                 memo[radius] = pyramids.constant_blocks(lo, hi, radius)
             return memo[radius]
