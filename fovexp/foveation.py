@@ -79,12 +79,17 @@ def sigma_bound_px(
 ) -> float:
     """An upper bound of :func:`sigma_px` over the image without evaluating the map: sigma
     grows with eccentricity and ppd, each largest at a corner
-    (:meth:`~fovexp.geometry.ViewingGeometry.max_eccentricity_and_ppd`); a relative margin of
-    1e-5 covers the map's float32 rounding. The blur stack and the contrast's boxes are sized
-    by it (both backends), so that the map need not be evaluated where the image is flat."""
+    (:meth:`~fovexp.geometry.ViewingGeometry.max_eccentricity_and_ppd`). The margins cover
+    the map's float32 rounding: four float32 steps of the eccentricity (which matter where
+    the largest eccentricity is just past the fovea: e - fovea is then a few steps), a
+    relative 1e-4 for the products and 1e-3 px, which also cover a GPU's less exact
+    trigonometry (its map is not read back). The blur stack and the contrast's boxes are
+    sized by it (both backends), so that the map need not be evaluated where the image is
+    flat; a bound a little high only makes them reach a little farther."""
     ecc, ppd = geom.max_eccentricity_and_ppd(gaze_px)
+    ecc += 4.0 * float(np.spacing(np.float32(ecc)))
     bound = float(sigma_px(np.float64(ecc), np.float64(ppd), blur_rate, fovea_deg, np.float64))
-    return bound * (1.0 + 1e-5) + 1e-6
+    return bound * (1.0 + 1e-4) + 1e-3
 
 
 #: Ratio of consecutive blur-stack sigmas past 1.5 px (the speed / error trade-off:

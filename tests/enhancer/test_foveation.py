@@ -57,3 +57,33 @@ def test_a_blur_beyond_any_display_is_refused_in_one_line(monkeypatch):
     with pytest.raises(FovexpError, match=r"blur reaches sigma = 200 px on a 64x64 image"):
         foveate(img, sigma)
     assert foveate(img, np.full((64, 64), 2.0, np.float32)).shape == img.shape
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_the_sigma_bound_is_above_every_pixel_of_the_map(dtype):
+    """sigma_bound_px sizes the blur stack and the contrast's boxes without the map: it must
+    not fall below any pixel's sigma as the map computes it, also where the largest
+    eccentricity is only a few float32 steps past the fovea, at the largest blur-rate."""
+    from fovexp import load_display
+    from fovexp.foveation import sigma_bound_px, sigma_px
+    from fovexp.geometry import ViewingGeometry
+
+    lg = load_display("lg-oled55cx")
+    rng = np.random.default_rng(5)
+    for i in range(40):
+        w, h = int(rng.integers(16, 300)), int(rng.integers(16, 200))
+        x0, y0 = int(rng.integers(0, 3840 - w)), int(rng.integers(0, 2160 - h))
+        g = ViewingGeometry.for_image(lg, w, h, viewport=(x0, y0, 3840, 2160))
+        gaze = g.gaze_px(tuple(rng.random(2)))
+        fovea = float(rng.uniform(1.0, 40.0))
+        if i % 2:  # the largest eccentricity just past the fovea
+            ecc_max = g.max_eccentricity_and_ppd(gaze)[0]
+            fovea = float(np.nextafter(np.float32(ecc_max), np.float32(0)) - 1e-6 * i)
+        rate = float(rng.choice([0.34, 5.0]))
+        if dtype == np.float32:
+            ecc, ppd = g.eccentricity_and_ppd_maps(gaze)
+        else:
+            x, y = g.grid()
+            ecc, ppd = g.eccentricity_deg(x, y, gaze), g.ppd(x, y)
+        sigma = sigma_px(ecc, ppd, rate, fovea, dtype)
+        assert float(sigma.max()) <= sigma_bound_px(g, gaze, rate, fovea), (i, fovea)
