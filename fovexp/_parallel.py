@@ -18,6 +18,7 @@ colour stage spends most in (the transfer function's power, twice per frame) ove
 from __future__ import annotations
 
 import math
+import os
 import threading
 from concurrent.futures import ThreadPoolExecutor
 
@@ -56,6 +57,16 @@ def _threads() -> ThreadPoolExecutor:
             _pool = ThreadPoolExecutor(max_workers=numba.config.NUMBA_NUM_THREADS,
                                        thread_name_prefix="fovexp-power")
         return _pool
+
+
+def _forget_threads() -> None:
+    """In a forked child: the parent's pool threads do not exist there (work handed to them
+    would wait for ever), so the child makes its own."""
+    global _pool, _pool_lock
+    _pool, _pool_lock = None, threading.Lock()
+
+
+os.register_at_fork(after_in_child=_forget_threads)
 
 
 def power(a: np.ndarray, exponent: np.floating, out: np.ndarray | None = None) -> np.ndarray:

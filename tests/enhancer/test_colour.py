@@ -35,3 +35,19 @@ def test_the_power_on_threads_is_one_call_bit_for_bit(n):
     strided = np.array(block, order="F")  # not C-contiguous (past one row): one call
     assert np.array_equal(power(strided, np.float32(2.2), strided),
                           np.power(block, np.float32(2.2)))
+
+
+def test_the_power_works_in_a_forked_child():
+    """A process forked after the power ran on threads (scene generation forks workers) gets
+    its own threads: the work is done, not left waiting for the parent's."""
+    import multiprocessing
+
+    from fovexp._parallel import power
+
+    x = np.random.default_rng(1).random(1 << 18, dtype=np.float32)
+    want = np.power(x, np.float32(2.2))
+    assert np.array_equal(power(x, np.float32(2.2)), want)  # the parent's pool exists now
+    ctx = multiprocessing.get_context("fork")
+    with ctx.Pool(1) as pool:
+        got = pool.apply_async(power, (x, np.float32(2.2))).get(timeout=60)
+    assert np.array_equal(got, want)
