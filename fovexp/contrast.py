@@ -48,7 +48,7 @@ from ._parallel import interleave
 from .errors import FovexpError
 from .foveation import SigmaOnBlocks, _float_array, per_pixel_sigma
 from .jit import FASTMATH
-from .pyramids import FLAT_BLOCK_LEVEL, blocks_reaching, constant_blocks, level_scale
+from .pyramids import FLAT_BLOCK_LEVEL, blocks_reaching, level_scale
 
 #: Box-filter width per integer blur level (docs/METHOD.md, 5.3): level k averages ceil(4 k) px.
 BOX_WIDTH_PX_PER_LEVEL = 4
@@ -84,16 +84,12 @@ def _fixed(v):  # pragma: no cover - compiled
 
 
 @numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
-def _sat(img, pad, y0, y1, x0, x1):  # pragma: no cover - compiled
-    """Exact summed-area table (int64, leading zero row and column) of a grey image in fixed
-    point (:func:`_fixed`), padded by ``pad`` pixels with symmetric borders
-    (:func:`_symmetric`), over rows [y0, y1) and columns [x0, x1) of the padded image (the
-    sums start there: the boxes inside it are the same integers)."""
+def _sat_into(img, pad, y0, y1, x0, x1, s):  # pragma: no cover - compiled
+    """:func:`_sat`, written into ``s`` ((y1 - y0 + 1, x1 - x0 + 1) int64)."""
     h, w = img.shape
     hp, wp = y1 - y0, x1 - x0
     # every entry past the leading zero row and column is written below: no memset of the
     # whole table (tens of MB at 4K, on one thread)
-    s = np.empty((hp + 1, wp + 1), dtype=np.int64)
     s[0, :] = 0
     s[:, 0] = 0
     cols = np.empty(wp, dtype=np.int64)
@@ -113,6 +109,14 @@ def _sat(img, pad, y0, y1, x0, x1):  # pragma: no cover - compiled
             for x in range(x0, x1):
                 s[y, x] += s[y - 1, x]
     return s
+
+
+def _sat(img: np.ndarray, pad: int, y0: int, y1: int, x0: int, x1: int) -> np.ndarray:
+    """Exact summed-area table (int64, leading zero row and column) of a grey image in fixed
+    point (:func:`_fixed`), padded by ``pad`` pixels with symmetric borders
+    (:func:`_symmetric`), over rows [y0, y1) and columns [x0, x1) of the padded image (the
+    sums start there: the boxes inside it are the same integers)."""
+    return _sat_into(img, pad, y0, y1, x0, x1, np.empty((y1 - y0 + 1, x1 - x0 + 1), np.int64))
 
 
 def check_sat_fits(shape: tuple[int, int], pad: int, max_value: float) -> None:
@@ -159,10 +163,10 @@ def _pixel_change(img, sigma, sat, y, x, oy, ox, pad, f_e):  # pragma: no cover 
 
 
 @numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
-def _change(img, sigma, sat, oy, ox, pad, f_e, add_input):  # pragma: no cover - compiled
-    """:func:`_pixel_change` of every pixel (plus the input where ``add_input``)."""
+def _change(img, sigma, sat, oy, ox, pad, f_e, add_input, out):  # pragma: no cover - compiled
+    """:func:`_pixel_change` of every pixel (plus the input where ``add_input``), written
+    into ``out`` (img's shape)."""
     h, w = img.shape
-    out = np.empty_like(img)
     for y in numba.prange(h):
         for x in range(w):
             change = _pixel_change(img, sigma, sat, y, x, oy, ox, pad, f_e)
@@ -200,13 +204,12 @@ def _change_blocks(img, sigma, sat, oy, ox, pad, f_e, flat, shift, out):  # prag
     return out
 
 
-def _flat_blocks(grey_blocks, max_sigma: float) -> np.ndarray:
+def _flat_blocks(grey_flat: np.ndarray, max_sigma: float) -> np.ndarray:
     """Blocks whose every pixel's boxes lie in one constant region (change exactly 0), from
-    the grey image's block extremes ``(lo, hi)``."""
-    lo, hi = grey_blocks
+    the grey image's constant radius per level-3 block."""
     # the widest box reaches sat_pad_px from its pixel; symmetric padding reads inside it
     block = level_scale(FLAT_BLOCK_LEVEL)
-    return constant_blocks(lo, hi, blocks_reaching(sat_pad_px(max_sigma), block))
+    return grey_flat >= blocks_reaching(sat_pad_px(max_sigma), block)
 
 
 def _enhance_channels(img: np.ndarray, sigma: np.ndarray, max_sigma: float, f_e: float):
@@ -217,7 +220,8 @@ def _enhance_channels(img: np.ndarray, sigma: np.ndarray, max_sigma: float, f_e:
         plane = np.ascontiguousarray(img[..., ch])
         check_sat_fits(plane.shape, pad, float(plane.max()))
         sat = _sat(plane, pad, 0, h + 2 * pad, 0, w + 2 * pad)
-        out[..., ch] = _change(plane, sigma, sat, 0, 0, pad, f_e, True)
+        out[..., ch] = _change(plane, sigma, sat, 0, 0, pad, f_e, True,
+                               np.empty(plane.shape, plane.dtype))
     return out
 
 
@@ -238,27 +242,28 @@ def contrast_enhance(linear: np.ndarray, sigma_map_px: np.ndarray, f_e: float) -
 
 def contrast_change(
     grey: np.ndarray, sigma_map_px: np.ndarray, f_e: float,
-    grey_blocks: tuple[np.ndarray, np.ndarray] | None = None,
+    grey_flat: np.ndarray | None = None,
 ) -> np.ndarray:
     """``contrast_enhance(grey) - grey`` of an (H, W) linear luminance image, in one pass: the
     change the pipeline adds to every colour channel (the method works on luminance). Float32
     or float64 (the result has the image's dtype).
 
-    ``grey_blocks``: the image's level-3 block extremes (:func:`fovexp.pyramids.block_extremes`)
-    to leave out the blocks whose boxes all lie in one constant region, where the change is
-    exactly 0 (the enhancer's skipping; the result is the same bit for bit)."""
+    ``grey_flat``: how far around each level-3 block the image is one constant
+    (:func:`fovexp.pyramids.constant_radius_blocks` of its block extremes), to leave out the
+    blocks whose boxes all lie in one constant region, where the change is exactly 0 (the
+    enhancer's skipping; the result is the same bit for bit)."""
     img = _float_array(grey)
     sigma = _float_array(sigma_map_px)
     max_sigma = float(sigma.max()) if sigma.size else 0.0
     if max_sigma <= 0.0:
         return np.zeros(img.shape, dtype=img.dtype)
-    flat = _flat_blocks(grey_blocks, max_sigma) if grey_blocks is not None else None
+    flat = _flat_blocks(grey_flat, max_sigma) if grey_flat is not None else None
     return _change_outside(img, sigma, float(f_e), flat, max_sigma)
 
 
 def contrast_change_where_needed(
     grey: np.ndarray, sigma_on_blocks: SigmaOnBlocks, max_sigma_px: float, f_e: float,
-    grey_blocks: tuple[np.ndarray, np.ndarray],
+    grey_flat: np.ndarray,
 ) -> np.ndarray:
     """:func:`contrast_change` with skipping, asking for the sigma map only where the change
     is not known to be 0 (:data:`fovexp.foveation.SigmaOnBlocks`).
@@ -268,7 +273,7 @@ def contrast_change_where_needed(
     img = _float_array(grey)
     if max_sigma_px <= 0.0:
         return np.zeros(img.shape, dtype=img.dtype)
-    flat = _flat_blocks(grey_blocks, max_sigma_px)
+    flat = _flat_blocks(grey_flat, max_sigma_px)
     if flat.all():
         return np.zeros(img.shape, dtype=img.dtype)
     sigma = _float_array(sigma_on_blocks(~flat, FLAT_BLOCK_LEVEL))
@@ -286,7 +291,7 @@ def _change_outside(
     f_e = np.float64(f_e)
     if flat is None or not flat.any():  # nothing to leave out
         return _change(img, sigma, _sat(img, pad, 0, h + 2 * pad, 0, w + 2 * pad), 0, 0, pad,
-                       f_e, False)
+                       f_e, False, np.empty(img.shape, img.dtype))
     # the table only where the boxes of the pixels computed reach: their bounding box, and
     # pad around it (in the padded image's coordinates, [y_lo, y_hi + 2 pad])
     block = level_scale(FLAT_BLOCK_LEVEL)
@@ -297,6 +302,6 @@ def _change_outside(
     x0, x1 = min(cols[0] * block, w), min((cols[-1] + 1) * block, w) + 2 * pad
     sat = _sat(img, pad, y0, y1, x0, x1)
     # NumPy's zeros: the flat blocks' pages are never written (calloc)
-    out = np.zeros_like(img)
+    out = np.zeros(img.shape, dtype=img.dtype)
     _change_blocks(img, sigma, sat, y0, x0, pad, f_e, flat, FLAT_BLOCK_LEVEL, out)
     return out

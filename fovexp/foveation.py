@@ -37,7 +37,7 @@ import numpy as np
 
 from ._parallel import interleave
 from .errors import FovexpError
-from .geometry import ViewingGeometry, arcmin_to_px
+from .geometry import ARCMIN_PER_DEG, ViewingGeometry, _angle_deg, _ppd_at
 from .jit import FASTMATH
 from .pyramids import (
     FLAT_BLOCK_LEVEL,
@@ -65,13 +65,80 @@ def sigma_px(
 
     ``blur_rate`` is in arcmin per degree; ``ppd`` the local pixels per degree. With the
     release preset (fovea 12 deg, 42.67 px/deg) blur-rate 0.46875 gives the release's
-    "6 px at 30 deg". Float32 (or ``dtype``).
+    "6 px at 30 deg". Float32 (or ``dtype``): in float32, each step rounded as float32
+    arithmetic rounds it (:func:`_sigma_at`).
     """
-    out = np.array(ecc_deg, dtype=dtype)  # a copy, worked on in place
-    out -= dtype(fovea_deg)
-    np.maximum(out, 0.0, out=out)
-    out *= dtype(blur_rate)  # arcmin
-    return arcmin_to_px(out, ppd).astype(dtype, copy=False)
+    single = np.dtype(dtype) == np.float32
+    return np.asarray(_sigma_ufunc(ecc_deg, ppd, blur_rate, fovea_deg, single)).astype(
+        dtype, copy=False)
+
+
+@numba.njit(cache=True, inline="always", nogil=True, fastmath=FASTMATH)
+def _round(v, single):  # pragma: no cover - compiled
+    return np.float64(np.float32(v)) if single else v
+
+
+@numba.njit(cache=True, inline="always", nogil=True, fastmath=FASTMATH)
+def _sigma_at(ecc, ppd, blur_rate, fovea, single):  # pragma: no cover - compiled
+    """:func:`sigma_px` of one point, in float64. ``single``: the float32 result, each step
+    (the inputs included) rounded to float32: a step computed in float64 and rounded is the
+    float32 step's own result (double rounding is innocuous for +, -, *, / since
+    53 >= 2 * 24 + 2), so the compiled per-block map and the map of float32 grids agree bit
+    for bit."""
+    e, fov = _round(ecc, single), _round(fovea, single)
+    a = _round(e - fov, single)
+    if a == a and a < 0.0:  # NaN stays NaN, as with np.maximum (and raises no warning)
+        a = 0.0
+    a = _round(a * _round(blur_rate, single), single)  # arcmin
+    a = _round(a / ARCMIN_PER_DEG, single)
+    return _round(a * ppd, single)
+
+
+@numba.vectorize(["float32(float32, float32, float64, float64, boolean)",
+                  "float64(float64, float64, float64, float64, boolean)"],
+                 cache=True, fastmath=FASTMATH)
+def _sigma_ufunc(ecc, ppd, blur_rate, fovea, single):  # pragma: no cover - compiled
+    return _sigma_at(ecc, ppd, blur_rate, fovea, single)
+
+
+@numba.njit(parallel=True, cache=True, nogil=True, fastmath=FASTMATH)
+def _exact_sigma_blocks(
+    ux, uy, vx, vy, d, pitch, blur_rate, fovea, need, shift, out
+):  # pragma: no cover - compiled
+    h, w = uy.shape[0], ux.shape[0]
+    stride = interleave(h)  # the blocks needed may be all in one part of the frame
+    for i in numba.prange(h):
+        y = (i * stride) % h
+        by = y >> shift
+        for bx in range(need.shape[1]):
+            if not need[by, bx]:
+                continue
+            for x in range(bx << shift, min((bx + 1) << shift, w)):
+                # the float32 eccentricity and ppd maps' values (eccentricity_and_ppd_maps)
+                e = np.float32(_angle_deg(ux[x], uy[y], vx, vy, d))
+                p = np.float32(_ppd_at(ux[x], uy[y], d, pitch))
+                out[y, x] = _sigma_at(e, p, blur_rate, fovea, True)
+
+
+def sigma_on_blocks(
+    geom: ViewingGeometry, gaze_px: tuple[float, float], blur_rate: float, fovea_deg: float,
+    need: np.ndarray | None = None, shift: int = 0, out: np.ndarray | None = None,
+) -> np.ndarray:
+    """The float32 sigma map of the ``exact`` geometry model: :func:`sigma_px` of
+    :meth:`~fovexp.geometry.ViewingGeometry.eccentricity_and_ppd_maps`, bit for bit, in one
+    parallel pass with no eccentricity or ppd map. ``need``: a boolean map of ``2**shift`` px
+    square blocks; only the pixels of the blocks it marks are evaluated, and the others left
+    as they are: 0, or what ``out`` (float32, the image's shape, written in place) holds."""
+    if geom.model != "exact":
+        raise ValueError("sigma_on_blocks evaluates the exact geometry model")
+    if need is None:
+        need, shift = np.ones((1, 1), np.bool_), 62  # one block: the whole frame
+    if out is None:
+        out = np.zeros(geom.shape, np.float32)
+    ux, uy, vx, vy, d, pitch = geom.exact_terms(gaze_px)
+    _exact_sigma_blocks(ux, uy, vx, vy, d, pitch, float(blur_rate), float(fovea_deg),
+                        np.ascontiguousarray(need, dtype=np.bool_), int(shift), out)
+    return out
 
 
 def sigma_bound_px(
@@ -226,17 +293,17 @@ def _blur_patch(src, ly0, ly1, lx0, lx1, g):  # pragma: no cover - compiled
 
 @numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
 def _foveate_bands(
-    img, sigma, levels, lvl_m, kbuf, kmeta, pbuf, pmeta, pad, band_h, flat, shift
+    img, sigma, levels, lvl_m, kbuf, kmeta, pbuf, pmeta, pad, band_h, flat, shift, out
 ):  # pragma: no cover - compiled
     """Blur stack evaluated band by band: for each band of rows and each stack level, blur
     only the runs of columns whose sigmas need that level, then accumulate the per-pixel
     linear interpolation between the two levels bracketing each sigma, as the pixel's own
     value plus the weighted differences of the levels from it (the weights sum to 1; level
     0 is the pixel itself). Pixels whose ``2**shift`` square block ``flat`` marks (their
-    neighbourhood is one constant) are left as they are: what the blur gives there."""
+    neighbourhood is one constant) are left as they are: what the blur gives there. Written
+    into ``out`` (img's shape: NumPy's allocation, :mod:`fovexp.jit`)."""
     h, w, c = img.shape
     n = levels.shape[0]
-    out = np.empty_like(img)
     nb = (h + band_h - 1) // band_h
     stride = interleave(nb)  # bands of the fovea or of flat regions cost little: spread them
     for i in numba.prange(nb):
@@ -404,11 +471,7 @@ def _flat_blocks(img: np.ndarray, reach_px: int) -> np.ndarray:
     ``reach_px``."""
     block = level_scale(FLAT_BLOCK_LEVEL)
     radius = blocks_reaching(reach_px, block)
-    lo, hi = channel_block_extremes(img, FLAT_BLOCK_LEVEL)
-    flat = constant_blocks(lo[..., 0], hi[..., 0], radius)
-    for ch in range(1, img.shape[2]):
-        flat &= constant_blocks(lo[..., ch], hi[..., ch], radius)
-    return flat
+    return constant_blocks(*channel_block_extremes(img, FLAT_BLOCK_LEVEL), radius)
 
 
 def _foveate(
@@ -453,7 +516,7 @@ def _foveate(
     kbuf = np.concatenate(plan.kernels)
     return _foveate_bands(
         img, sigma, plan.sigmas_px.astype(img.dtype), plan.pyramid_level, kbuf, kmeta, pbuf,
-        pmeta, pad, BAND_ROWS, flat, shift,
+        pmeta, pad, BAND_ROWS, flat, shift, np.empty(img.shape, img.dtype),
     )
 
 

@@ -349,17 +349,28 @@ class ViewingGeometry:
                 return ecc, ppd
             out[0][...], out[1][...] = ecc, ppd
             return out
-        ux, uy = self._screen_cm(x[0], y[:, 0])
-        vx, vy = self._screen_cm(np.float64(gaze_px[0]), np.float64(gaze_px[1]))
-        pitch = math.sqrt(self.pitch_x_cm * self.pitch_y_cm)
+        ux, uy, vx, vy, d, pitch = self.exact_terms(gaze_px)
         if need is None:
             need, shift = _EVERY_PIXEL
         # NumPy's zeros: pages the kernel does not write are never touched (calloc)
         ecc, ppd = out if out is not None else (np.zeros(self.shape, dtype=np.float32),
                                                 np.zeros(self.shape, dtype=np.float32))
-        _exact_grids(ux, uy, float(vx), float(vy), self.distance_cm, pitch,
-                     np.ascontiguousarray(need, dtype=np.bool_), int(shift), ecc, ppd)
+        _exact_grids(ux, uy, vx, vy, d, pitch, np.ascontiguousarray(need, dtype=np.bool_),
+                     int(shift), ecc, ppd)
         return ecc, ppd
+
+    def exact_terms(
+        self, gaze_px: tuple[float, float],
+    ) -> tuple[np.ndarray, np.ndarray, float, float, float, float]:
+        """What the ``exact`` model's compiled per-pixel formulas (:func:`_angle_deg`,
+        :func:`_ppd_at`) take: the screen position (cm from its centre) of every pixel column
+        and row, the gaze's, the viewing distance (cm) and the pitch (cm, the geometric mean
+        of the two)."""
+        x, y = self.grid()
+        ux, uy = self._screen_cm(x[0], y[:, 0])
+        vx, vy = self._screen_cm(np.float64(gaze_px[0]), np.float64(gaze_px[1]))
+        return (ux, uy, float(vx), float(vy), float(self.distance_cm),
+                math.sqrt(self.pitch_x_cm * self.pitch_y_cm))
 
     def max_eccentricity_and_ppd(self, gaze_px: tuple[float, float]) -> tuple[float, float]:
         """The largest eccentricity (deg) and px/deg over the image, float64: both are at
@@ -389,7 +400,3 @@ def cpp_to_cpd(f_cpp: np.ndarray | float, ppd: np.ndarray | float) -> np.ndarray
     """Cycles per pixel to cycles per degree at ``ppd`` pixels per degree."""
     return np.asarray(f_cpp) * ppd
 
-
-def arcmin_to_px(arcmin: np.ndarray | float, ppd: np.ndarray | float) -> np.ndarray:
-    """Visual angle in arcmin to pixels at ``ppd`` pixels per degree."""
-    return np.asarray(arcmin) / ARCMIN_PER_DEG * ppd

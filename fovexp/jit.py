@@ -16,6 +16,12 @@ The kernels are memory-bound: fast-math saved no measurable time (CPU seconds of
 enhancement with 12 impulses, three interleaved rounds on the shared 2-core VM: 1.65-1.90 s
 with it, 1.86-1.94 s without; end to end against the landed main: benchmarks/CLI.md).
 
+Large outputs (whole frames, the contrast's summed-area table) are allocated by NumPy and
+passed into the kernels, not allocated inside them: NumPy asks Linux for transparent huge pages
+on large arrays (``madvise``), Numba's allocator does not, and the first writes to fresh 4 KiB
+pages cost several times more (measured on the 2-core VM: a 33 MB array written once took
+12-17 ms from a kernel's own allocation, 4-5 ms from NumPy's, 1.1-1.5 ms written again).
+
 Kernels use no cross-thread reductions either, so the thread count does not change a result
 (``tests/enhancer/test_determinism.py`` checks both across processes).
 """

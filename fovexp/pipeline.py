@@ -4,7 +4,7 @@ Stages and what each depends on (a parameter change recomputes only what lies do
 
     image ─ linear ─┬─ foveated ─┬─ luma ─┬─ pyramid ─┬─ laplacian ──── amplitude ─┐
                     │            │        │           └─ gradients ─── orientation ┤
-                    │            │        └─ luma_blocks (where it is flat) ─┐     │
+                    │            │        └─ luma_flat (where it is flat) ───┐     │
     gaze, blur_rate ┴─ sigma ────┴─ contrast (f_e) ─ headroom ─────────── K (s_k) ─┤
     impulses, seed ─ impulses ─ band ─ active (not flat) ─ frequency (s_f) ────────┴─ noise ─ output
 
@@ -50,7 +50,14 @@ from . import amplitude as amp
 from . import colour, frequency, gabor, orientation, pyramids
 from .contrast import contrast_change, contrast_change_where_needed
 from .errors import FovexpError
-from .foveation import SigmaOnBlocks, foveate, foveate_exact, sigma_bound_px, sigma_px
+from .foveation import (
+    SigmaOnBlocks,
+    foveate,
+    foveate_exact,
+    sigma_bound_px,
+    sigma_on_blocks,
+    sigma_px,
+)
 from .geometry import Display, GeometryModel, ViewingGeometry
 from .params import EngineOptions, EnhanceParams, ParameterTable, Preset, get_preset
 from .pyramids import FLAT_BLOCK_LEVEL
@@ -247,7 +254,6 @@ class _SigmaBlocks:
         self._blur_rate, self._fovea_deg = blur_rate, fovea_deg
         self.bound_px = sigma_bound_px(geom, self._gaze_px, blur_rate, fovea_deg)
         # allocated when first asked for (NumPy's zeros: pages never written stay untouched)
-        self._grids = (np.zeros((0, 0), np.float32), np.zeros((0, 0), np.float32))
         self._sigma = np.zeros((0, 0), np.float32)
         self.done = np.zeros((0, 0), np.bool_)  # the blocks evaluated
         self._shift = -1
@@ -255,20 +261,13 @@ class _SigmaBlocks:
     def on(self, need: np.ndarray, shift: int) -> np.ndarray:
         """The map, evaluated (at least) on the ``2**shift`` px blocks ``need`` marks; 0 where
         nothing asked for it yet."""
-        shape = self._geom.shape
         if shift != self._shift or self.done.shape != need.shape:
-            self._grids = (np.zeros(shape, np.float32), np.zeros(shape, np.float32))
-            self._sigma = np.zeros(shape, np.float32)
+            self._sigma = np.zeros(self._geom.shape, np.float32)
             self.done, self._shift = np.zeros(need.shape, np.bool_), shift
         todo = need & ~self.done
         if todo.any():
-            ecc, ppd = self._geom.eccentricity_and_ppd_maps(self._gaze_px, todo, shift,
-                                                            self._grids)
-            rows, cols = np.flatnonzero(todo.any(axis=1)), np.flatnonzero(todo.any(axis=0))
-            box = (slice(rows[0] << shift, (rows[-1] + 1) << shift),
-                   slice(cols[0] << shift, (cols[-1] + 1) << shift))
-            # elementwise: the blocks evaluated before get the same values again
-            self._sigma[box] = sigma_px(ecc[box], ppd[box], self._blur_rate, self._fovea_deg)
+            sigma_on_blocks(self._geom, self._gaze_px, self._blur_rate, self._fovea_deg, todo,
+                            shift, self._sigma)
             self.done |= todo
         return self._sigma
 
@@ -366,13 +365,15 @@ class Enhancer:
         c.stage("geometry", ("shape", "viewport"), self._geometry)
         c.stage("linear", ("image",), self._linear)
         c.stage("grids", ("geometry", "gaze"), self._grids)
-        c.stage("sigma", ("sigma_given", "?grids", "blur_rate"), self._sigma)
+        c.stage("sigma", ("sigma_given", "?grids", "blur_rate", "geometry", "gaze"), self._sigma)
         c.stage("foveated", ("linear", "?sigma", "already_foveated", "?sigma_blocks"),
                 self._foveated)
         c.stage("luma", ("foveated",), colour.luminance)
         # level-3 block extremes of the luminance: where it is flat (skipping only)
         c.stage("luma_blocks", ("luma",), lambda luma: tuple(e[..., 0] for e in (
             pyramids.channel_block_extremes(luma[..., None], FLAT_BLOCK_LEVEL))))
+        # how far around each block the luminance is one constant (skipping only)
+        c.stage("luma_flat", ("luma_blocks",), lambda b: pyramids.constant_radius_blocks(*b))
         c.stage("pyramid", ("luma",), lambda luma: pyramids.gaussian_pyramid(
             luma, amp.MAX_LAPLACIAN_LEVEL))
         c.stage("abs_laplacian", ("pyramid", "imp_active"), self._abs_laplacian)
@@ -382,7 +383,7 @@ class Enhancer:
             pyr[orientation.ORIENTATION_LEVEL]))
         # the sigma map's bound, and the map block by block as the stages that skip ask for it
         c.stage("sigma_blocks", ("geometry", "gaze", "blur_rate"), self._sigma_blocks)
-        c.stage("contrast", ("luma", "?sigma", "f_e", "?luma_blocks", "?sigma_blocks"),
+        c.stage("contrast", ("luma", "?sigma", "f_e", "?luma_flat", "?sigma_blocks"),
                 self._contrast)
         c.stage("headroom", ("foveated", "luma", "contrast"), self._headroom)
         c.stage("impulses", ("shape", "n_impulses", "seed"), self._impulses)
@@ -390,8 +391,9 @@ class Enhancer:
         c.stage("imp_bands", ("impulses", "geometry", "gaze", "sigma_given", "blur_rate"),
                 self._imp_bands)
         c.stage("imp_band", ("impulses", "imp_bands"), self._imp_band)
-        c.stage("imp_active", ("impulses", "?imp_band", "?imp_bands", "?luma_blocks", "shape",
-                               "sigma_given", "?sigma_blocks"), self._imp_active)
+        c.stage("imp_blocks", ("impulses", "shape"), self._imp_blocks)
+        c.stage("imp_active", ("impulses", "?imp_band", "?imp_bands", "?luma_flat", "imp_blocks",
+                               "shape", "sigma_given", "?sigma_blocks"), self._imp_active)
         c.stage("imp_frequency", ("imp_active", "impulses", "s_f"), self._imp_frequency)
         c.stage("imp_laplacian", ("imp_active", "abs_laplacian"), lambda b, lap:
                 amp.laplacian_amplitude_at(lap, b.level, b.x_px, b.y_px))
@@ -503,11 +505,14 @@ class Enhancer:
         ecc = geom.eccentricity_deg(x, y, gaze_px)
         return ecc, np.broadcast_to(geom.ppd(x, y), ecc.shape)
 
-    def _sigma(self, given, grids, blur_rate) -> np.ndarray:
-        """The sigma map (px, section 5.2): the one given with the frame, else from the
-        eccentricity and px/deg maps (computed only then)."""
+    def _sigma(self, given, grids, blur_rate, geom: ViewingGeometry, gaze) -> np.ndarray:
+        """The sigma map (px, section 5.2): the one given with the frame, else in float32 with
+        the exact geometry in one pass (:func:`fovexp.foveation.sigma_on_blocks`), else from
+        the eccentricity and px/deg maps (computed only then)."""
         if given is not None:
             return given
+        if self._dtype == np.float32 and geom.model == "exact":
+            return sigma_on_blocks(geom, geom.gaze_px(gaze), blur_rate, self.preset.fovea_deg)
         ecc, ppd = grids()
         return sigma_px(ecc, ppd, blur_rate, self.preset.fovea_deg, self._dtype)
 
@@ -557,7 +562,7 @@ class Enhancer:
             need[k] = mask
         return need
 
-    def _contrast(self, luma, sigma, f_e, luma_blocks, sigma_blocks) -> np.ndarray:
+    def _contrast(self, luma, sigma, f_e, luma_flat, sigma_blocks) -> np.ndarray:
         """The change of luminance the contrast enhancement makes (grey, linear). The method
         processes luminance only (section 4.5): like the noise, this change is added to
         every channel of the foveated image. Skipping leaves out the blocks whose boxes are
@@ -567,9 +572,9 @@ class Enhancer:
             return contrast_change(luma, sigma(), f_e)
         source = self._sigma_source(sigma, sigma_blocks)
         if not callable(source):
-            return contrast_change(luma, source, f_e, luma_blocks())
+            return contrast_change(luma, source, f_e, luma_flat())
         return contrast_change_where_needed(luma, source, sigma_blocks().bound_px, f_e,
-                                            luma_blocks())
+                                            luma_flat())
 
     def _sigma_source(self, sigma, sigma_blocks) -> np.ndarray | SigmaOnBlocks:
         """The sigma map for a stage that skips flat blocks: the whole map when it is given,
@@ -659,51 +664,41 @@ class Enhancer:
         return ImpulseParams(index, x, y, s, f_lo, f_hi, open_,
                              amp.laplacian_level(s, self.preset.attenuation))
 
-    def _imp_active(self, imp, band, bands, luma_blocks, shape, sigma_given,
+    def _imp_active(self, imp, band, bands, luma_flat, imp_blocks, shape, sigma_given,
                     sigma_blocks) -> ImpulseParams:
         """The impulses the amplitude, frequency and orientation are evaluated at. When
         skipping, those whose |L| samples read only a constant region of the luminance are
         left out: |L| is exactly 0 there, and so is K (section 4.2;
-        :func:`fovexp.amplitude.laplacian_reach_px`). Judged on the level-3 block extremes:
-        first at the reach of the largest sigma the frame can have (its bound), before the
-        band is evaluated at all (a block constant that far is constant nearer), then at each
-        impulse's own level."""
+        :func:`fovexp.amplitude.laplacian_reach_px`). Judged on the level-3 blocks' constant
+        radius (:func:`fovexp.pyramids.constant_radius_blocks`): first at the reach of the
+        largest sigma the frame can have (its bound), before the band is evaluated at all (a
+        block constant that far is constant nearer), then at each impulse's own level."""
         if not self.options.skip:
             return band()
-        lo, hi = luma_blocks()
-        block = pyramids.level_scale(FLAT_BLOCK_LEVEL)
+        radius = luma_flat()
         top = max(min(amp.MAX_LAPLACIAN_LEVEL, pyramids.pyramid_depth(shape, 99)), 1)
-
-        memo: dict[int, np.ndarray] = {}
-
-        def constant(k0: int) -> np.ndarray:  # the blocks constant as far as level k0 reads
-            reach = int(amp.laplacian_reach_px(np.asarray(k0), top))
-            radius = int(pyramids.blocks_reaching(reach, block))
-            if radius not in memo:
-                memo[radius] = pyramids.constant_blocks(lo, hi, radius)
-            return memo[radius]
-
-        if not constant(1).any():  # nothing flat at the smallest reach: nothing is
+        # per bracketing level k0, the block radius its |L| samples reach
+        reach = pyramids.blocks_reaching(amp.laplacian_reach_px(np.arange(top + 1), top),
+                                         pyramids.level_scale(FLAT_BLOCK_LEVEL))
+        if radius.max() < reach.min():  # nothing flat at the smallest reach: nothing is
             return band()
-        bx = np.clip(imp.x_px, 0, shape[1] - 1).astype(np.int64) // block
-        by = np.clip(imp.y_px, 0, shape[0] - 1).astype(np.int64) // block
+        bx, by = imp_blocks
+        at_impulse = radius[by, bx]
         bound = (float(sigma_given.max()) if sigma_given is not None
                  else sigma_blocks().bound_px)
         k0_max, _ = amp.bracketing_levels(
             amp.laplacian_level(np.array([bound]), self.preset.attenuation), top)
-        const = constant(int(k0_max[0]))
-        index = np.flatnonzero(~const[by, bx]) if const.any() else np.arange(len(imp))
+        index = np.flatnonzero(at_impulse < reach[k0_max[0]])
         band = self._band_params(imp, index, *bands().at(index))
-        if len(band.index) == 0:
-            return band
-        # per bracketing level present, the blocks around which the luminance is one constant
-        # as far as that level reads
         k0, _ = amp.bracketing_levels(band.level, top)
-        levels = np.flatnonzero(np.bincount(k0, minlength=top + 1))
-        const = np.zeros((top + 1, *lo.shape), dtype=np.bool_)
-        for k in levels:
-            const[k] = constant(int(k))
-        return band.subset(~const[k0, by[band.index], bx[band.index]])
+        return band.subset(at_impulse[band.index] < reach[k0])
+
+    def _imp_blocks(self, imp, shape) -> tuple[np.ndarray, np.ndarray]:
+        """The level-3 block (column, row) of each impulse, clamped to the image (frame-free:
+        kept across a sequence's frames)."""
+        block = pyramids.level_scale(FLAT_BLOCK_LEVEL)
+        return (np.clip(imp.x_px, 0, shape[1] - 1).astype(np.int64) // block,
+                np.clip(imp.y_px, 0, shape[0] - 1).astype(np.int64) // block)
 
     def _imp_frequency(self, band: ImpulseParams, imp, s_f: float) -> np.ndarray:
         """The per-impulse frequency draw (section 4.1) where the band is open; 0 elsewhere

@@ -279,10 +279,85 @@ FLAT_BLOCK_LEVEL = 3
 def constant_blocks(lo: np.ndarray, hi: np.ndarray, radius_blocks: int) -> np.ndarray:
     """Blocks of a block-extremes grid (:func:`block_extremes`) around which the image is one
     constant: the minimum of ``lo`` equals the maximum of ``hi`` over the ``(2 radius + 1)^2``
-    blocks centred on each (clamped at the image's edges, as the image's own borders are)."""
-    size = 2 * int(radius_blocks) + 1
-    return ndimage.minimum_filter(lo, size, mode="nearest") == ndimage.maximum_filter(
-        hi, size, mode="nearest")
+    blocks centred on each (clamped at the image's edges, as the image's own borders are),
+    in every channel of (bh, bw, C) extremes (:func:`channel_block_extremes`)."""
+    return constant_radius_blocks(lo, hi) >= int(radius_blocks)
+
+
+def constant_radius_blocks(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """The largest radius (in blocks) at which each block is :func:`constant_blocks`, int32:
+    -1 where the block itself is not one constant, 2**30 where the whole image is (NaN is
+    never constant).
+    One pass answers every radius: the window of radius ``r >= 1`` around a block is one
+    constant exactly when every block within ``r - 1`` of it has a constant 3 x 3 window
+    (those windows overlap, so they share one value, and together they cover the larger
+    window), i.e. when its chessboard distance to the nearest block whose 3 x 3 window is
+    not constant is at least ``r``."""
+    lo3 = lo if lo.ndim == 3 else lo[..., None]
+    hi3 = hi if hi.ndim == 3 else hi[..., None]
+    return _constant_radius(np.ascontiguousarray(lo3), np.ascontiguousarray(hi3))
+
+
+@numba.njit(cache=True, fastmath=FASTMATH, nogil=True)
+def _constant_radius(lo, hi):  # pragma: no cover - compiled
+    bh, bw, nc = lo.shape
+    far = np.int32(2**30)
+    # the 3 x 3 window one constant in every channel: each block one constant (lo == hi), and
+    # equal to its neighbours along the row (then along the column of those row windows)
+    row = np.empty((bh, bw), dtype=np.bool_)
+    for y in range(bh):
+        for x in range(bw):
+            ok = True
+            for ch in range(nc):
+                v = lo[y, x, ch]
+                ok &= hi[y, x, ch] == v  # NaN: never equal
+                if x > 0:
+                    ok &= (lo[y, x - 1, ch] == v) & (hi[y, x - 1, ch] == v)
+                if x < bw - 1:
+                    ok &= (lo[y, x + 1, ch] == v) & (hi[y, x + 1, ch] == v)
+            row[y, x] = ok
+    d = np.empty((bh, bw), dtype=np.int32)
+    for y in range(bh):
+        for x in range(bw):
+            ok = row[y, x]
+            for yy in (y - 1, y + 1):
+                if 0 <= yy < bh:
+                    ok &= row[yy, x]
+                    for ch in range(nc):
+                        ok &= lo[yy, x, ch] == lo[y, x, ch]
+            d[y, x] = far if ok else 0
+    # chessboard distance to the nearest 0: two raster passes (exact for this metric)
+    for y in range(bh):
+        for x in range(bw):
+            if d[y, x] == 0:
+                continue
+            m = d[y, x]
+            if x > 0:
+                m = min(m, d[y, x - 1] + 1)
+            if y > 0:
+                for xx in range(max(x - 1, 0), min(x + 2, bw)):
+                    m = min(m, d[y - 1, xx] + 1)
+            d[y, x] = m
+    for y in range(bh - 1, -1, -1):
+        for x in range(bw - 1, -1, -1):
+            if d[y, x] == 0:
+                continue
+            m = d[y, x]
+            if x < bw - 1:
+                m = min(m, d[y, x + 1] + 1)
+            if y < bh - 1:
+                for xx in range(max(x - 1, 0), min(x + 2, bw)):
+                    m = min(m, d[y + 1, xx] + 1)
+            d[y, x] = m
+    for y in range(bh):  # radius 0: the block alone
+        for x in range(bw):
+            if d[y, x] == 0:
+                one = True
+                for ch in range(nc):
+                    if lo[y, x, ch] != hi[y, x, ch]:
+                        one = False
+                d[y, x] = 0 if one else -1
+    return d
 
 
 def blocks_reaching(radius_px: int | np.ndarray, block: int) -> int | np.ndarray:

@@ -53,7 +53,7 @@ def test_the_contrast_asks_for_sigma_only_where_its_change_is_not_zero():
     grey[:, 150:] = 0.25  # flat right part
     yy, xx = np.mgrid[0:240, 0:320]
     sigma = (0.02 * np.hypot(xx - 60, yy - 100)).astype(np.float32)
-    blocks = tuple(e[..., 0] for e in pyramids.channel_block_extremes(grey[..., None], 3))
+    blocks = pyramids.constant_radius_blocks(*pyramids.channel_block_extremes(grey[..., None], 3))
     asked = []
 
     def on_blocks(need, shift):

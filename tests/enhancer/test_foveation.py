@@ -87,3 +87,48 @@ def test_the_sigma_bound_is_above_every_pixel_of_the_map(dtype):
             ecc, ppd = g.eccentricity_deg(x, y, gaze), g.ppd(x, y)
         sigma = sigma_px(ecc, ppd, rate, fovea, dtype)
         assert float(sigma.max()) <= sigma_bound_px(g, gaze, rate, fovea), (i, fovea)
+
+
+def _sigma_in_numpy_float32(ecc, ppd, rate, fovea):
+    """The sigma formula step by step in NumPy's float32 arithmetic (what sigma_px's float32
+    result is defined as)."""
+    a = np.array(ecc, dtype=np.float32)
+    a -= np.float32(fovea)
+    np.maximum(a, 0.0, out=a)
+    a *= np.float32(rate)
+    return (a / np.float32(60.0) * ppd).astype(np.float32)
+
+
+@pytest.mark.parametrize("viewport", [None, (1000, 300, 3840, 2160)])
+def test_the_sigma_map_of_some_blocks_is_the_whole_maps_there(viewport):
+    """sigma_on_blocks (one pass, no eccentricity or ppd map) gives sigma_px of the float32
+    grids bit for bit on the blocks asked for and leaves the other pixels as they were; and
+    sigma_px in float32 is NumPy's float32 arithmetic step by step (float32 grids, and
+    float64 points as the per-impulse band gives them), at the fovea's edge too."""
+    from fovexp import load_display
+    from fovexp.foveation import sigma_on_blocks, sigma_px
+    from fovexp.geometry import ViewingGeometry
+
+    w, h = (600, 400) if viewport else (960, 540)
+    g = ViewingGeometry.for_image(load_display("lg-oled55cx"), w, h, viewport=viewport)
+    rng = np.random.default_rng(8)
+    for rate, q in ((0.34, 10), (5.0, 50), (1.7, 90)):
+        gaze = g.gaze_px(tuple(rng.random(2)))
+        ecc, ppd = g.eccentricity_and_ppd_maps(gaze)
+        fovea = float(np.percentile(ecc, q))  # the fovea's edge in the frame
+        full = sigma_px(ecc, ppd, rate, fovea)
+        want = _sigma_in_numpy_float32(ecc, ppd, rate, fovea)
+        assert np.array_equal(full.view(np.uint32), want.view(np.uint32))
+        assert (full == 0).any() and (full > 0).any()
+        x, y = rng.random(5000) * (w - 1), rng.random(5000) * (h - 1)
+        e64, p64 = g.eccentricity_deg(x, y, gaze), g.ppd(x, y)
+        assert np.array_equal(sigma_px(e64, p64, rate, fovea).view(np.uint32),
+                              _sigma_in_numpy_float32(e64, p64, rate, fovea).view(np.uint32))
+        need = rng.random((-(-h // 8), -(-w // 8))) < 0.3
+        px = np.kron(need, np.ones((8, 8), bool))[:h, :w]
+        out = np.full((h, w), -1.0, np.float32)
+        got = sigma_on_blocks(g, gaze, rate, fovea, need, 3, out)
+        assert got is out and (got[~px] == -1.0).all()
+        assert np.array_equal(got[px].view(np.uint32), full[px].view(np.uint32))
+        assert np.array_equal(sigma_on_blocks(g, gaze, rate, fovea).view(np.uint32),
+                              full.view(np.uint32))

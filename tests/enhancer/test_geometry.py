@@ -8,7 +8,7 @@ import pytest
 from fovexp import FovexpError, load_display
 from fovexp.acuity import t_high_cpd, t_low_cpd
 from fovexp.foveation import sigma_px
-from fovexp.geometry import ViewingGeometry, arcmin_to_px, cpd_to_cpp, cpp_to_cpd
+from fovexp.geometry import ViewingGeometry, cpd_to_cpp, cpp_to_cpd
 
 LG = load_display("lg-oled55cx")
 
@@ -81,7 +81,8 @@ def test_release_geometry_gives_6_px_at_30_deg_for_blur_rate_0_46875():
 
 def test_unit_conversions_round_trip():
     assert float(cpd_to_cpp(cpp_to_cpd(0.2, 40.0), 40.0)) == pytest.approx(0.2)
-    assert float(arcmin_to_px(60.0, 40.0)) == pytest.approx(40.0)
+    # 60 arcmin of blur (blur-rate 1, 60 deg past the fovea) at 40 px/deg is 40 px
+    assert float(sigma_px(68.0, 40.0, 1.0, 8.0)) == pytest.approx(40.0)
 
 
 def test_thibos_table_and_extension():
