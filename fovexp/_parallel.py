@@ -89,4 +89,3 @@ def power(a: np.ndarray, exponent: np.floating, out: np.ndarray | None = None) -
     for f in futures:
         f.result()
     return out
-
