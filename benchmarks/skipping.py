@@ -3,7 +3,7 @@ a textured 4K frame and on the same frame three quarters flat, and the output wi
 the output without it, bit for bit. Results: benchmarks/SKIPPING.md and skipping.json, with the
 machine they came from.
 
-    .venv/bin/python benchmarks/skipping.py [--repeats 7] [--impulses 64 12]
+    .venv/bin/python benchmarks/skipping.py [--repeats 7] [--impulses 64 12] [--runs 1]
 
 Scenes: Sponza (the shared 4K render; a generated texture when it is absent) and the same frame
 with everything but its top-left quadrant replaced by constant grey (display value 0.5): "three
@@ -18,8 +18,9 @@ impulses kept (section 4.4). Two kinds of whole enhancement are timed:
 - "foveation + enhancement": the same with the foveation simulated first.
 
 For each impulse count and kind, the four enhancers (scene x skip on/off) run interleaved,
-frame after frame, so that the machine's load falls on all of them alike; medians are
-reported. Every frame's output with skipping is compared bit for bit with the one without.
+frame after frame, in an order that rotates from frame to frame, so that the machine's load
+falls on all of them alike; medians are reported. Every frame's output with skipping is
+compared bit for bit with the one without.
 """
 
 from __future__ import annotations
@@ -89,7 +90,11 @@ def run_group(images, impulses: int, kind: str, repeats: int) -> dict:
     for i in range(repeats + 1):  # one warm-up frame
         gaze = (0.5 + 0.001 * (i % 3), 0.5)  # the gaze moves a little every frame
         outputs = {}
-        for key, enh in enhancers.items():
+        # the order rotates from frame to frame: what runs later in a round (after the
+        # others' allocations) is not always the same enhancer
+        keys = list(enhancers)
+        for key in keys[i % len(keys):] + keys[: i % len(keys)]:
+            enh = enhancers[key]
             if kind == "sigma":  # a new frame and its sigma map
                 enh.set_image(frames[key[0]].copy(), sigma_px=sigmas[i % 3].copy())
             else:  # a new frame
@@ -154,15 +159,20 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--repeats", type=int, default=7)
     ap.add_argument("--impulses", type=int, nargs="+", default=[64, 12])
+    ap.add_argument("--runs", type=int, default=1,
+                    help="run each group this many times (the ratio varies from run to run "
+                    "on a shared machine more than within one)")
     ap.add_argument("--out", type=Path, default=HERE)
     args = ap.parse_args()
     images, source = scenes()
     result = {"machine": machine(), "source": source, "blur_rate": BLUR_RATE,
-              "repeats": args.repeats, "groups": []}
+              "repeats": args.repeats, "runs": args.runs, "groups": []}
     for n in args.impulses:
         for kind in KINDS:
-            result["groups"].append(run_group(images, n, kind, args.repeats))
-            print(report(result), flush=True)
+            for run in range(args.runs):
+                result["groups"].append({**run_group(images, n, kind, args.repeats),
+                                         "run": run + 1})
+                print(report(result), flush=True)
     result["amplitude_floor"] = amplitude_floor(images["textured"])
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "skipping.json").write_text(json.dumps(result, indent=1))
@@ -180,11 +190,12 @@ def report(r: dict) -> str:
         f"Machine: {m['cpu']}, {m['cores']} cores, {m['memory_gb']} GB; Python {m['python']}, "
         f"NumPy {m['numpy']}, SciPy {m['scipy']}, Numba {m['numba']} "
         f"({m['numba_threads']} threads); {m['date']}.",
-        f"Command: `.venv/bin/python benchmarks/skipping.py --repeats {r['repeats']}` (medians "
+        f"Command: `.venv/bin/python benchmarks/skipping.py --repeats {r['repeats']}"
+        + (f" --runs {r['runs']}" if r.get("runs", 1) > 1 else "") + "` (medians "
         "of the frames after one warm-up frame; the four enhancers of a row group run "
-        "interleaved, frame after frame). Wall-clock seconds (medians, and the ratio of the "
-        "fastest frames, which a loaded machine disturbs least), and the process's CPU seconds "
-        "(all threads).", "",
+        "interleaved, frame after frame, in an order that rotates). Wall-clock seconds "
+        "(medians, and the ratio of the fastest frames, which a loaded machine disturbs "
+        "least), and the process's CPU seconds (all threads).", "",
         f"Scenes: {r['source']} (\"textured\"), and the same with all but its top-left "
         "quadrant constant grey (\"3/4 flat\"); 4K, blur-rate "
         f"{r['blur_rate']}, LG OLED55CX profile, a new frame and a moved gaze each time. "
@@ -199,8 +210,9 @@ def report(r: dict) -> str:
         "stages, skip on s | flat vs textured | output identical |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
+    runs = r.get("runs", 1)
     for g in r["groups"]:
-        kind = KINDS[g["kind"]]
+        kind = KINDS[g["kind"]] + (f", run {g['run']}" if runs > 1 else "")
         tex_on = _row(g, "textured", True)["median_s"]
         tex_paper = _row(g, "textured", True)["paper_median_s"]
         tex_cpu = _row(g, "textured", True)["cpu_median_s"]
@@ -222,6 +234,20 @@ def report(r: dict) -> str:
                 f"{paper:.3f} | "
                 f"{paper_ratio} | "
                 f"{'yes, bit for bit' if g['identical'][scene] else 'NO'} |")
+    if runs > 1:
+        lines += ["", f"Flat vs textured (skip on, medians) over the {runs} runs of each group:",
+                  ""]
+        for n in dict.fromkeys(g["impulses"] for g in r["groups"]):
+            for k in KINDS:
+                ratios = [_row(g, "textured", True)["median_s"]
+                          / _row(g, "3/4 flat", True)["median_s"]
+                          for g in r["groups"] if g["impulses"] == n and g["kind"] == k]
+                if ratios:
+                    verdict = ((" (target >= 2x: " + ("met" if np.median(ratios) >= TARGET
+                                                     else "missed") + ")") if n == 64 else "")
+                    lines.append(f"- {n} impulses, {KINDS[k]}: "
+                                 + ", ".join(f"{x:.2f}x" for x in ratios)
+                                 + f"; median {np.median(ratios):.2f}x{verdict}")
     fl = r.get("amplitude_floor")
     if fl:
         lines += ["", "## An amplitude floor (measured, not adopted)", "",
@@ -236,7 +262,7 @@ def report(r: dict) -> str:
                          f"{row['pixels_changed']:.3%} | {row['max_codes']:.0f} |")
     lines += ["", "Stage medians (s), skip on / skip off:", ""]
     for g in r["groups"]:
-        kind = KINDS[g["kind"]]
+        kind = KINDS[g["kind"]] + (f", run {g['run']}" if runs > 1 else "")
         for scene in ("textured", "3/4 flat"):
             on, off = _row(g, scene, True), _row(g, scene, False)
             names = sorted(set(on["stages_median_s"]) | set(off["stages_median_s"]),
