@@ -369,7 +369,7 @@ class ViewingGeometry:
         x, y = self.grid()
         ux, uy = self._screen_cm(x[0], y[:, 0])
         vx, vy = self._screen_cm(np.float64(gaze_px[0]), np.float64(gaze_px[1]))
-        return (ux, uy, float(vx), float(vy), float(self.distance_cm),
+        return (np.asarray(ux), np.asarray(uy), float(vx), float(vy), float(self.distance_cm),
                 math.sqrt(self.pitch_x_cm * self.pitch_y_cm))
 
     def max_eccentricity_and_ppd(self, gaze_px: tuple[float, float]) -> tuple[float, float]:

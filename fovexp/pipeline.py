@@ -678,8 +678,9 @@ class Enhancer:
         radius = luma_flat()
         top = max(min(amp.MAX_LAPLACIAN_LEVEL, pyramids.pyramid_depth(shape, 99)), 1)
         # per bracketing level k0, the block radius its |L| samples reach
-        reach = pyramids.blocks_reaching(amp.laplacian_reach_px(np.arange(top + 1), top),
-                                         pyramids.level_scale(FLAT_BLOCK_LEVEL))
+        reach = np.asarray(pyramids.blocks_reaching(
+            amp.laplacian_reach_px(np.arange(top + 1), top),
+            pyramids.level_scale(FLAT_BLOCK_LEVEL)))
         if radius.max() < reach.min():  # nothing flat at the smallest reach: nothing is
             return band()
         bx, by = imp_blocks
