@@ -1,7 +1,5 @@
 """``python -m fovexp ...``: the same as the ``fovexp`` command."""
 
-import sys
+from .cli import entry
 
-from .cli import main
-
-sys.exit(main())
+entry()

@@ -10,9 +10,9 @@ spreads every contiguous chunk over the whole frame. (Numba's dynamic chunking,
 ``set_parallel_chunksize``, costs far more than the work here: measured 20x on the |L| tiles.)
 The results do not depend on the order: the items are independent.
 
-NumPy's own elementwise loops run on one core; :func:`power` splits the one the
-colour stage spends most in (the transfer function's power, twice per frame) over threads
-(:func:`power`).
+NumPy's own elementwise loops run on one core; :func:`in_parts` splits one over threads: the
+one the colour stage spends most in (the transfer function's power, twice per frame,
+:func:`power`) and the output's conversion to integer codes (:func:`fovexp.io.write_image`).
 """
 
 from __future__ import annotations
@@ -20,12 +20,17 @@ from __future__ import annotations
 import math
 import os
 import threading
+from collections.abc import Callable, Iterable
 from concurrent.futures import ThreadPoolExecutor
+from typing import TypeVar
 
 import numba
 import numpy as np
 
 from .jit import FASTMATH
+
+T = TypeVar("T")
+R = TypeVar("R")
 
 #: The golden ratio's fractional part: multiples of it modulo 1 are spread the most evenly.
 _GOLDEN = (math.sqrt(5.0) - 1.0) / 2.0
@@ -46,6 +51,8 @@ def interleave(n: int) -> int:
 
 #: Below this many elements one call is faster than handing parts to threads.
 _MIN_SPLIT = 1 << 16
+#: The largest part :func:`in_parts` hands to a thread (elements).
+_PART = 1 << 20
 _pool: ThreadPoolExecutor | None = None
 _pool_lock = threading.Lock()
 
@@ -55,7 +62,7 @@ def _threads() -> ThreadPoolExecutor:
     with _pool_lock:
         if _pool is None:
             _pool = ThreadPoolExecutor(max_workers=numba.config.NUMBA_NUM_THREADS,
-                                       thread_name_prefix="fovexp-power")
+                                       thread_name_prefix="fovexp-parts")
         return _pool
 
 
@@ -69,23 +76,47 @@ def _forget_threads() -> None:
 os.register_at_fork(after_in_child=_forget_threads)
 
 
-def power(a: np.ndarray, exponent: np.floating, out: np.ndarray | None = None) -> np.ndarray:
-    """``np.power(a, exponent, out=out)`` (in place when ``out`` is ``a``; a new array when
-    it is None); C-contiguous arrays are done in as many contiguous parts as Numba has
-    threads (:func:`numba.get_num_threads`), run on threads: NumPy's loop releases the GIL.
-    Elementwise, so the values are those of one call (tested); measured on a 4K RGB frame,
-    2 cores: 23 ms instead of 35."""
-    if out is None:
-        out = np.empty(a.shape, np.result_type(a, exponent))
-    parts = min(numba.get_num_threads(), a.size // _MIN_SPLIT)
-    if parts < 2 or not (a.flags.c_contiguous and out.flags.c_contiguous) or (
-            a.shape != out.shape):
-        return np.power(a, exponent, out=out)
+def thread_count() -> int:
+    """How many threads the package's parallel work uses: Numba's
+    (:func:`numba.get_num_threads`)."""
+    return numba.get_num_threads()
+
+
+def thread_map(fn: Callable[[T], R], items: Iterable[T]) -> list[R]:
+    """``[fn(item) for item in items]``, each call on a pool thread (for work that releases
+    the GIL: NumPy's loops, zlib)."""
+    return list(_threads().map(fn, items))
+
+
+def in_parts(
+    fn: Callable[[np.ndarray, np.ndarray], object], a: np.ndarray, out: np.ndarray,
+) -> np.ndarray:
+    """``fn(a, out)`` for an elementwise ``fn`` (each output value from the same input value
+    alone), done on threads: C-contiguous arrays of the same shape go in contiguous parts of
+    at most :data:`_PART` elements, as many parts at least as Numba has threads
+    (:func:`numba.get_num_threads`), each part on a pool thread (NumPy's loops release the
+    GIL; parts that small keep a part's temporaries in cache). The values are those of one
+    call (tested). Returns ``out``."""
+    threads = thread_count()
+    parts = max(threads, -(-a.size // _PART))
+    if threads < 2 or a.size < _MIN_SPLIT or not (
+            a.flags.c_contiguous and out.flags.c_contiguous) or a.shape != out.shape:
+        fn(a, out)
+        return out
     src, dst = a.reshape(-1), out.reshape(-1)  # views: both are C-contiguous
     # part boundaries on 64-element multiples: every part starts aligned as the whole does
     edges = [src.size * i // parts // 64 * 64 for i in range(parts)] + [src.size]
-    futures = [_threads().submit(np.power, src[lo:hi], exponent, out=dst[lo:hi])
+    futures = [_threads().submit(fn, src[lo:hi], dst[lo:hi])
                for lo, hi in zip(edges[:-1], edges[1:], strict=True)]
     for f in futures:
         f.result()
     return out
+
+
+def power(a: np.ndarray, exponent: np.floating, out: np.ndarray | None = None) -> np.ndarray:
+    """``np.power(a, exponent, out=out)`` (in place when ``out`` is ``a``; a new array when
+    it is None), in parts on threads (:func:`in_parts`); measured on a 4K RGB frame, 2 cores:
+    23 ms instead of 35."""
+    if out is None:
+        out = np.empty(a.shape, np.result_type(a, exponent))
+    return in_parts(lambda src, dst: np.power(src, exponent, out=dst), a, out)

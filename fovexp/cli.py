@@ -11,6 +11,7 @@ load no command at all.
 from __future__ import annotations
 
 import argparse
+import gc
 import importlib
 import sys
 import warnings
@@ -332,5 +333,23 @@ def main(argv: list[str] | None = None) -> int:
         return 2
 
 
+def entry() -> None:
+    """The ``fovexp`` program (console script, ``python -m fovexp``): :func:`main` with the
+    garbage collector tuned for a short process (measured on the 2-core VM, 4K ``enhance``).
+
+    - Its young generation is collected every 20,000 allocations, not 700: loading Numba and
+      its kernels allocates millions of objects, which triggered 320 collections (0.1 s, and
+      0.2 s end to end at the median of six runs).
+    - The process exits without the interpreter's last full collection. Once Numba has loaded
+      a kernel, that pass walks its compiler's objects: 0.27 s of every command's exit, with
+      nothing of ours left to collect (files are closed and renamed into place by then).
+
+    :func:`main` itself leaves the collector alone: tests call it in-process."""
+    gc.set_threshold(20_000, 20, 20)
+    code = main()
+    gc.freeze()  # the final collection skips frozen objects
+    sys.exit(code)
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    entry()

@@ -38,7 +38,7 @@ import numpy as np
 from ._parallel import interleave
 from .errors import FovexpError
 from .geometry import ARCMIN_PER_DEG, ViewingGeometry, _angle_deg, _ppd_at
-from .jit import FASTMATH
+from .jit import FASTMATH, flat_broadcast
 from .pyramids import (
     FLAT_BLOCK_LEVEL,
     blocks_reaching,
@@ -68,9 +68,12 @@ def sigma_px(
     "6 px at 30 deg". Float32 (or ``dtype``): in float32, each step rounded as float32
     arithmetic rounds it (:func:`_sigma_at`).
     """
-    single = np.dtype(dtype) == np.float32
-    return np.asarray(_sigma_ufunc(ecc_deg, ppd, blur_rate, fovea_deg, single)).astype(
-        dtype, copy=False)
+    # float32 maps stay float32 (no float64 copy): the formula converts each value exactly
+    inputs = np.float32 if np.result_type(ecc_deg, ppd) == np.float32 else np.float64
+    shape, (e, p) = flat_broadcast(ecc_deg, ppd, dtype=inputs)
+    out = np.empty(e.shape)
+    _sigma_points(e, p, float(blur_rate), float(fovea_deg), np.dtype(dtype) == np.float32, out)
+    return out.reshape(shape).astype(dtype, copy=False)
 
 
 @numba.njit(cache=True, inline="always", nogil=True, fastmath=FASTMATH)
@@ -94,11 +97,11 @@ def _sigma_at(ecc, ppd, blur_rate, fovea, single):  # pragma: no cover - compile
     return _round(a * ppd, single)
 
 
-# no signatures: compiled (or loaded from the cache) at the first call, not at import (two
-# eager signatures measured +0.1 s on every command's import)
-@numba.vectorize(cache=True, fastmath=FASTMATH)
-def _sigma_ufunc(ecc, ppd, blur_rate, fovea, single):  # pragma: no cover - compiled
-    return _sigma_at(ecc, ppd, blur_rate, fovea, single)
+@numba.njit(cache=True, nogil=True, fastmath=FASTMATH)
+def _sigma_points(ecc, ppd, blur_rate, fovea, single, out):  # pragma: no cover - compiled
+    """:func:`_sigma_at` of 1-D arrays of points (see :func:`fovexp.jit.flat_broadcast`)."""
+    for i in range(out.shape[0]):
+        out[i] = _sigma_at(ecc[i], ppd[i], blur_rate, fovea, single)
 
 
 @numba.njit(parallel=True, cache=True, nogil=True, fastmath=FASTMATH)

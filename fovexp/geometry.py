@@ -39,10 +39,9 @@ import numba
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from ._parallel import interleave
 from .config import read_yaml
 from .errors import FovexpError, validation_error
-from .jit import FASTMATH
+from .jit import FASTMATH, flat_broadcast
 from .resources import shipped_displays
 
 GeometryModel = Literal["exact", "linear", "release"]
@@ -171,39 +170,29 @@ def _ppd_at(ux, uy, d, pitch):  # pragma: no cover - compiled
     return (math.pi / 180.0) * math.sqrt(ux * ux + uy * uy + d * d) / pitch
 
 
-@numba.vectorize(["float64(float64, float64, float64, float64, float64)"], cache=True,
-                 fastmath=FASTMATH)
-def _angle_ufunc(ux, uy, vx, vy, d):  # pragma: no cover - compiled
-    return _angle_deg(ux, uy, vx, vy, d)
+@numba.njit(cache=True, nogil=True, fastmath=FASTMATH)
+def _angle_points(ux, uy, vx, vy, d, out):  # pragma: no cover - compiled
+    """:func:`_angle_deg` of 1-D arrays of points (a loop, not a ufunc: see
+    :func:`fovexp.jit.flat_broadcast`)."""
+    for i in range(out.shape[0]):
+        out[i] = _angle_deg(ux[i], uy[i], vx, vy, d)
 
 
-@numba.vectorize(["float64(float64, float64, float64, float64)"], cache=True,
-                 fastmath=FASTMATH)
-def _ppd_ufunc(ux, uy, d, pitch):  # pragma: no cover - compiled
-    return _ppd_at(ux, uy, d, pitch)
+@numba.njit(cache=True, nogil=True, fastmath=FASTMATH)
+def _ppd_points(ux, uy, d, pitch, out):  # pragma: no cover - compiled
+    """:func:`_ppd_at` of 1-D arrays of points."""
+    for i in range(out.shape[0]):
+        out[i] = _ppd_at(ux[i], uy[i], d, pitch)
 
 
 @numba.njit(parallel=True, cache=True, nogil=True, fastmath=FASTMATH)
-def _exact_grids(ux, uy, vx, vy, d, pitch, need, shift, ecc, ppd):  # pragma: no cover
-    """Eccentricity and ppd (float32), written into ``ecc`` and ``ppd`` at the pixels whose
-    ``2**shift`` square block ``need`` marks; rows in parallel, interleaved
-    (:func:`fovexp._parallel.interleave`: the blocks needed may be all in one part of the
-    frame)."""
-    h, w = uy.shape[0], ux.shape[0]
-    stride = interleave(h)
-    for i in numba.prange(h):
-        y = (i * stride) % h
-        by = y >> shift
-        for bx in range(need.shape[1]):
-            if not need[by, bx]:
-                continue
-            for x in range(bx << shift, min((bx + 1) << shift, w)):
-                ecc[y, x] = _angle_deg(ux[x], uy[y], vx, vy, d)
-                ppd[y, x] = _ppd_at(ux[x], uy[y], d, pitch)
-
-
-#: ``need`` and ``shift`` of :func:`_exact_grids` for every pixel: one block, the whole frame.
-_EVERY_PIXEL = (np.ones((1, 1), dtype=np.bool_), 62)
+def _exact_grids(ux, uy, vx, vy, d, pitch, ecc, ppd):  # pragma: no cover - compiled
+    """Eccentricity and ppd of every pixel, written into ``ecc`` and ``ppd`` (float32 or
+    float64: the float64 values rounded once); rows in parallel."""
+    for y in numba.prange(uy.shape[0]):
+        for x in range(ux.shape[0]):
+            ecc[y, x] = _angle_deg(ux[x], uy[y], vx, vy, d)
+            ppd[y, x] = _ppd_at(ux[x], uy[y], d, pitch)
 
 
 @dataclass(frozen=True)
@@ -307,9 +296,12 @@ class ViewingGeometry:
         if self.model == "release":
             r_cm = np.hypot((x_px - gx) * self.pitch_x_cm, (y_px - gy) * self.pitch_y_cm)
             return np.degrees(np.arctan(r_cm / self.distance_cm))
-        ux, uy = self._screen_cm(x_px, y_px)
+        shape, (x_flat, y_flat) = flat_broadcast(x_px, y_px)
+        ux, uy = self._screen_cm(x_flat, y_flat)
         vx, vy = self._screen_cm(np.float64(gx), np.float64(gy))
-        return _angle_ufunc(ux, uy, vx, vy, self.distance_cm)
+        out = np.empty(x_flat.shape)
+        _angle_points(ux, uy, vx, vy, float(self.distance_cm), out)
+        return out.reshape(shape)
 
     def ppd(self, x_px: np.ndarray, y_px: np.ndarray) -> np.ndarray:
         """Local pixels per degree at pixels ``(x_px, y_px)``.
@@ -326,37 +318,26 @@ class ViewingGeometry:
         y_px = np.asarray(y_px, dtype=np.float64)
         if self.model != "exact":
             return np.full(np.broadcast(x_px, y_px).shape, self.ppd_constant)
-        ux, uy = self._screen_cm(x_px, y_px)
-        pitch = math.sqrt(self.pitch_x_cm * self.pitch_y_cm)
-        return _ppd_ufunc(ux, uy, self.distance_cm, pitch)
+        shape, (x_flat, y_flat) = flat_broadcast(x_px, y_px)
+        ux, uy = self._screen_cm(x_flat, y_flat)
+        out = np.empty(x_flat.shape)
+        _ppd_points(ux, uy, float(self.distance_cm), math.sqrt(self.pitch_x_cm * self.pitch_y_cm),
+                    out)
+        return out.reshape(shape)
 
     def eccentricity_and_ppd_maps(
-        self, gaze_px: tuple[float, float], need: np.ndarray | None = None, shift: int = 0,
-        out: tuple[np.ndarray, np.ndarray] | None = None,
+        self, gaze_px: tuple[float, float], dtype: type = np.float32,
     ) -> tuple[np.ndarray, np.ndarray]:
-        """Per-pixel eccentricity (deg) and pixels per degree, float32 (H, W): the same
-        formulas as :meth:`eccentricity_deg` and :meth:`ppd`, evaluated on the pixel grid.
-
-        ``need``: a boolean map of ``2**shift`` px square blocks; the ``exact`` model then
-        evaluates only the pixels of the blocks it marks, the same values, and leaves the
-        others as they are: 0, or what ``out`` (two float32 (H, W) arrays, written in place
-        and returned) holds there. The other models evaluate every pixel."""
-        x, y = self.grid()
+        """Per-pixel eccentricity (deg) and pixels per degree, (H, W) maps of ``dtype``: the
+        same formulas as :meth:`eccentricity_deg` and :meth:`ppd`, evaluated on the pixel
+        grid (in float64, then rounded once to ``dtype``)."""
         if self.model != "exact":
-            ecc = self.eccentricity_deg(x, y, gaze_px).astype(np.float32)
-            ppd = np.full(ecc.shape, self.ppd_constant, dtype=np.float32)
-            if out is None:
-                return ecc, ppd
-            out[0][...], out[1][...] = ecc, ppd
-            return out
-        ux, uy, vx, vy, d, pitch = self.exact_terms(gaze_px)
-        if need is None:
-            need, shift = _EVERY_PIXEL
-        # NumPy's zeros: pages the kernel does not write are never touched (calloc)
-        ecc, ppd = out if out is not None else (np.zeros(self.shape, dtype=np.float32),
-                                                np.zeros(self.shape, dtype=np.float32))
-        _exact_grids(ux, uy, vx, vy, d, pitch, np.ascontiguousarray(need, dtype=np.bool_),
-                     int(shift), ecc, ppd)
+            x, y = self.grid()
+            e: np.ndarray = self.eccentricity_deg(x, y, gaze_px).astype(dtype, copy=False)
+            return e, np.full(e.shape, self.ppd_constant, dtype=dtype)
+        ecc: np.ndarray = np.empty(self.shape, dtype=dtype)
+        ppd: np.ndarray = np.empty(self.shape, dtype=dtype)
+        _exact_grids(*self.exact_terms(gaze_px), ecc, ppd)
         return ecc, ppd
 
     def exact_terms(

@@ -22,13 +22,31 @@ on large arrays (``madvise``), Numba's allocator does not, and the first writes 
 pages cost several times more (measured on the 2-core VM: a 33 MB array written once took
 12-17 ms from a kernel's own allocation, 4-5 ms from NumPy's, 1.1-1.5 ms written again).
 
+Formulas evaluated at arbitrary points (the eccentricity, px/deg and sigma of a few corners or
+samples) are plain kernels over 1-D arrays (:func:`flat_broadcast`), not Numba ufuncs: a
+ufunc's loop wrapper is built by LLVM in every process, at import for one with signatures
+(measured about 0.1 s each on the 2-core VM), where a kernel is loaded from the cache.
+
 Kernels use no cross-thread reductions either, so the thread count does not change a result
 (``tests/enhancer/test_determinism.py`` checks both across processes).
 """
 
 from __future__ import annotations
 
+import numpy as np
+from numpy.typing import ArrayLike
+
 #: Numba's ``fastmath`` flag of every kernel: off (see the module docstring). Numba's cache
 #: does not notice a change here (it checks the kernels' own files): after changing it, delete
 #: the cached kernels (``fovexp/__pycache__/*.nbi``, ``*.nbc``) and run ``fovexp compile``.
 FASTMATH = False
+
+
+def flat_broadcast(
+    *arrays: ArrayLike, dtype: type = np.float64,
+) -> tuple[tuple[int, ...], list[np.ndarray]]:
+    """The shape ``arrays`` broadcast to (NumPy's rules), and each of them broadcast to it,
+    as a contiguous 1-D array of ``dtype``: what a kernel looping over points takes in place
+    of a ufunc's broadcasting (its result is reshaped to the shape)."""
+    full = np.broadcast_arrays(*(np.asarray(a, dtype=dtype) for a in arrays))
+    return full[0].shape, [np.ascontiguousarray(a).reshape(-1) for a in full]

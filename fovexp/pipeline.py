@@ -496,14 +496,8 @@ class Enhancer:
         return colour.encode(linear, self._gamma(), self.preset.transfer)
 
     def _grids(self, geom: ViewingGeometry, gaze) -> tuple[np.ndarray, np.ndarray]:
-        """Eccentricity and px/deg of every pixel: float32 maps, or in float64 the same
-        formulas evaluated in float64."""
-        gaze_px = geom.gaze_px(gaze)
-        if self._dtype == np.float32:
-            return geom.eccentricity_and_ppd_maps(gaze_px)
-        x, y = geom.grid()
-        ecc = geom.eccentricity_deg(x, y, gaze_px)
-        return ecc, np.broadcast_to(geom.ppd(x, y), ecc.shape)
+        """Eccentricity and px/deg of every pixel, maps of the engine's float type."""
+        return geom.eccentricity_and_ppd_maps(geom.gaze_px(gaze), self._dtype)
 
     def _sigma(self, given, grids, blur_rate, geom: ViewingGeometry, gaze) -> np.ndarray:
         """The sigma map (px, section 5.2): the one given with the frame, else in float32 with

@@ -124,23 +124,24 @@ def test_a_profile_with_pixels_far_from_square_is_refused(tmp_path):
 
 
 @pytest.mark.parametrize("viewport", [None, (1000, 300, 3840, 2160)])
-def test_grids_of_some_blocks_are_the_whole_grids_there(viewport):
-    """The eccentricity and ppd of the blocks asked for are the whole maps' values bit for
-    bit; the other pixels are left as they were."""
+def test_the_maps_are_the_point_formulas_on_the_grid(viewport):
+    """The eccentricity and ppd maps (one parallel pass over the grid) are eccentricity_deg
+    and ppd of every pixel bit for bit, in float64 and rounded once in float32; and the point
+    formulas broadcast their arguments as NumPy does."""
     w, h = (600, 400) if viewport else (960, 540)
     g = ViewingGeometry.for_image(LG, w, h, viewport=viewport)
     gaze = g.gaze_px((0.37, 0.61))
-    ecc, ppd = g.eccentricity_and_ppd_maps(gaze)
-    rng = np.random.default_rng(4)
-    need = rng.random((-(-h // 8), -(-w // 8))) < 0.3
-    px = np.kron(need, np.ones((8, 8), bool))[:h, :w]
-    out = (np.full((h, w), -1.0, np.float32), np.full((h, w), -2.0, np.float32))
-    e2, p2 = g.eccentricity_and_ppd_maps(gaze, need, 3, out)
-    assert e2 is out[0] and p2 is out[1]
-    assert np.array_equal(e2[px], ecc[px]) and np.array_equal(p2[px], ppd[px])
-    assert (e2[~px] == -1.0).all() and (p2[~px] == -2.0).all()
-    e3, _ = g.eccentricity_and_ppd_maps(gaze, need, 3)
-    assert (e3[~px] == 0).all() and np.array_equal(e3[px], ecc[px])
+    x, y = g.grid()
+    e64, p64 = g.eccentricity_deg(x, y, gaze), g.ppd(x, y)
+    assert e64.shape == p64.shape == (h, w)
+    for dtype in (np.float64, np.float32):
+        ecc, ppd = g.eccentricity_and_ppd_maps(gaze, dtype)
+        assert ecc.dtype == ppd.dtype == dtype
+        assert np.array_equal(ecc, e64.astype(dtype)) and np.array_equal(ppd, p64.astype(dtype))
+    row = g.eccentricity_deg(np.array([3.0, 70.0, 5.5]), np.array(2.0), gaze)
+    assert row.shape == (3,) and np.array_equal(row, e64[2, [3, 70]].tolist() + [
+        float(g.eccentricity_deg(np.array(5.5), np.array(2.0), gaze))])
+    assert g.eccentricity_deg(np.array(3.0), np.array(2.0), gaze).shape == ()
 
 
 @pytest.mark.parametrize("model", ["exact", "linear", "release"])

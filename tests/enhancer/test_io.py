@@ -7,6 +7,7 @@ from __future__ import annotations
 import os
 import stat
 
+import imagecodecs
 import imageio.v3 as iio
 import numpy as np
 import png
@@ -52,6 +53,24 @@ def test_every_layout_and_depth_round_trips_exactly_and_reads_the_same_elsewhere
     assert depth == 8 * np.dtype(dtype).itemsize and img.dtype == np.float32
     assert img.shape == ints.shape
     assert np.array_equal(np.round(img * top).astype(dtype), ints)
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
+def test_the_codes_written_are_one_numpy_conversion_of_the_whole_frame(tmp_path, dtype):
+    """The conversion to integer codes, done in parts on threads (a 4K frame is dozens of
+    parts), writes what one NumPy float32 conversion of the whole frame gives: values
+    clipped (below 0, above 1), halves rounded to even, float64 input rounded to float32."""
+    rng = np.random.default_rng(5)
+    top = np.iinfo(dtype).max
+    values = rng.uniform(-0.1, 1.1, (2160, 3840, 3))
+    values[0, :4, 0] = (np.arange(4) + 0.5) / top  # halves: 0.5, 1.5, 2.5, 3.5 codes
+    want = np.rint(np.clip(values, 0, 1, dtype=np.float32) * np.float32(top)).astype(dtype)
+    assert list(want[0, :4, 0]) == [0, 2, 2, 4] and want.min() == 0 and want.max() == top
+    for a in (values, values.astype(np.float32)):
+        path = tmp_path / "x.png"
+        write_image(path, a, bit_depth=8 * np.dtype(dtype).itemsize)
+        got = imagecodecs.png_decode(path.read_bytes())  # Pillow reads 16-bit RGB as 8
+        assert got.dtype == dtype and np.array_equal(got, want)
 
 
 @pytest.mark.parametrize("layout", list(LAYOUTS))
