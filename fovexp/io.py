@@ -7,9 +7,9 @@ The enhancer processes the colour; alpha passes through unchanged (docs/API.md).
 Codecs: imagecodecs for reading PNG and JPEG and writing JPEG (libpng and libjpeg-turbo; 8-
 and 16-bit, 1 to 4 channels); tifffile for TIFF (float samples too). Both are imported when
 first used. PNG is written here (:func:`_png_encode`): a fast zlib setting
-(:data:`PNG_ZLIB_LEVEL`, the "up" filter on every row) deflated in parts on threads, a 4K frame
-in 0.15 s on two cores where libpng takes 0.3 s with the same settings on one, and maximum
-compression seconds.
+(:data:`PNG_ZLIB_LEVEL`, the "up" filter on every row) deflated in parts on threads. A 4K
+frame takes about 0.2 s on two cores, where libpng at the same level takes 0.3-0.4 s on one
+and maximum compression takes seconds (docs/STATUS.md, "Decisions").
 (Not OpenCV: PsychoPy depends on ``opencv-python``, and a second OpenCV wheel in the same
 environment would share its ``cv2`` folder.)
 
@@ -213,7 +213,7 @@ def write_image(path: str | Path, image: np.ndarray, bit_depth: int = 8) -> None
 def _quantize(a: np.ndarray, dtype: type) -> np.ndarray:
     """Values in [0, 1] (clipped) to the integer codes of ``dtype``: ``rint(v * top)`` in
     float32 steps as the enhancer computes (exact for ``k / top`` inputs), in parts on
-    threads (a 4K frame: :func:`fovexp._parallel.in_parts`)."""
+    threads (:func:`fovexp._parallel.in_parts`)."""
     from ._parallel import in_parts
 
     top = np.float32(np.iinfo(dtype).max)
