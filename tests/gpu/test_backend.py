@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from fovexp import MAP_NAMES, EnhanceParams, Enhancer, FovexpError, load_display
+from fovexp.contrast import sat_pad_px
 from fovexp.pyramids import reduce
 
 from engine_helpers import band_power_fraction, textured_image
@@ -331,11 +332,17 @@ def test_one_enhancer_follows_size_channel_and_method_changes(ctx):
 
 
 def test_the_contrast_padding_wider_than_the_image_matches(ctx):
-    """A 16 x 24 image with sigma 10 px: the summed-area table's border (23 px) is wider than
-    the image, where the symmetric padding repeats (as MATLAB's padarray)."""
-    image = textured_image(16, 24, seed=2)
-    sigma = np.full((16, 24), 10.0, np.float32)
+    """A textured 16 x 24 image with sigma 14 px: the summed-area table's border (31 px) is
+    wider than the image in both directions, where the symmetric padding repeats (period 2 n,
+    as MATLAB's padarray). The image has no flat square (on a constant image any padding
+    reads the same value: issue 19), and the contrast changes it visibly."""
+    image = textured_image(16, 24, seed=2, flat_squares=False)
+    assert image.std() > 0.05
+    sigma = np.full((16, 24), 14.0, np.float32)
+    assert sat_pad_px(14.0) > 24
     (_, cpu), (_, gpu) = _pair(ctx, image, set_kw={"sigma_px": sigma}, method="contrast")
+    change = cpu.linear("contrast") - cpu.linear("foveated")
+    assert np.abs(change).max() > 0.02
     assert np.abs(cpu.linear("contrast") - gpu.linear("contrast")).max() < 1e-5
 
 

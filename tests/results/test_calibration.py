@@ -15,7 +15,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from fovexp import FovexpError, ParameterTable
+from fovexp import PAPER_TABLE2, FovexpError, ParameterTable
 from fovexp.analysis.tables import table2_latex, table2_markdown
 from fovexp.results.calibration import calibrate, fe_summary
 from fovexp.results.derive import fe_by_blur_rate, parameter_table, sk_line_by_blur_rate
@@ -51,7 +51,8 @@ def test_fe_summary_by_hand() -> None:
 
 
 def test_calibrate_by_hand() -> None:
-    fe = _trials([("P1", 0.11, None, "f_e", 0.1), ("P2", 0.11, None, "f_e", 0.2)])
+    # f_e 0.1 and 0.14: mean 0.12, not the paper's 0.15 at blur-rate 0.11
+    fe = _trials([("P1", 0.11, None, "f_e", 0.1), ("P2", 0.11, None, "f_e", 0.14)])
     # s_k means per s_f: 1 -> 20, 2 -> 16, 3 -> 14 (P1 and P2 symmetric about the means)
     sk = _trials([(p, 0.11, sf, "s_k", v + d) for sf, v in ((1.0, 20.0), (2.0, 16.0), (3.0, 14.0))
                   for p, d in (("P1", 1.0), ("P2", -1.0))])
@@ -63,13 +64,14 @@ def test_calibrate_by_hand() -> None:
     assert line.slope == pytest.approx(-3.0)
     assert line.intercept == pytest.approx(50 / 3 + 6)
     row = c.table.iloc[0]
-    assert row["f_e"] == pytest.approx(0.15)
+    assert row["f_e"] == pytest.approx(0.12)
+    assert row["f_e_sem"] == pytest.approx(0.02)
     assert row["s_f"] == pytest.approx(2.2)
     assert row["s_k"] == pytest.approx(-3.0 * 2.2 + 50 / 3 + 6)
     # participants' own lines are parallel (offset +-1): SEM_line = 1; SEM(s_f) = 0.2
     assert row["s_k_sem"] == pytest.approx(np.hypot(3.0 * 0.2, 1.0))
     pt = c.parameter_table("hand")
-    assert pt.at(0.11) == pytest.approx((0.15, row["s_k"], 2.2))
+    assert pt.at(0.11) == pytest.approx((0.12, row["s_k"], 2.2))
 
 
 def test_missing_levels_are_clear_errors() -> None:
@@ -90,6 +92,18 @@ def test_out_of_range_table_is_a_clear_error() -> None:
     sf = _trials([("P1", 0.11, 5.0, "s_f", 5.0)])  # line at 5 -> s_k = -2
     with pytest.raises(FovexpError, match="outside the enhancer's ranges.*s_k"):
         calibrate(fe, sk, sf).parameter_table()
+
+
+def test_the_fixture_truth_is_far_from_the_paper() -> None:
+    """The simulated study's truth differs from the paper's Table 2 (the defaults an analysis
+    could fall back on) by more than twice the recovery tolerance in every entry: a
+    ``calibrate`` that returned PAPER_TABLE2 whatever the logs said fails the recovery tests
+    below (issue 19)."""
+    truth = Truth()
+    for row in PAPER_TABLE2.rows:
+        for k in ("f_e", "s_k", "s_f"):
+            assert abs(getattr(truth, k)[row.blur_rate] - getattr(row, k)) > 2 * TOL[k], (
+                k, row.blur_rate)
 
 
 def test_recovery_of_ground_truth(study: Path) -> None:
