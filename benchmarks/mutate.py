@@ -1,0 +1,403 @@
+"""Mutation testing of the enhancer's stage modules, fovexp/results/ and the analysis'
+statistics (issue 19), with cosmic-ray, one module at a time, each with the tests that
+exercise it. The record is benchmarks/MUTATION.md (its table is rewritten between markers;
+the text around it is kept); each module's survivors, with their diffs, go to
+benchmarks/mutation/<module>.survivors.txt.
+
+    .venv/bin/python benchmarks/mutate.py [MODULE ...] [--list] [--recheck] [--max N]
+
+``./dev mutate`` runs it under ``nice -n 19``. MODULE is a name of :data:`MODULES` (e.g.
+``contrast``, ``results.stats``); none: all of them (hours on 2 cores: run a few at a time).
+
+Why cosmic-ray and not mutmut 3 (checked on mutmut 3.8.1): mutmut rewrites each function into
+a trampoline and skips every decorated function (mutmut/mutation/file_mutation.py, "ignore
+decorated functions"), so none of the 60-odd ``@numba.njit`` kernels, where most of the
+formulas are, would be mutated. cosmic-ray mutates the module's syntax tree wherever the
+node is, writes each mutant to disk in a copy of the repository and runs a command.
+
+Why ``NUMBA_DISABLE_JIT=1`` for the modules with kernels (:data:`KERNEL_MODULES`): with the
+JIT on, a mutated file invalidates Numba's cache of every kernel of its module (the cache is
+keyed on the file), so each mutant would recompile them (seconds to tens of seconds each);
+with it off the kernels run as Python (``prange`` is ``range``), which the tests' small
+images keep fast enough. The mutants are the same code. The other modules run with the JIT
+on: their tests load the kernels from Numba's cache, which a mutant there does not touch.
+
+``--recheck`` runs the survivors of a module's last session again, against the tests as they
+are now: tests are only added to kill survivors, so what was killed stays killed.
+
+Operators: one replacement per operator, as mutmut makes them (+ -, * /, < <=, == !=, and,
+or, True False, numbers +-1, break continue, a loop's body skipped, ``not`` added or
+removed, a unary minus removed, an exception type replaced, a decorator removed). Left out
+before the run, as equivalent by construction:
+
+- mutations inside a ``@numba.njit(...)`` decorator, or removing it: the kernels' compile
+  options (cache, parallel, nogil, inline, fastmath = FASTMATH, which is off) change speed,
+  not values, and with the JIT off the decorator is not applied at all;
+- mutations inside type annotations: with ``from __future__ import annotations`` they are
+  never evaluated;
+- lines marked ``# pragma: no mutate``.
+
+Score = killed / (killed + survived); a mutant that times out (an endless loop) or breaks the
+import counts as killed, as cosmic-ray counts it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import json
+import os
+import platform
+import shutil
+import subprocess
+import sys
+import time
+from datetime import datetime, timezone
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+BEGIN, END = "<!-- mutation-run: begin -->", "<!-- mutation-run: end -->"
+
+E = "tests/enhancer/"
+#: The modules with Numba kernels: mutated with the JIT off (see the module docstring).
+KERNEL_MODULES = {"geometry", "foveation", "contrast", "pyramids", "gabor", "colour"}
+#: module name -> (file, the tests that exercise it: pytest arguments). A kernel module's
+#: selection is of tests on small images (its kernels run as Python); the others run with the
+#: JIT on, their kernels loaded from Numba's cache (compiled once, by the baseline run).
+MODULES: dict[str, tuple[str, list[str]]] = {
+    "geometry": ("fovexp/geometry.py", [E + "test_geometry.py"]),
+    "acuity": ("fovexp/acuity.py", [E + "test_frequency.py"]),
+    "foveation": ("fovexp/foveation.py", [E + "test_foveation.py"]),
+    "contrast": ("fovexp/contrast.py", [E + "test_contrast.py"]),
+    "pyramids": ("fovexp/pyramids.py", [E + "test_pyramids.py"]),
+    "frequency": ("fovexp/frequency.py", [E + "test_frequency.py"]),
+    "amplitude": ("fovexp/amplitude.py", [E + "test_amplitude.py"]),
+    "orientation": ("fovexp/orientation.py", [E + "test_orientation.py"]),
+    "gabor": ("fovexp/gabor.py", [E + "test_gabor.py"]),
+    "colour": ("fovexp/colour.py", [E + "test_colour.py"]),
+    "results.calibration": ("fovexp/results/calibration.py",
+                            ["tests/results/test_calibration.py"]),
+    "results.derive": ("fovexp/results/derive.py", ["tests/results/test_calibration.py"]),
+    "results.format": ("fovexp/results/format.py", ["tests/results/test_loading.py",
+                                                    "tests/results/test_frames.py"]),
+    "results.frames": ("fovexp/results/frames.py", ["tests/results/test_frames.py"]),
+    "results.limits": ("fovexp/results/limits.py", ["tests/results/test_loading.py"]),
+    "results.loading": ("fovexp/results/loading.py", ["tests/results/test_loading.py"]),
+    "results.stats": ("fovexp/results/stats.py", ["tests/results/test_calibration.py",
+                                                  "tests/analysis/test_stats.py"]),
+    "analysis.stats": ("fovexp/analysis/stats.py", ["tests/analysis/test_stats.py"]),
+    "analysis.validation": ("fovexp/analysis/validation.py",
+                            ["tests/analysis/test_validation.py"]),
+}
+#: cosmic-ray's sessions (one SQLite file per module), kept for --recheck
+STATE = ROOT / "out" / "mutate"
+
+#: The operators run (cosmic-ray's names without "core/"): one replacement per operator.
+KEEP_OPERATORS = {
+    "ReplaceBinaryOperator_Add_Sub", "ReplaceBinaryOperator_Sub_Add",
+    "ReplaceBinaryOperator_Mul_Div", "ReplaceBinaryOperator_Div_Mul",
+    "ReplaceBinaryOperator_FloorDiv_Div", "ReplaceBinaryOperator_Mod_Div",
+    "ReplaceBinaryOperator_Pow_Mul", "ReplaceBinaryOperator_LShift_RShift",
+    "ReplaceBinaryOperator_RShift_LShift", "ReplaceBinaryOperator_BitAnd_BitOr",
+    "ReplaceBinaryOperator_BitOr_BitAnd", "ReplaceBinaryOperator_BitXor_BitAnd",
+    "ReplaceComparisonOperator_Eq_NotEq", "ReplaceComparisonOperator_NotEq_Eq",
+    "ReplaceComparisonOperator_Lt_LtE", "ReplaceComparisonOperator_LtE_Lt",
+    "ReplaceComparisonOperator_Gt_GtE", "ReplaceComparisonOperator_GtE_Gt",
+    "ReplaceComparisonOperator_Is_IsNot", "ReplaceComparisonOperator_IsNot_Is",
+    "ReplaceComparisonOperator_In_NotIn", "ReplaceComparisonOperator_NotIn_In",
+    "ReplaceUnaryOperator_Delete_USub", "ReplaceUnaryOperator_Delete_Not",
+    "ReplaceUnaryOperator_Delete_Invert", "AddNot", "ReplaceTrueWithFalse",
+    "ReplaceFalseWithTrue", "ReplaceAndWithOr", "ReplaceOrWithAnd",
+    "ReplaceBreakWithContinue", "ReplaceContinueWithBreak", "ZeroIterationForLoop",
+    "NumberReplacer", "ExceptionReplacer", "RemoveDecorator",
+}
+
+
+def machine() -> str:
+    cpu = platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return f"{cpu}, {os.cpu_count()} cores, {platform.platform()}, Python " \
+           f"{platform.python_version()}"
+
+
+def load() -> str:
+    try:
+        return Path("/proc/loadavg").read_text().split()[0]
+    except OSError:
+        return "?"
+
+
+def copy_tree(work: Path) -> None:
+    """The repository's files (tracked, and new ones git does not ignore) into ``work``."""
+    if work.exists():
+        shutil.rmtree(work)
+    files = subprocess.run(["git", "ls-files", "-z", "--cached", "--others", "--exclude-standard"],
+                           cwd=ROOT, capture_output=True, check=True).stdout.split(b"\0")
+    for name in files:
+        if not name:
+            continue
+        src = ROOT / os.fsdecode(name)
+        if src.is_file():
+            dst = work / os.fsdecode(name)
+            dst.parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(src, dst)
+    # bytecode of everything once (cosmic-ray runs each test command without writing any)
+    subprocess.run([sys.executable, "-m", "compileall", "-q", "fovexp", "tests"], cwd=work,
+                   check=True, stdout=subprocess.DEVNULL)
+
+
+def equivalent_spans(path: Path) -> list[tuple[tuple[int, int], tuple[int, int], str]]:
+    """Source spans whose mutations are equivalent by construction (module docstring)."""
+    tree = ast.parse(path.read_text())
+    spans = []
+
+    def span(node: ast.AST, why: str) -> None:
+        spans.append(((node.lineno, node.col_offset), (node.end_lineno, node.end_col_offset),
+                      why))
+
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            for dec in node.decorator_list:
+                if "numba" in ast.unparse(dec):
+                    # from the "@" (one column before the expression) to its end
+                    spans.append(((dec.lineno, max(dec.col_offset - 1, 0)),
+                                  (dec.end_lineno, dec.end_col_offset), "numba decorator"))
+            if node.returns is not None:
+                span(node.returns, "annotation")
+            args = node.args
+            for a in [*args.posonlyargs, *args.args, *args.kwonlyargs, args.vararg,
+                      args.kwarg]:
+                if a is not None and a.annotation is not None:
+                    span(a.annotation, "annotation")
+        elif isinstance(node, ast.AnnAssign):
+            span(node.annotation, "annotation")
+    for i, line in enumerate(path.read_text().splitlines(), start=1):
+        if "pragma: no mutate" in line:
+            spans.append(((i, 0), (i, len(line) + 1), "pragma: no mutate"))
+    return spans
+
+
+def inside(start: tuple[int, int], end: tuple[int, int], span) -> bool:
+    (a, b, _) = span
+    return a <= tuple(start) and tuple(end) <= b
+
+
+def _skip(wdb, job_ids: list[str], why: str) -> None:
+    from cosmic_ray.work_item import WorkerOutcome, WorkResult
+
+    for job_id in job_ids:
+        wdb.set_result(job_id, WorkResult(output=why, worker_outcome=WorkerOutcome.SKIPPED))
+
+
+def filter_session(db: Path, module: Path, max_mutants: int | None) -> dict[str, int]:
+    """Mark the mutants left out (operators not run, equivalent by construction; past
+    ``max_mutants`` in a trial run) as skipped in cosmic-ray's session; returns the counts
+    left out, by reason."""
+    from cosmic_ray.work_db import WorkDB, use_db
+
+    spans = equivalent_spans(module)
+    lines = module.read_text().splitlines()
+    left_out: dict[str, list[str]] = {}
+    kept = []
+    with use_db(db, WorkDB.Mode.open) as wdb:
+        for item in wdb.pending_work_items:
+            (m,) = item.mutations
+            name = m.operator_name.split("/", 1)[-1]
+            why = None
+            if name not in KEEP_OPERATORS:
+                why = "operator not run"
+            elif name == "RemoveDecorator" and "numba" in lines[m.start_pos[0] - 1]:
+                why = "numba decorator"
+            else:
+                why = next((s[2] for s in spans if inside(m.start_pos, m.end_pos, s)), None)
+            if why:
+                left_out.setdefault(why, []).append(item.job_id)
+            else:
+                kept.append((m.start_pos, item.job_id))
+        if max_mutants is not None:  # a trial: the first N mutants of the file
+            kept.sort()
+            left_out["beyond --max"] = [j for _, j in kept[max_mutants:]]
+        for why, jobs in left_out.items():
+            _skip(wdb, jobs, f"left out by benchmarks/mutate.py: {why}")
+    return {why: len(jobs) for why, jobs in left_out.items()}
+
+
+def outcomes(db: Path) -> tuple[dict[str, int], list[tuple[int, str, str]]]:
+    """Counts by outcome (killed, survived, incompetent, pending) and the survivors
+    (line, operator, diff)."""
+    from cosmic_ray.work_db import WorkDB, use_db
+    from cosmic_ray.work_item import TestOutcome, WorkerOutcome
+
+    counts = {"killed": 0, "survived": 0, "incompetent": 0}
+    survivors = []
+    with use_db(db, WorkDB.Mode.open) as wdb:
+        specs = {item.job_id: item.mutations[0] for item in wdb.work_items}
+        for job_id, result in wdb.results:
+            if result.worker_outcome == WorkerOutcome.SKIPPED:
+                continue
+            if result.test_outcome == TestOutcome.KILLED:  # failed, timed out or crashed
+                counts["killed"] += 1
+            elif result.test_outcome == TestOutcome.SURVIVED:
+                counts["survived"] += 1
+                m = specs[job_id]
+                survivors.append((m.start_pos[0], m.operator_name, result.diff or ""))
+            else:
+                counts["incompetent"] += 1
+        counts["pending"] = wdb.num_work_items - wdb.num_results
+    return counts, sorted(survivors)
+
+
+def run_module(name: str, work: Path, env: dict[str, str], max_mutants: int | None,
+               recheck: bool) -> dict:
+    """Mutation-test one module: a new session, or with ``recheck`` the survivors of the last
+    one again (against the tests as they are now: what a test written for them kills)."""
+    from cosmic_ray.work_db import WorkDB, use_db
+
+    path, tests = MODULES[name]
+    if name in KERNEL_MODULES:
+        env = dict(env, NUMBA_DISABLE_JIT="1")
+    cr = str(Path(sys.executable).with_name("cosmic-ray"))
+    pytest = [sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider",
+              "-m", "not slow and not gui", *tests]
+    t0 = time.perf_counter()
+    base = subprocess.run(pytest, cwd=work, env=env, capture_output=True, text=True)
+    baseline_s = time.perf_counter() - t0
+    if base.returncode != 0:
+        raise SystemExit(f"{name}: the tests fail without a mutation:\n{base.stdout[-3000:]}")
+    if name not in KERNEL_MODULES:  # the baseline compiled the kernels: time a cached run
+        t0 = time.perf_counter()
+        subprocess.run(pytest, cwd=work, env=env, capture_output=True, check=True)
+        baseline_s = time.perf_counter() - t0
+    # generous: a loaded machine; an endless loop is killed here
+    timeout = max(60.0, 5.0 * baseline_s)
+    STATE.mkdir(parents=True, exist_ok=True)
+    cfg, db = STATE / f"{name}.toml", STATE / f"{name}.sqlite"
+    cfg.write_text(
+        "[cosmic-ray]\n"
+        f'module-path = "{path}"\n'
+        f"timeout = {timeout:.0f}\n"
+        "excluded-modules = []\n"
+        f"test-command = {json.dumps(' '.join(pytest))}\n"
+        '[cosmic-ray.distributor]\nname = "local"\n')
+    previous = json.loads((STATE / f"{name}.json").read_text()) if recheck else None
+    if recheck:
+        if not db.exists():
+            raise SystemExit(f"{name}: no session to recheck ({db}): run it first")
+        with use_db(db, WorkDB.Mode.open) as wdb:
+            again = [job for job, r in wdb.results if str(r.test_outcome) == "survived"]
+        con = __import__("sqlite3").connect(db)
+        con.executemany("delete from work_results where job_id = ?", [(j,) for j in again])
+        con.commit()
+        con.close()
+        left_out = previous["left_out"]
+    else:
+        db.unlink(missing_ok=True)
+        subprocess.run([cr, "init", str(cfg), str(db)], cwd=work, env=env, check=True,
+                       capture_output=True)
+        left_out = filter_session(db, work / path, max_mutants)
+    t0 = time.perf_counter()
+    subprocess.run([cr, "exec", str(cfg), str(db)], cwd=work, env=env, check=True,
+                   capture_output=True)
+    wall_s = time.perf_counter() - t0
+    counts, survivors = outcomes(db)
+    killed, survived = counts["killed"], counts["survived"]
+    out = ROOT / "benchmarks" / "mutation"
+    out.mkdir(exist_ok=True)
+    with open(out / f"{name}.survivors.txt", "w") as fh:
+        fh.write(f"# {name} ({path}): {survived} surviving mutants of {killed + survived}\n")
+        for line, op, diff in survivors:
+            fh.write(f"\n## line {line}: {op}\n{diff}\n")
+    result = {
+        "module": name, "path": path, "tests": tests, "jit": name not in KERNEL_MODULES,
+        "mutants": killed + survived, "killed": killed, "survived": survived,
+        "incompetent": counts["incompetent"], "pending": counts["pending"],
+        "left_out": left_out, "score": round(100.0 * killed / max(killed + survived, 1), 1),
+        "baseline_s": round(baseline_s, 1), "wall_s": round(wall_s), "timeout_s": timeout,
+        "date": datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
+        "machine": machine(), "load": load(), "max": max_mutants,
+        "command": f"./dev mutate {'--recheck ' if recheck else ''}{name}",
+    }
+    if previous:  # what the first run found, kept beside the recheck
+        result["first_run"] = previous.get("first_run") or {
+            k: previous[k] for k in ("mutants", "killed", "survived", "score", "date", "wall_s",
+                                     "load")}
+        result["wall_s"] += previous.get("wall_s", 0)
+    (STATE / f"{name}.json").write_text(json.dumps(result, indent=1) + "\n")
+    return result
+
+
+def write_record(results: dict[str, dict]) -> None:
+    path = ROOT / "benchmarks" / "MUTATION.md"
+    text = path.read_text() if path.exists() else f"# Mutation testing\n\n{BEGIN}\n{END}\n"
+    rows = ["| module | file | mutants | killed | survived | score | left out | run | date | "
+            "load |", "|---|---|---:|---:|---:|---:|---:|---:|---|---:|"]
+    for name in MODULES:
+        r = results.get(name)
+        if r is None:
+            continue
+        partial = f" (first {r['max']})" if r.get("max") else ""
+        rows.append(
+            f"| {name} | `{r['path']}` | {r['mutants']}{partial} | {r['killed']} | "
+            f"{r['survived']} | {r['score']} % | {sum(r['left_out'].values())} | "
+            f"{r['wall_s'] / 60:.0f} min | {r['date']} | {r['load']} |")
+    machines = sorted({r["machine"] for r in results.values()})
+    table = "\n".join(rows) + "\n\nMachine: " + "; ".join(machines) + \
+        ". Command: `./dev mutate MODULE` (benchmarks/mutate.py, under `nice -n 19`)."
+    head, _, rest = text.partition(BEGIN)
+    _, _, tail = rest.partition(END)
+    path.write_text(f"{head}{BEGIN}\n{table}\n{END}{tail}")
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("modules", nargs="*", help="names of MODULES (default: all)")
+    ap.add_argument("--list", action="store_true", help="list the modules and their tests")
+    ap.add_argument("--max", type=int, default=None,
+                    help="run only the first N mutants of each module (a trial; not recorded "
+                    "as a full run)")
+    ap.add_argument("--recheck", action="store_true",
+                    help="run the survivors of the last run of each module again, against the "
+                    "tests as they are now")
+    ap.add_argument("--work", type=Path, default=Path("/tmp/fovexp-mutate"),
+                    help="scratch copy of the repository the mutants are written into")
+    args = ap.parse_args()
+    if args.list:
+        for name, (path, tests) in MODULES.items():
+            print(f"{name:22s} {path:34s} {' '.join(tests)}")
+        return 0
+    names = args.modules or list(MODULES)
+    unknown = [n for n in names if n not in MODULES]
+    if unknown:
+        ap.error(f"unknown module(s) {', '.join(unknown)} (see --list)")
+    copy_tree(args.work)
+    env = dict(os.environ, PYTHONDONTWRITEBYTECODE="1",
+               FOVEXP_TEST_STIMULI=str(args.work / ".mutate" / "stimuli"))
+    env.pop("NUMBA_DISABLE_JIT", None)
+    (args.work / ".mutate").mkdir(exist_ok=True)
+    subprocess.run([sys.executable, "-c",
+                    "import sys; from fovexp.experiment.stimuli import DRY_RUN_SIZE, "
+                    "StimulusSet, generate_scenes; generate_scenes(StimulusSet(sys.argv[1]), "
+                    "DRY_RUN_SIZE)", env["FOVEXP_TEST_STIMULI"]], cwd=args.work, check=True)
+    record = ROOT / "benchmarks" / "mutation" / "results.json"
+    results = json.loads(record.read_text()) if record.exists() else {}
+    for name in names:
+        print(f"mutate {name}: {MODULES[name][0]} ...", flush=True)
+        r = run_module(name, args.work, env, args.max, args.recheck)
+        print(f"  {r['killed']} killed, {r['survived']} survived of {r['mutants']} "
+              f"({r['score']} %), {sum(r['left_out'].values())} left out, "
+              f"{r['wall_s'] / 60:.0f} min", flush=True)
+        results[name] = r
+        record.parent.mkdir(exist_ok=True)
+        record.write_text(json.dumps(results, indent=1, sort_keys=True) + "\n")
+        write_record(results)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
