@@ -48,6 +48,7 @@ import ast
 import json
 import os
 import platform
+import shlex
 import shutil
 import subprocess
 import sys
@@ -234,7 +235,8 @@ def outcomes(db: Path) -> tuple[dict[str, int], list[tuple[int, str, str]]]:
     from cosmic_ray.work_db import WorkDB, use_db
     from cosmic_ray.work_item import TestOutcome, WorkerOutcome
 
-    counts = {"killed": 0, "survived": 0, "incompetent": 0}
+    counts = {"killed": 0, "survived": 0, "incompetent": 0, "killed by timeout": 0,
+              "killed by an error at import or collection": 0}
     survivors = []
     with use_db(db, WorkDB.Mode.open) as wdb:
         specs = {item.job_id: item.mutations[0] for item in wdb.work_items}
@@ -242,7 +244,14 @@ def outcomes(db: Path) -> tuple[dict[str, int], list[tuple[int, str, str]]]:
             if result.worker_outcome == WorkerOutcome.SKIPPED:
                 continue
             if result.test_outcome == TestOutcome.KILLED:  # failed, timed out or crashed
+                out = result.output or ""
+                if "ERROR: usage" in out or "file or directory not found" in out:
+                    raise SystemExit(f"{db}: pytest was called wrongly:\n{out[-2000:]}")
                 counts["killed"] += 1
+                if out == "timeout":
+                    counts["killed by timeout"] += 1
+                elif "error" in out.splitlines()[-1] if out.strip() else False:
+                    counts["killed by an error at import or collection"] += 1
             elif result.test_outcome == TestOutcome.SURVIVED:
                 counts["survived"] += 1
                 m = specs[job_id]
@@ -258,13 +267,16 @@ def run_module(name: str, work: Path, env: dict[str, str], max_mutants: int | No
     """Mutation-test one module: a new session, or with ``recheck`` the survivors of the last
     one again (against the tests as they are now: what a test written for them kills)."""
     from cosmic_ray.work_db import WorkDB, use_db
+    from cosmic_ray.work_item import TestOutcome
 
     path, tests = MODULES[name]
     if name in KERNEL_MODULES:
         env = dict(env, NUMBA_DISABLE_JIT="1")
     cr = str(Path(sys.executable).with_name("cosmic-ray"))
-    pytest = [sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider",
-              "-m", "not slow and not gui", *tests]
+    # the command cosmic-ray runs (it splits it with shlex): the baseline runs the same words
+    command = shlex.join([sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider",
+                          "-m", "not slow and not gui", *tests])
+    pytest = shlex.split(command)
     t0 = time.perf_counter()
     base = subprocess.run(pytest, cwd=work, env=env, capture_output=True, text=True)
     baseline_s = time.perf_counter() - t0
@@ -283,14 +295,14 @@ def run_module(name: str, work: Path, env: dict[str, str], max_mutants: int | No
         f'module-path = "{path}"\n'
         f"timeout = {timeout:.0f}\n"
         "excluded-modules = []\n"
-        f"test-command = {json.dumps(' '.join(pytest))}\n"
+        f"test-command = {json.dumps(command)}\n"
         '[cosmic-ray.distributor]\nname = "local"\n')
     previous = json.loads((STATE / f"{name}.json").read_text()) if recheck else None
     if recheck:
         if not db.exists():
             raise SystemExit(f"{name}: no session to recheck ({db}): run it first")
         with use_db(db, WorkDB.Mode.open) as wdb:
-            again = [job for job, r in wdb.results if str(r.test_outcome) == "survived"]
+            again = [job for job, r in wdb.results if r.test_outcome == TestOutcome.SURVIVED]
         con = __import__("sqlite3").connect(db)
         con.executemany("delete from work_results where job_id = ?", [(j,) for j in again])
         con.commit()
@@ -317,6 +329,8 @@ def run_module(name: str, work: Path, env: dict[str, str], max_mutants: int | No
         "module": name, "path": path, "tests": tests, "jit": name not in KERNEL_MODULES,
         "mutants": killed + survived, "killed": killed, "survived": survived,
         "incompetent": counts["incompetent"], "pending": counts["pending"],
+        "killed_by_timeout": counts["killed by timeout"],
+        "killed_by_error": counts["killed by an error at import or collection"],
         "left_out": left_out, "score": round(100.0 * killed / max(killed + survived, 1), 1),
         "baseline_s": round(baseline_s, 1), "wall_s": round(wall_s), "timeout_s": timeout,
         "date": datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
