@@ -229,43 +229,66 @@ def filter_session(db: Path, module: Path, max_mutants: int | None) -> dict[str,
     return {why: len(jobs) for why, jobs in left_out.items()}
 
 
-def outcomes(db: Path) -> tuple[dict[str, int], list[tuple[int, str, str]]]:
-    """Counts by outcome (killed, survived, incompetent, pending) and the survivors
-    (line, operator, diff)."""
+def outcomes(dbs: list[Path]) -> tuple[dict[str, int], list[tuple[int, str, str]]]:
+    """Counts by outcome (killed, survived, incompetent, pending) over the sessions of one
+    module and its survivors (line, operator, diff)."""
     from cosmic_ray.work_db import WorkDB, use_db
     from cosmic_ray.work_item import TestOutcome, WorkerOutcome
 
-    counts = {"killed": 0, "survived": 0, "incompetent": 0, "killed by timeout": 0,
-              "killed by an error at import or collection": 0}
+    counts = {"killed": 0, "survived": 0, "incompetent": 0, "pending": 0,
+              "killed by timeout": 0, "killed by an error at import or collection": 0}
     survivors = []
-    with use_db(db, WorkDB.Mode.open) as wdb:
-        specs = {item.job_id: item.mutations[0] for item in wdb.work_items}
-        for job_id, result in wdb.results:
-            if result.worker_outcome == WorkerOutcome.SKIPPED:
-                continue
-            if result.test_outcome == TestOutcome.KILLED:  # failed, timed out or crashed
-                out = result.output or ""
-                if "ERROR: usage" in out or "file or directory not found" in out:
-                    raise SystemExit(f"{db}: pytest was called wrongly:\n{out[-2000:]}")
-                counts["killed"] += 1
-                if out == "timeout":
-                    counts["killed by timeout"] += 1
-                elif "error" in out.splitlines()[-1] if out.strip() else False:
-                    counts["killed by an error at import or collection"] += 1
-            elif result.test_outcome == TestOutcome.SURVIVED:
-                counts["survived"] += 1
-                m = specs[job_id]
-                survivors.append((m.start_pos[0], m.operator_name, result.diff or ""))
-            else:
-                counts["incompetent"] += 1
-        counts["pending"] = wdb.num_work_items - wdb.num_results
+    for db in dbs:
+        with use_db(db, WorkDB.Mode.open) as wdb:
+            specs = {item.job_id: item.mutations[0] for item in wdb.work_items}
+            for job_id, result in wdb.results:
+                if result.worker_outcome == WorkerOutcome.SKIPPED:
+                    continue
+                if result.test_outcome == TestOutcome.KILLED:  # failed, timed out or crashed
+                    out = result.output or ""
+                    if "ERROR: usage" in out or "file or directory not found" in out:
+                        raise SystemExit(f"{db}: pytest was called wrongly:\n{out[-2000:]}")
+                    counts["killed"] += 1
+                    last = out.strip().splitlines()[-1] if out.strip() else ""
+                    if out == "timeout":
+                        counts["killed by timeout"] += 1
+                    elif "error" in last and "failed" not in last:
+                        counts["killed by an error at import or collection"] += 1
+                elif result.test_outcome == TestOutcome.SURVIVED:
+                    counts["survived"] += 1
+                    m = specs[job_id]
+                    survivors.append((m.start_pos[0], m.operator_name, result.diff or ""))
+                else:
+                    counts["incompetent"] += 1
+            counts["pending"] += wdb.num_work_items - wdb.num_results
     return counts, sorted(survivors)
 
 
-def run_module(name: str, work: Path, env: dict[str, str], max_mutants: int | None,
+def _split(db: Path, parts: int) -> list[Path]:
+    """Copies of a session, the pending mutants dealt round-robin: part i skips the others'."""
+    from cosmic_ray.work_db import WorkDB, use_db
+
+    with use_db(db, WorkDB.Mode.open) as wdb:
+        pending = sorted((item.mutations[0].start_pos, item.job_id)
+                         for item in wdb.pending_work_items)
+    out = []
+    for i in range(parts):
+        part = db.with_name(f"{db.stem}.part{i}.sqlite")
+        shutil.copy(db, part)
+        with use_db(part, WorkDB.Mode.open) as wdb:
+            _skip(wdb, [j for k, (_, j) in enumerate(pending) if k % parts != i],
+                  "another part's")
+        out.append(part)
+    return out
+
+
+def run_module(name: str, works: list[Path], env: dict[str, str], max_mutants: int | None,
                recheck: bool) -> dict:
-    """Mutation-test one module: a new session, or with ``recheck`` the survivors of the last
-    one again (against the tests as they are now: what a test written for them kills)."""
+    """Mutation-test one module, its mutants shared among ``works`` (copies of the
+    repository, one cosmic-ray session each, run side by side): a new session, or with
+    ``recheck`` the survivors of the last one again (against the tests as they are now)."""
+    import sqlite3
+
     from cosmic_ray.work_db import WorkDB, use_db
     from cosmic_ray.work_item import TestOutcome
 
@@ -277,16 +300,15 @@ def run_module(name: str, work: Path, env: dict[str, str], max_mutants: int | No
     command = shlex.join([sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider",
                           "-m", "not slow and not gui", *tests])
     pytest = shlex.split(command)
+    for work in works:  # in every copy: with the JIT on, this compiles its kernels' cache
+        base = subprocess.run(pytest, cwd=work, env=env, capture_output=True, text=True)
+        if base.returncode != 0:
+            raise SystemExit(f"{name}: the tests fail without a mutation:\n"
+                             f"{base.stdout[-3000:]}")
     t0 = time.perf_counter()
-    base = subprocess.run(pytest, cwd=work, env=env, capture_output=True, text=True)
+    subprocess.run(pytest, cwd=works[0], env=env, capture_output=True, check=True)
     baseline_s = time.perf_counter() - t0
-    if base.returncode != 0:
-        raise SystemExit(f"{name}: the tests fail without a mutation:\n{base.stdout[-3000:]}")
-    if name not in KERNEL_MODULES:  # the baseline compiled the kernels: time a cached run
-        t0 = time.perf_counter()
-        subprocess.run(pytest, cwd=work, env=env, capture_output=True, check=True)
-        baseline_s = time.perf_counter() - t0
-    # generous: a loaded machine; an endless loop is killed here
+    # generous (a loaded machine); an endless loop is killed here, and counts as killed
     timeout = max(60.0, 5.0 * baseline_s)
     STATE.mkdir(parents=True, exist_ok=True)
     cfg, db = STATE / f"{name}.toml", STATE / f"{name}.sqlite"
@@ -301,28 +323,42 @@ def run_module(name: str, work: Path, env: dict[str, str], max_mutants: int | No
     if recheck:
         if not db.exists():
             raise SystemExit(f"{name}: no session to recheck ({db}): run it first")
-        with use_db(db, WorkDB.Mode.open) as wdb:
-            again = [job for job, r in wdb.results if r.test_outcome == TestOutcome.SURVIVED]
-        con = __import__("sqlite3").connect(db)
-        con.executemany("delete from work_results where job_id = ?", [(j,) for j in again])
+        # the parts' results back into the whole session, the survivors made pending again
+        merged = []
+        for part in sorted(STATE.glob(f"{name}.part*.sqlite")):
+            with use_db(part, WorkDB.Mode.open) as wdb:
+                merged += [(j, r) for j, r in wdb.results if r.output != "another part's"]
+        con = sqlite3.connect(db)
+        con.execute("delete from work_results")
         con.commit()
         con.close()
+        with use_db(db, WorkDB.Mode.open) as wdb:
+            for job_id, r in merged:
+                if r.test_outcome != TestOutcome.SURVIVED:
+                    wdb.set_result(job_id, r)
         left_out = previous["left_out"]
     else:
         db.unlink(missing_ok=True)
-        subprocess.run([cr, "init", str(cfg), str(db)], cwd=work, env=env, check=True,
+        subprocess.run([cr, "init", str(cfg), str(db)], cwd=works[0], env=env, check=True,
                        capture_output=True)
-        left_out = filter_session(db, work / path, max_mutants)
+        left_out = filter_session(db, works[0] / path, max_mutants)
+    for old in STATE.glob(f"{name}.part*.sqlite"):
+        old.unlink()
+    parts = _split(db, len(works))
     t0 = time.perf_counter()
-    subprocess.run([cr, "exec", str(cfg), str(db)], cwd=work, env=env, check=True,
-                   capture_output=True)
+    procs = [subprocess.Popen([cr, "exec", str(cfg), str(part)], cwd=work, env=env,
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+             for work, part in zip(works, parts, strict=True)]
+    if any(p.wait() != 0 for p in procs):
+        raise SystemExit(f"{name}: cosmic-ray exec failed")
     wall_s = time.perf_counter() - t0
-    counts, survivors = outcomes(db)
+    counts, survivors = outcomes(parts)
     killed, survived = counts["killed"], counts["survived"]
     out = ROOT / "benchmarks" / "mutation"
     out.mkdir(exist_ok=True)
     with open(out / f"{name}.survivors.txt", "w") as fh:
-        fh.write(f"# {name} ({path}): {survived} surviving mutants of {killed + survived}\n")
+        fh.write(f"# {name} ({path}): {survived} surviving mutants of {killed + survived} "
+                 f"(benchmarks/MUTATION.md says which are equivalent)\n")
         for line, op, diff in survivors:
             fh.write(f"\n## line {line}: {op}\n{diff}\n")
     result = {
@@ -333,6 +369,7 @@ def run_module(name: str, work: Path, env: dict[str, str], max_mutants: int | No
         "killed_by_error": counts["killed by an error at import or collection"],
         "left_out": left_out, "score": round(100.0 * killed / max(killed + survived, 1), 1),
         "baseline_s": round(baseline_s, 1), "wall_s": round(wall_s), "timeout_s": timeout,
+        "workers": len(works),
         "date": datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
         "machine": machine(), "load": load(), "max": max_mutants,
         "command": f"./dev mutate {'--recheck ' if recheck else ''}{name}",
@@ -379,7 +416,11 @@ def main() -> int:
                     help="run the survivors of the last run of each module again, against the "
                     "tests as they are now")
     ap.add_argument("--work", type=Path, default=Path("/tmp/fovexp-mutate"),
-                    help="scratch copy of the repository the mutants are written into")
+                    help="folder of the scratch copies of the repository the mutants are "
+                    "written into")
+    ap.add_argument("--workers", type=int, default=2,
+                    help="copies run side by side, each with a share of the mutants (2: the "
+                    "machine's cores)")
     args = ap.parse_args()
     if args.list:
         for name, (path, tests) in MODULES.items():
@@ -389,20 +430,22 @@ def main() -> int:
     unknown = [n for n in names if n not in MODULES]
     if unknown:
         ap.error(f"unknown module(s) {', '.join(unknown)} (see --list)")
-    copy_tree(args.work)
-    env = dict(os.environ, PYTHONDONTWRITEBYTECODE="1",
-               FOVEXP_TEST_STIMULI=str(args.work / ".mutate" / "stimuli"))
+    works = [args.work / f"w{i}" for i in range(args.workers)]
+    for work in works:
+        copy_tree(work)
+    stimuli = args.work / "stimuli"
+    env = dict(os.environ, PYTHONDONTWRITEBYTECODE="1", FOVEXP_TEST_STIMULI=str(stimuli))
     env.pop("NUMBA_DISABLE_JIT", None)
-    (args.work / ".mutate").mkdir(exist_ok=True)
-    subprocess.run([sys.executable, "-c",
-                    "import sys; from fovexp.experiment.stimuli import DRY_RUN_SIZE, "
-                    "StimulusSet, generate_scenes; generate_scenes(StimulusSet(sys.argv[1]), "
-                    "DRY_RUN_SIZE)", env["FOVEXP_TEST_STIMULI"]], cwd=args.work, check=True)
+    if not stimuli.is_dir():
+        subprocess.run([sys.executable, "-c",
+                        "import sys; from fovexp.experiment.stimuli import DRY_RUN_SIZE, "
+                        "StimulusSet, generate_scenes; generate_scenes(StimulusSet(sys.argv[1]), "
+                        "DRY_RUN_SIZE)", str(stimuli)], cwd=works[0], check=True)
     record = ROOT / "benchmarks" / "mutation" / "results.json"
     results = json.loads(record.read_text()) if record.exists() else {}
     for name in names:
         print(f"mutate {name}: {MODULES[name][0]} ...", flush=True)
-        r = run_module(name, args.work, env, args.max, args.recheck)
+        r = run_module(name, works, env, args.max, args.recheck)
         print(f"  {r['killed']} killed, {r['survived']} survived of {r['mutants']} "
               f"({r['score']} %), {sum(r['left_out'].values())} left out, "
               f"{r['wall_s'] / 60:.0f} min", flush=True)
