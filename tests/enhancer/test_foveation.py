@@ -142,3 +142,117 @@ def test_the_sigma_map_of_some_blocks_is_the_whole_maps_there(viewport):
         assert np.array_equal(got[px].view(np.uint32), full[px].view(np.uint32))
         assert np.array_equal(sigma_on_blocks(g, gaze, rate, fovea).view(np.uint32),
                               full.view(np.uint32))
+
+
+# --- small inputs, for the mutation runs (their kernels run as Python there) and as unit
+# checks of each formula of the stage (issue 19)
+
+def test_sigma_px_is_the_papers_formula():
+    """sigma = blur_rate / 60 * max(0, e - fovea) * ppd (px; section 5.2), float32 or
+    float64, 0 inside the fovea."""
+    from fovexp.foveation import sigma_px
+
+    ecc = np.array([3.0, 8.0, 20.0, 45.5])
+    ppd = np.array([39.0, 40.0, 44.0, 51.0])
+    want = 0.34 / 60 * np.maximum(ecc - 8.0, 0) * ppd
+    got = sigma_px(ecc, ppd, 0.34, 8.0, np.float64)
+    assert got.dtype == np.float64 and np.allclose(got, want, rtol=1e-14, atol=0)
+    got32 = sigma_px(ecc.astype(np.float32), ppd.astype(np.float32), 0.34, 8.0)
+    assert got32.dtype == np.float32 and np.allclose(got32, want, rtol=1e-6)
+    assert sigma_px(np.float64(20.0), np.float64(44.0), 5.0, 8.0, np.float64) == pytest.approx(
+        5 / 60 * 12 * 44, rel=1e-14)
+
+
+def test_the_blur_stack_and_its_kernels():
+    """Stack sigmas 0.25 px apart up to 1.5 px, then x 2**0.25; each level blurred on the
+    coarsest pyramid level whose residual blur is still >= 1.25 level px, with the residual
+    Gaussian: pyramid blur and residual add up (in variance) to the stack sigma."""
+    from fovexp.foveation import (
+        MIN_RESIDUAL_LEVEL_PX,
+        STACK_RATIO,
+        blur_stack_plan,
+        gaussian_kernel,
+        stack_sigmas_px,
+    )
+    from fovexp.pyramids import gaussian_sigma_px
+
+    assert STACK_RATIO == 2**0.25 and MIN_RESIDUAL_LEVEL_PX == 1.25
+    s = stack_sigmas_px(3.0)
+    assert s[:7] == pytest.approx([0, 0.25, 0.5, 0.75, 1.0, 1.25, 1.5])
+    # then by the ratio until 3 is reached (1.5 * 2**(4/4) lands a rounding below 3: one more)
+    assert s[7:] == pytest.approx([1.5 * 2 ** (k / 4) for k in range(1, s.size - 6)])
+    assert s[-2] < 3.0 <= s[-1] and stack_sigmas_px(0.3).tolist() == s[:7].tolist()
+    plan = blur_stack_plan(40.0)
+    assert plan.sigmas_px[-1] >= 40.0 and plan.top == int(plan.pyramid_level.max()) >= 3
+    for sig, m, g in zip(plan.sigmas_px, plan.pyramid_level, plan.kernels, strict=True):
+        m = int(m)
+        r = g.size // 2
+        res = np.sqrt(max(sig**2 - gaussian_sigma_px(m) ** 2, 0.0)) / 2**m
+        if sig > 0:
+            assert res >= 1.25 or m == 0
+            nxt = np.sqrt(max(sig**2 - gaussian_sigma_px(m + 1) ** 2, 0.0)) / 2 ** (m + 1)
+            assert nxt < 1.25
+            assert r == int(4 * res + 0.5)
+            assert np.allclose(g, gaussian_kernel(res))
+        else:
+            assert g.tolist() == [1.0]
+    step = 2**plan.top
+    assert plan.pad_px % step == 0 and plan.pad_px >= 4 * 40.0 + 2 * step
+    assert plan.pad_px < 4 * 40.0 + 3 * step
+    assert plan.reach_px() == max(2**int(m) * (g.size // 2 + 1) + 2 * (2**int(m) - 1)
+                                  for m, g in zip(plan.pyramid_level, plan.kernels, strict=True))
+    assert blur_stack_plan(1.0).pad_px == 0  # no pyramid: no border
+    g = gaussian_kernel(1.7, np.float64)
+    d = np.arange(-7, 8)
+    assert g.size == 15 and np.allclose(g, np.exp(-d**2 / (2 * 1.7**2)) / np.exp(
+        -d**2 / (2 * 1.7**2)).sum(), rtol=1e-14)
+    assert gaussian_kernel(1.7).dtype == np.float32
+
+
+def test_the_exact_reference_is_the_gaussian_of_each_pixels_own_sigma():
+    """foveate_exact: SciPy's gaussian_filter (nearest borders, 4 sigma) for a constant
+    sigma, and each pixel with its own sigma otherwise (pixels at two sigmas each compared
+    with the constant-sigma filter of their own); sigma 0 keeps the pixel."""
+    img = textured_image(20, 26, seed=3, rgb=False, flat_squares=False)
+    for s in (0.8, 1.7):
+        ref = ndimage.gaussian_filter(img.astype(np.float64), s, mode="nearest")
+        assert np.abs(foveate_exact(img, np.full(img.shape, s, np.float32)) - ref).max() < 1e-6
+    sigma = np.where(np.arange(26)[None, :] < 13, 0.8, 1.7).astype(np.float32).repeat(20, 0)
+    sigma[5, 5] = 0.0
+    got = foveate_exact(img.astype(np.float64), sigma)
+    assert got.dtype == np.float64 and got[5, 5] == img[5, 5]
+    for s, cols in ((0.8, slice(0, 5)), (1.7, slice(13, 26))):
+        ref = ndimage.gaussian_filter(img.astype(np.float64), s, mode="nearest")
+        assert np.abs(got[:, cols] - ref[:, cols]).max() < 1e-6
+    ys, xs = np.array([0, 19, 7]), np.array([25, 0, 14])
+    assert np.allclose(foveate_exact(img, sigma, ys, xs), got[ys, xs], atol=1e-6)
+
+
+@pytest.mark.parametrize("max_sigma,rgb", [(2.6, False), (9.0, True)])
+def test_small_fast_foveation_against_the_exact_convolution(max_sigma, rgb):
+    """The blur stack on a 44 x 60 image (the same bounds as on 270 x 480: RMS < 0.002,
+    max < 0.02), sigma 0 bit for bit, the blur there elsewhere; float64 kept; the sigma map
+    asked for by blocks gives the same result."""
+    img = linearize(textured_image(44, 60, seed=6, rgb=rgb, flat_squares=False), 2.2)
+    sigma = _radial_sigma(44, 60, max_sigma)
+    fast = foveate(img, sigma)
+    rng = np.random.default_rng(2)
+    ys, xs = rng.integers(0, 44, 60), rng.integers(0, 60, 60)
+    err = fast[ys, xs] - foveate_exact(img, sigma, ys, xs)
+    assert np.sqrt(np.mean(err**2)) < 0.002 and np.abs(err).max() < 0.02
+    zero = sigma == 0
+    assert zero.sum() > 50 and np.array_equal(fast[zero], img[zero])
+    assert np.abs(fast[~zero] - img[~zero]).max() > 0.01
+    assert np.array_equal(foveate(img, sigma, skip=False), fast)
+    f64 = foveate(img.astype(np.float64), sigma)
+    assert f64.dtype == np.float64 and np.abs(f64 - fast).max() < 1e-5
+
+    def on_blocks(need, shift):
+        return sigma
+
+    assert np.array_equal(foveate(img, on_blocks, max_sigma_px=float(sigma.max())), fast)
+    with pytest.raises(ValueError, match="needs max_sigma_px"):
+        foveate(img, on_blocks)
+    flat = np.full((44, 60), 0.3, np.float32)
+    assert np.array_equal(foveate(flat, sigma), flat)  # a constant stays its constant
+    assert np.array_equal(foveate(img, np.zeros((44, 60), np.float32)), img)
