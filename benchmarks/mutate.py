@@ -48,6 +48,7 @@ import ast
 import json
 import os
 import platform
+import random
 import shlex
 import shutil
 import subprocess
@@ -196,10 +197,11 @@ def _skip(wdb, job_ids: list[str], why: str) -> None:
         wdb.set_result(job_id, WorkResult(output=why, worker_outcome=WorkerOutcome.SKIPPED))
 
 
-def filter_session(db: Path, module: Path, max_mutants: int | None) -> dict[str, int]:
+def filter_session(db: Path, module: Path, max_mutants: int | None,
+                   sample: int | None = None) -> dict[str, int]:
     """Mark the mutants left out (operators not run, equivalent by construction; past
-    ``max_mutants`` in a trial run) as skipped in cosmic-ray's session; returns the counts
-    left out, by reason."""
+    ``max_mutants`` in a trial run; outside a random ``sample`` of that many) as skipped in
+    cosmic-ray's session; returns the counts left out, by reason."""
     from cosmic_ray.work_db import WorkDB, use_db
 
     spans = equivalent_spans(module)
@@ -221,9 +223,14 @@ def filter_session(db: Path, module: Path, max_mutants: int | None) -> dict[str,
                 left_out.setdefault(why, []).append(item.job_id)
             else:
                 kept.append((m.start_pos, item.job_id))
+        kept.sort()
         if max_mutants is not None:  # a trial: the first N mutants of the file
-            kept.sort()
             left_out["beyond --max"] = [j for _, j in kept[max_mutants:]]
+        elif sample is not None and len(kept) > sample:  # a uniform sample, reproducible
+            chosen = set(random.Random(f"{module.name}:{sample}").sample(range(len(kept)),
+                                                                         sample))
+            left_out["not in the sample"] = [j for i, (_, j) in enumerate(kept)
+                                             if i not in chosen]
         for why, jobs in left_out.items():
             _skip(wdb, jobs, f"left out by benchmarks/mutate.py: {why}")
     return {why: len(jobs) for why, jobs in left_out.items()}
@@ -283,7 +290,7 @@ def _split(db: Path, parts: int) -> list[Path]:
 
 
 def run_module(name: str, works: list[Path], env: dict[str, str], max_mutants: int | None,
-               recheck: bool) -> dict:
+               recheck: bool, sample: int | None = None) -> dict:
     """Mutation-test one module, its mutants shared among ``works`` (copies of the
     repository, one cosmic-ray session each, run side by side): a new session, or with
     ``recheck`` the survivors of the last one again (against the tests as they are now)."""
@@ -341,7 +348,7 @@ def run_module(name: str, works: list[Path], env: dict[str, str], max_mutants: i
         db.unlink(missing_ok=True)
         subprocess.run([cr, "init", str(cfg), str(db)], cwd=works[0], env=env, check=True,
                        capture_output=True)
-        left_out = filter_session(db, works[0] / path, max_mutants)
+        left_out = filter_session(db, works[0] / path, max_mutants, sample)
     for old in STATE.glob(f"{name}.part*.sqlite"):
         old.unlink()
     parts = _split(db, len(works))
@@ -368,10 +375,13 @@ def run_module(name: str, works: list[Path], env: dict[str, str], max_mutants: i
         "killed_by_timeout": counts["killed by timeout"],
         "killed_by_error": counts["killed by an error at import or collection"],
         "left_out": left_out, "score": round(100.0 * killed / max(killed + survived, 1), 1),
+        "score_95": wilson(killed, killed + survived),
+        "population": killed + survived + counts["incompetent"]
+        + left_out.get("not in the sample", 0),
         "baseline_s": round(baseline_s, 1), "wall_s": round(wall_s), "timeout_s": timeout,
         "workers": len(works),
         "date": datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
-        "machine": machine(), "load": load(), "max": max_mutants,
+        "machine": machine(), "load": load(), "max": max_mutants, "sample": sample,
         "command": f"./dev mutate {'--recheck ' if recheck else ''}{name}",
     }
     if previous:  # what the first run found, kept beside the recheck
@@ -383,23 +393,45 @@ def run_module(name: str, works: list[Path], env: dict[str, str], max_mutants: i
     return result
 
 
+def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
+    """95 % Wilson interval (percent) of a proportion k / n: the score of a sample's
+    population."""
+    if n == 0:
+        return (0.0, 100.0)
+    p = k / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * ((p * (1 - p) / n + z * z / (4 * n * n)) ** 0.5) / (1 + z * z / n)
+    return (round(100 * (centre - half), 1), round(100 * (centre + half), 1))
+
+
 def write_record(results: dict[str, dict]) -> None:
+    """The table of benchmarks/MUTATION.md, between its markers (the text around is kept)."""
     path = ROOT / "benchmarks" / "MUTATION.md"
     text = path.read_text() if path.exists() else f"# Mutation testing\n\n{BEGIN}\n{END}\n"
-    rows = ["| module | file | mutants | killed | survived | score | left out | run | date | "
-            "load |", "|---|---|---:|---:|---:|---:|---:|---:|---|---:|"]
+    rows = ["| module | mutants run (of all) | killed | survived | score (95 % interval) | "
+            "left out as equivalent | wall | date (UTC) | load | command |",
+            "|---|---:|---:|---:|---|---:|---:|---|---:|---|"]
     for name in MODULES:
         r = results.get(name)
         if r is None:
             continue
-        partial = f" (first {r['max']})" if r.get("max") else ""
+        run = r["mutants"] + r.get("incompetent", 0)
+        of = f" of {r['population']}" if r.get("population", run) != run else ""
+        if r.get("max"):
+            of = f" (first {r['max']})"
+        lo, hi = r.get("score_95", (None, None))
+        interval = f" ({lo}-{hi})" if of and lo is not None else ""
+        equivalent = sum(v for k, v in r["left_out"].items()
+                         if k in ("numba decorator", "annotation", "pragma: no mutate"))
+        cmd = r["command"] + (f" --sample {r['sample']}" if r.get("sample") else "")
         rows.append(
-            f"| {name} | `{r['path']}` | {r['mutants']}{partial} | {r['killed']} | "
-            f"{r['survived']} | {r['score']} % | {sum(r['left_out'].values())} | "
-            f"{r['wall_s'] / 60:.0f} min | {r['date']} | {r['load']} |")
+            f"| {name} | {run}{of} | {r['killed']} | {r['survived']} | "
+            f"{r['score']} %{interval} | {equivalent} | {r['wall_s'] / 60:.0f} min | "
+            f"{r['date'][:16]} | {r['load']} | `{cmd}` |")
     machines = sorted({r["machine"] for r in results.values()})
     table = "\n".join(rows) + "\n\nMachine: " + "; ".join(machines) + \
-        ". Command: `./dev mutate MODULE` (benchmarks/mutate.py, under `nice -n 19`)."
+        ". Under `nice -n 19`, two copies side by side; load: the 1-minute load average when " \
+        "the module finished (the machine is shared)."
     head, _, rest = text.partition(BEGIN)
     _, _, tail = rest.partition(END)
     path.write_text(f"{head}{BEGIN}\n{table}\n{END}{tail}")
@@ -412,6 +444,9 @@ def main() -> int:
     ap.add_argument("--max", type=int, default=None,
                     help="run only the first N mutants of each module (a trial; not recorded "
                     "as a full run)")
+    ap.add_argument("--sample", type=int, default=None,
+                    help="run a uniform random sample of N mutants of each module (reproducible; "
+                    "the record gives the score's 95 %% interval)")
     ap.add_argument("--recheck", action="store_true",
                     help="run the survivors of the last run of each module again, against the "
                     "tests as they are now")
@@ -445,7 +480,7 @@ def main() -> int:
     results = json.loads(record.read_text()) if record.exists() else {}
     for name in names:
         print(f"mutate {name}: {MODULES[name][0]} ...", flush=True)
-        r = run_module(name, works, env, args.max, args.recheck)
+        r = run_module(name, works, env, args.max, args.recheck, args.sample)
         print(f"  {r['killed']} killed, {r['survived']} survived of {r['mutants']} "
               f"({r['score']} %), {sum(r['left_out'].values())} left out, "
               f"{r['wall_s'] / 60:.0f} min", flush=True)
