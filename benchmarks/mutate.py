@@ -343,7 +343,7 @@ def run_module(name: str, works: list[Path], env: dict[str, str], max_mutants: i
             for job_id, r in merged:
                 if r.test_outcome != TestOutcome.SURVIVED:
                     wdb.set_result(job_id, r)
-        left_out = previous["left_out"]
+        left_out, sample = previous["left_out"], previous.get("sample")
     else:
         db.unlink(missing_ok=True)
         subprocess.run([cr, "init", str(cfg), str(db)], cwd=works[0], env=env, check=True,
@@ -468,7 +468,7 @@ def main() -> int:
     works = [args.work / f"w{i}" for i in range(args.workers)]
     for work in works:
         copy_tree(work)
-    stimuli = args.work / "stimuli"
+    stimuli = args.work / "dry-run-scenes"  # the tests' FOVEXP_TEST_STIMULI, made once
     env = dict(os.environ, PYTHONDONTWRITEBYTECODE="1", FOVEXP_TEST_STIMULI=str(stimuli))
     env.pop("NUMBA_DISABLE_JIT", None)
     if not stimuli.is_dir():
