@@ -104,3 +104,52 @@ def test_the_contrast_asks_for_sigma_only_where_its_change_is_not_zero():
     # a bound above the map's maximum reaches farther: the same result
     got = contrast_change_where_needed(grey, on_blocks, 2 * float(sigma.max()), 0.3, blocks)
     assert np.array_equal(got.view(np.uint32), want.view(np.uint32))
+
+
+def test_the_table_border_and_its_limit():
+    """The summed-area table's border is half the widest box (level floor(max) + 1) plus one;
+    a frame whose exact sums would overflow int64 is refused in one line; a map without blur
+    changes nothing."""
+    from fovexp import FovexpError
+    from fovexp.contrast import SAT_FRACTION_BITS, check_sat_fits, sat_pad_px
+
+    assert [sat_pad_px(s) for s in (0.0, 0.9, 1.0, 2.5, 6.0)] == [3, 3, 5, 7, 15]
+    assert SAT_FRACTION_BITS == 36
+    check_sat_fits((4320, 7680), 64, 1.0)  # an 8K frame fits (docs: a margin of 3.8)
+    with pytest.raises(FovexpError, match="too large for the contrast stage's exact sums"):
+        check_sat_fits((4320, 7680), 64, 4.0)
+    with pytest.raises(FovexpError, match="76800x43200 frame"):
+        check_sat_fits((43200, 76800), 0, 0.5)  # a value below 1 counts as 1
+    grey = textured_image(20, 30, rgb=False, flat_squares=False)
+    zero = np.zeros((20, 30), np.float32)
+    assert np.array_equal(contrast_change(grey, zero, 0.3), zero)
+    assert contrast_change(grey.astype(np.float64), zero, 0.3).dtype == np.float64
+
+
+def test_flat_blocks_are_left_out_exactly():
+    """With the image's constant radius per 8 x 8 block, the blocks whose boxes all lie in one
+    constant region are not computed (their change is exactly 0) and the others are
+    computed on a table limited to where their boxes reach: the same result bit for bit,
+    also when every block or none is flat."""
+    from fovexp import pyramids
+    from fovexp.contrast import contrast_change_where_needed
+
+    grey = np.full((64, 80), 0.4, np.float32)
+    grey[40:, 50:] = textured_image(24, 30, seed=7, rgb=False, flat_squares=False)
+    sigma = np.full((64, 80), 1.5, np.float32)
+    flat = pyramids.constant_radius_blocks(*pyramids.channel_block_extremes(grey[..., None], 3))
+    want = contrast_change(grey, sigma, 0.25)
+    got = contrast_change(grey, sigma, 0.25, flat)
+    assert np.array_equal(got.view(np.uint32), want.view(np.uint32))
+    assert np.abs(want).max() > 1e-3 and (want[:20, :30] == 0).all()
+
+    def on_blocks(need, shift):
+        return sigma
+
+    got = contrast_change_where_needed(grey, on_blocks, 1.5, 0.25, flat)
+    assert np.array_equal(got.view(np.uint32), want.view(np.uint32))
+    const = np.full((64, 80), 0.4, np.float32)
+    cflat = pyramids.constant_radius_blocks(*pyramids.channel_block_extremes(const[..., None], 3))
+    assert not contrast_change_where_needed(const, on_blocks, 1.5, 0.25, cflat).any()
+    assert not contrast_change(const, sigma, 0.25, cflat).any()
+    assert not contrast_change_where_needed(grey, on_blocks, 0.0, 0.25, flat).any()
