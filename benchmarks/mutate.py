@@ -64,18 +64,23 @@ E = "tests/enhancer/"
 #: The modules with Numba kernels: mutated with the JIT off (see the module docstring).
 KERNEL_MODULES = {"geometry", "foveation", "contrast", "pyramids", "gabor", "colour"}
 #: module name -> (file, the tests that exercise it: pytest arguments). A kernel module's
-#: selection is of tests on small images (its kernels run as Python); the others run with the
-#: JIT on, their kernels loaded from Numba's cache (compiled once, by the baseline run).
+#: selection is of tests on small images (its kernels run as Python: the tests on frames of
+#: 270 x 480 and more, which take minutes so, are left out; each has a small counterpart);
+#: the others run with the JIT on, their kernels loaded from Numba's cache (compiled once,
+#: by the baseline run).
 MODULES: dict[str, tuple[str, list[str]]] = {
-    "geometry": ("fovexp/geometry.py", [E + "test_geometry.py"]),
+    "geometry": ("fovexp/geometry.py", [E + "test_geometry.py",
+                                        "-k", "not point_formulas_on_the_grid"]),
     "acuity": ("fovexp/acuity.py", [E + "test_frequency.py"]),
-    "foveation": ("fovexp/foveation.py", [E + "test_foveation.py"]),
+    "foveation": ("fovexp/foveation.py", [
+        E + "test_foveation.py", "-k", "not fast_foveation_error_against and not "
+        "leaves_sigma_zero_pixels_bit_exact and not map_of_some_blocks_is_the_whole"]),
     "contrast": ("fovexp/contrast.py", [E + "test_contrast.py"]),
     "pyramids": ("fovexp/pyramids.py", [E + "test_pyramids.py"]),
     "frequency": ("fovexp/frequency.py", [E + "test_frequency.py"]),
     "amplitude": ("fovexp/amplitude.py", [E + "test_amplitude.py"]),
     "orientation": ("fovexp/orientation.py", [E + "test_orientation.py"]),
-    "gabor": ("fovexp/gabor.py", [E + "test_gabor.py"]),
+    "gabor": ("fovexp/gabor.py", [E + "test_gabor.py", "-k", "not std_over_k"]),
     "colour": ("fovexp/colour.py", [E + "test_colour.py"]),
     "results.calibration": ("fovexp/results/calibration.py",
                             ["tests/results/test_calibration.py"]),

@@ -256,3 +256,32 @@ def test_small_fast_foveation_against_the_exact_convolution(max_sigma, rgb):
     flat = np.full((44, 60), 0.3, np.float32)
     assert np.array_equal(foveate(flat, sigma), flat)  # a constant stays its constant
     assert np.array_equal(foveate(img, np.zeros((44, 60), np.float32)), img)
+
+
+def test_the_sigma_map_of_some_blocks_on_a_small_frame():
+    """sigma_on_blocks on a 40 x 56 image in a 1920 x 1080 frame: on the 8 px blocks asked
+    for, sigma_px of the float32 maps bit for bit; elsewhere what ``out`` held; the whole
+    frame when no blocks are given; refused for another geometry model."""
+    from fovexp import load_display
+    from fovexp.foveation import sigma_on_blocks, sigma_px
+    from fovexp.geometry import ViewingGeometry
+
+    g = ViewingGeometry.for_image(load_display("lg-oled55cx"), 56, 40,
+                                  viewport=(1500, 900, 1920, 1080))
+    gaze = g.gaze_px((0.2, 0.3))
+    ecc, ppd = g.eccentricity_and_ppd_maps(gaze)
+    fovea = float(np.percentile(ecc, 30))
+    full = sigma_px(ecc, ppd, 1.7, fovea)
+    assert (full == 0).any() and (full > 0).any()
+    assert np.array_equal(sigma_on_blocks(g, gaze, 1.7, fovea).view(np.uint32),
+                          full.view(np.uint32))
+    need = np.zeros((5, 7), bool)
+    need[1, 2] = need[4, 6] = True
+    out = np.full((40, 56), -1.0, np.float32)
+    got = sigma_on_blocks(g, gaze, 1.7, fovea, need, 3, out)
+    assert got is out
+    mask = np.kron(need, np.ones((8, 8), bool))
+    assert np.array_equal(got[mask], full[mask]) and (got[~mask] == -1).all()
+    with pytest.raises(ValueError, match="exact geometry model"):
+        sigma_on_blocks(ViewingGeometry.for_image(load_display("lg-oled55cx"), 56, 40,
+                                                  "linear"), gaze, 1.7, fovea)
