@@ -95,3 +95,10 @@ def test_headroom_limit_takes_the_nearer_side():
     """K <= 2 min(1 - N_max, N_min): 3 std either side within [0, 1] (section 4.2)."""
     k = amp.headroom_limit(np.array([0.3, 0.05, 0.5]), np.array([0.9, 0.5, 0.5]))
     assert k == pytest.approx([0.2, 0.1, 1.0])
+
+
+def test_the_coarsest_level_is_the_one_a_blur_of_94_px_selects():
+    """MAX_LAPLACIAN_LEVEL: the level eq. 8 selects (a = 0.25) for sigma = 94 px, centre
+    2**-8.5 cycles/px (amplitude's docstring)."""
+    assert amp.MAX_LAPLACIAN_LEVEL == 8
+    assert amp.laplacian_level(np.array([94.0]), 0.25)[0] == pytest.approx(8.0, abs=0.05)

@@ -116,3 +116,17 @@ def test_release_draw_keeps_the_first_try_below_the_upper_limit():
     at = np.full((1, n), 2.0)
     at[0, 1] = 1.0
     assert frequency.draw_release(at, mu[:1], sn[:1], hi[:1])[0] == pytest.approx(math.e)
+
+
+def test_the_draw_at_sigma_one_and_below_the_whole_distribution():
+    """sigma_n of exactly 1 is an ordinary draw (only 0 is the point exp(mu_n)); where F_H
+    lies far below the whole distribution (u Phi(z_H) underflows to 0), the draw is F_H, its
+    limit, not 0."""
+    from scipy.stats import norm
+
+    f = frequency.draw_truncated(np.array([0.3]), np.array([-2.0]), np.array([1.0]),
+                                 np.array([1.0]))
+    assert f[0] == pytest.approx(math.exp(-2.0 + norm.ppf(0.3 * norm.cdf(2.0))), rel=1e-12)
+    far = frequency.draw_truncated(np.array([0.5]), np.array([0.0]), np.array([0.01]),
+                                   np.array([math.exp(-100.0)]))
+    assert far[0] == math.exp(-100.0)
