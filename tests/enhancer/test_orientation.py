@@ -126,3 +126,18 @@ def test_orientation_at_is_atan2_less_a_quarter_turn_and_defined_where_flat():
     at3 = orient.orientation_at(ramp, ramp.T, np.array([20.0]), np.array([60.0]))
     at2 = orient.orientation_at(ramp, ramp.T, np.array([20.0]), np.array([60.0]), level=2)
     assert abs(float(at3[0]) - float(at2[0])) > 0.1
+
+
+def test_the_orientation_threshold_and_level():
+    """|G| exactly GRADIENT_EPS is a direction (only below it is flat), read at a node of the
+    level grid (where the bicubic sample is the node's value exactly); the gradients are
+    taken on level 3, 1/8 of the resolution (docs/METHOD.md, 5.5)."""
+    assert orient.ORIENTATION_LEVEL == 3
+    eps = orient.GRADIENT_EPS
+    shape = (12, 12)
+    node = np.array([40.0]), np.array([48.0])  # level-3 node (5, 6)
+    at = orient.orientation_at(np.zeros(shape), np.full(shape, eps), *node, dtype=np.float64)
+    assert at[0] == pytest.approx(0.0, abs=1e-12)  # atan2(eps, 0) - pi/2
+    below = orient.orientation_at(np.zeros(shape), np.full(shape, np.nextafter(eps, 0)), *node,
+                                  dtype=np.float64)
+    assert below[0] == pytest.approx(-math.pi / 2)

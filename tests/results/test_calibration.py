@@ -162,3 +162,57 @@ def test_table2_formats_round_trip(study: Path, tmp_path: Path) -> None:
     assert md.count("\n") == 5 and "| 0.34 |" in md and "±" in md
     tex = table2_latex(c.table)
     assert r"\toprule" in tex and tex.count(r"\\") == 4 and "0.57 &" in tex
+
+
+def test_levels_merge_float_noise_and_come_out_sorted() -> None:
+    """Blur-rates equal to 6 decimals are one level (4e-7 apart: merged; 1e-6 apart: not);
+    the summaries and the lines come out in ascending blur-rate whatever the trials' order."""
+    from fovexp.results.calibration import (
+        LEVEL_DECIMALS,
+        participant_sk_lines,
+        sk_lines,
+        sk_summary,
+    )
+
+    assert LEVEL_DECIMALS == 6
+    t = _trials([("P2", 0.57, None, "f_e", 0.3), ("P1", 0.34 + 4e-7, None, "f_e", 0.1),
+                 ("P2", 0.34, None, "f_e", 0.2), ("P1", 0.340001, None, "f_e", 0.4)])
+    fe = fe_summary(t)
+    assert fe["blur_rate"].tolist() == [0.34, 0.340001, 0.57]
+    assert fe["n"].tolist() == [2, 1, 1] and fe["mean"].iloc[0] == pytest.approx(0.15)
+    sk = _trials([(p, br, sf, "s_k", v) for br in (0.57, 0.11) for p in ("P2", "P1")
+                  for sf, v in ((2.0, 16.0), (1.0, 20.0))])
+    assert sk_summary(sk)["blur_rate"].tolist() == [0.11, 0.11, 0.57, 0.57]
+    assert sk_summary(sk)["s_f"].tolist() == [1.0, 2.0, 1.0, 2.0]
+    assert list(sk_lines(sk_summary(sk))) == [0.11, 0.57]
+    assert list(participant_sk_lines(sk)) == [0.11, 0.57]
+
+
+def test_the_first_s_k_trial_without_s_f_is_named() -> None:
+    sk = _trials([("P1", 0.11, 1.0, "s_k", 20.0), ("P1", 0.11, None, "s_k", 18.0),
+                  ("P2", 0.11, None, "s_k", 17.0)]).assign(file="trials.csv", line=[2, 3, 4])
+    from fovexp.results.calibration import sk_summary
+
+    with pytest.raises(FovexpError, match=r"trials.csv: line 3: column s_f is empty"):
+        sk_summary(sk)
+
+
+def test_the_s_k_uncertainty_by_hand() -> None:
+    """SEM of s_k = sqrt((slope SEM(s_f))^2 + SEM_line^2): SEM_line from the participants'
+    own lines (two or more, each from two or more s_f levels), left out with fewer; NaN when
+    neither part is known."""
+    fe = _trials([("P1", 0.11, None, "f_e", 0.1), ("P2", 0.11, None, "f_e", 0.14)])
+    # participants' lines parallel, s_k offset +-0.5 (two s_f levels each): SEM_line = 0.5
+    sk = _trials([(p, 0.11, sf, "s_k", v + d) for sf, v in ((1.0, 20.0), (3.0, 14.0))
+                  for p, d in (("P1", 0.5), ("P2", -0.5))])
+    two = _trials([("P1", 0.11, 2.0, "s_f", 2.0), ("P2", 0.11, 2.4, "s_f", 2.4)])
+    one = _trials([("P1", 0.11, 2.0, "s_f", 2.0)])
+    row = calibrate(fe, sk, two).table.iloc[0]
+    assert row["s_k_sem"] == pytest.approx(np.hypot(3.0 * 0.2, 0.5))
+    row = calibrate(fe, sk, one).table.iloc[0]  # SEM(s_f) unknown: SEM_line alone
+    assert row["s_k_sem"] == pytest.approx(0.5)
+    sk1 = sk[sk["participant"] == "P1"]  # one participant line: no SEM_line
+    row = calibrate(fe, sk1, two).table.iloc[0]
+    assert row["s_k_sem"] == pytest.approx(3.0 * 0.2)
+    row = calibrate(fe, sk1, one).table.iloc[0]
+    assert np.isnan(row["s_k_sem"])
