@@ -93,6 +93,7 @@ MODULES: dict[str, tuple[str, list[str]]] = {
                                                     "tests/results/test_loading.py"]),
     "results.loading": ("fovexp/results/loading.py", ["tests/results/test_loading.py"]),
     "results.stats": ("fovexp/results/stats.py", ["tests/results/test_stats.py",
+                                                  "tests/analysis/test_stats.py",
                                                   "tests/results/test_calibration.py"]),
     "analysis.stats": ("fovexp/analysis/stats.py", ["tests/analysis/test_stats.py"]),
     "analysis.validation": ("fovexp/analysis/validation.py",
