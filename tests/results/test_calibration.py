@@ -216,3 +216,31 @@ def test_the_s_k_uncertainty_by_hand() -> None:
     assert row["s_k_sem"] == pytest.approx(3.0 * 0.2)
     row = calibrate(fe, sk1, one).table.iloc[0]
     assert np.isnan(row["s_k_sem"])
+
+
+def test_derive_leaves_pilots_out_unless_asked_and_refuses_dry_runs_for_real(tmp_path: Path):
+    """The runner's contract (results/derive.py): mouse-gaze pilots (R7) are left out unless
+    ``include_pilots`` (in each of the three functions); ``real_only`` refuses a folder of
+    dry runs only, not one with real sessions."""
+    root = tmp_path / "study"
+    real = Truth(f_e={0.11: 0.10, 0.34: 0.10, 0.57: 0.10})
+    pilot = Truth(f_e={0.11: 0.30, 0.34: 0.30, 0.57: 0.30}, s_f={0.11: 6.0, 0.34: 6.0, 0.57: 6.0})
+    write_study(root, n_participants=4, seed=2, truth=real, experiments=CAL, tracker="tobii")
+    write_study(root, n_participants=4, seed=3, truth=pilot, experiments=CAL, tracker="mouse",
+                prefix="M")
+    fe = fe_by_blur_rate(root / "calibration-fe")
+    assert all(abs(v - 0.10) < 0.03 for v in fe.values()), fe
+    fe_all = fe_by_blur_rate(root / "calibration-fe", include_pilots=True)
+    assert all(abs(v - 0.20) < 0.03 for v in fe_all.values()), fe_all
+    lines = sk_line_by_blur_rate(root / "calibration-sk")
+    lines_all = sk_line_by_blur_rate(root / "calibration-sk", include_pilots=True)
+    assert lines != lines_all
+    table = parameter_table(root, real_only=True)
+    assert all(abs(r.s_f - real.s_f[r.blur_rate]) < 0.3 for r in table.rows)
+    table_all = parameter_table(root, include_pilots=True)
+    assert all(r.s_f > real.s_f[r.blur_rate] + 0.5 for r in table_all.rows)
+    dry = tmp_path / "dry"
+    write_study(dry, n_participants=2, seed=4, experiments=("calibration-fe",))
+    assert fe_by_blur_rate(dry / "calibration-fe")  # a dry run's own chain may use it
+    with pytest.raises(FovexpError, match="holds only simulated sessions"):
+        fe_by_blur_rate(dry / "calibration-fe", real_only=True)
