@@ -8,6 +8,7 @@ from __future__ import annotations
 import csv
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 
@@ -119,3 +120,97 @@ def test_a_file_that_is_not_a_frame_log(tmp_path: Path) -> None:
     (tmp_path / "x.csv").write_text("a,b\n1,2\n")
     with pytest.raises(FovexpError, match="not a frame log"):
         read_frame_log(tmp_path / "x.csv")
+
+
+def test_reading_a_log_torn_unreadable_or_not_csv(tmp_path: Path) -> None:
+    """A kill mid-write leaves a partial last line: dropped (complete lines are kept, the last
+    one included); an unreadable path or bytes that are no CSV: one error naming the file."""
+    path = tmp_path / "f.csv"
+    write(path, GOOD)
+    whole = path.read_bytes()
+    path.write_bytes(whole + b"1,0,3,20.02")  # torn
+    torn = read_frame_log(path)
+    assert len(torn) == len(GOOD) and torn["frame"].iloc[-1] == 2
+    assert torn["value"].iloc[-1] == pytest.approx(0.12)
+    with pytest.raises(FovexpError, match=r"f.csv: not a frame log"):
+        path.write_bytes(b'trial_index,attempt,frame,blanked\n"1,2\n')
+        read_frame_log(path)
+    with pytest.raises(FovexpError, match="cannot read"):
+        read_frame_log(tmp_path)  # a folder
+    old = tmp_path / "old.csv"  # a log written before the gaze columns existed
+    old.write_text("trial_index,attempt,frame,blanked\n0,0,0,1\n")
+    got = read_frame_log(old)
+    assert got["gaze_ecc_deg"].isna().all() and str(got["frame"].dtype) == "Int64"
+
+
+def test_latency_summary_and_trial_quality_by_hand(tmp_path: Path) -> None:
+    """Latencies 1..20 ms over 20 frames of trial 0 (one frame without a sample, two dropped):
+    median, 95th percentile (linear, NumPy's default), maximum; per trial of its last attempt;
+    NaN where no frame had a sample, and for no frames at all."""
+    from fovexp.results.frames import trial_quality
+
+    rows = [frame(0, n, 10.0 + n * PERIOD_S, 0.0, age_s=(n + 1) / 1000) for n in range(20)]
+    rows.append(frame(0, 20, 10.0 + 20 * PERIOD_S, 0.0, ecc=None, age_s=None))
+    rows[3]["dropped"] = rows[7]["dropped"] = 1
+    rows += [frame(1, n, 30.0 + n * PERIOD_S, 0.0, ecc=None, age_s=None, attempt=1)
+             for n in range(4)]
+    rows += [frame(1, n, 20.0 + n * PERIOD_S, 0.0, age_s=0.5, attempt=0) for n in range(3)]
+    frames = write(tmp_path / "f.csv", rows)
+    lat = [n + 1.0 for n in range(20)]
+    s = latency_summary(frames[frames["trial_index"] == 0])
+    assert (s["frames"], s["with_gaze"]) == (21, 20)
+    assert s["median_ms"] == pytest.approx(10.5) and s["max_ms"] == pytest.approx(20.0)
+    assert s["p95_ms"] == pytest.approx(19.05)  # 1 + 0.95 * 19
+    assert s["dropped_fraction"] == pytest.approx(2 / 21)
+    empty = latency_summary(frames.iloc[:0])
+    assert empty["frames"] == 0 and all(np.isnan(empty[k]) for k in
+                                        ("median_ms", "p95_ms", "max_ms", "dropped_fraction"))
+    q = trial_quality(frames).set_index("trial_index")
+    assert q.loc[0, "frames"] == 21 and q.loc[0, "dropped_fraction"] == pytest.approx(2 / 21)
+    assert q.loc[0, "latency_p95_ms"] == pytest.approx(np.percentile(lat, 95))
+    assert q.loc[1, "frames"] == 4 and np.isnan(q.loc[1, "latency_p95_ms"])  # attempt 1 only
+    assert q.loc[1, "dropped_fraction"] == 0.0
+    assert list(trial_quality(frames.iloc[:0]).columns) == [
+        "trial_index", "frames", "dropped_fraction", "latency_p95_ms"]
+
+
+def test_the_blanking_rule_reads_the_previous_flip_and_a_missing_flag(tmp_path: Path) -> None:
+    """'Recent' is measured from the previous flip of the same attempt (not the one before
+    it): a sample exactly the timeout (2 s here) older than the previous flip keeps the rule,
+    one a microsecond older breaks it; a frame whose blanked flag is missing counts as
+    shown."""
+    base = [frame(0, n, 10.0 + n * 0.02, 0.0) for n in range(3)]
+    edge = [dict(r) for r in base]
+    edge[2]["gaze_system_time_us"] = edge[1]["flip_system_time_us"] - 2_000_000  # just recent
+    frames = write(tmp_path / "a.csv", edge)
+    assert unblanked_violations(frames, RADIUS_DEG, 2.0, 0.0).empty
+    edge[2]["gaze_system_time_us"] -= 1  # 1 us too old
+    frames = write(tmp_path / "b.csv", edge)
+    assert unblanked_violations(frames, RADIUS_DEG, 2.0, 0.0)["frame"].tolist() == [2]
+    unflagged = [dict(r) for r in base]
+    unflagged[1]["blanked"] = ""
+    unflagged[1]["gaze_ecc_deg"] = 2.0
+    frames = write(tmp_path / "c.csv", unflagged)
+    assert unblanked_violations(frames, RADIUS_DEG, TIMEOUT_S, 0.0)["frame"].tolist() == [1]
+
+
+def test_final_value_at_the_edges_of_enter(tmp_path: Path) -> None:
+    """A frame flipped exactly at Enter (+ the slack) is before it; one later is after; the
+    logged values must match to value_tol; a trial row without frames does not stop the
+    others being checked; the first frame named as shown."""
+    rows = trial(0, 10.0, [0.0, 0.0, 0.02])
+    enter = 2 * PERIOD_S  # the last frame's flip, exactly
+    log = [{"trial_index": 7, "start_value": 0, "final_value": 0, "response_time_s": 1},
+           {"trial_index": 0, "start_value": 0.0, "final_value": 0.02, "response_time_s": enter}]
+    bad = final_value_violations(write(tmp_path / "f.csv", rows), log)
+    assert bad["problem"].tolist() == ["no frames"]
+    log[1]["final_value"] = 0.02 + 1e-9  # within value_tol = 1e-9 of the frame's
+    assert final_value_violations(write(tmp_path / "f.csv", rows), log[1:]).empty
+    log[1]["response_time_s"] = enter - 2e-4  # the last frame now after Enter
+    bad = final_value_violations(write(tmp_path / "f.csv", rows), log[1:])
+    assert bad["problem"].tolist() == ["1 frame(s) flipped after Enter",
+                                       "the last frame before Enter shows 0, final_value is 0.02"]
+    rows = trial(0, 10.0, [0.5, 0.0, 0.02])
+    log[1]["response_time_s"] = enter
+    bad = final_value_violations(write(tmp_path / "f.csv", rows), log[1:])
+    assert bad["problem"].tolist() == ["first frame shows 0.5, start_value is 0"]
