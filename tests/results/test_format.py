@@ -26,7 +26,7 @@ def test_format_value_and_line():
 @pytest.mark.parametrize("text,ok", [
     ("P01", True), ("a" * 32, True), ("a" * 33, False), ("", False), ("P 01", False),
     ("P01\n", False), ("x-y_Z9", True), ("CON", False), ("com7", False), ("lpt0", False),
-    ("com10", True), ("nul", False), ("aux1", True), (5, False),
+    ("com10", True), ("lpt10", True), ("nul", False), ("aux1", True), (5, False),
 ])
 def test_the_participant_id_rule(text, ok):
     assert is_participant_id(text) is ok
@@ -82,3 +82,45 @@ def test_the_valid_part_is_counted_in_bytes(tmp_path):
         torn = read_trials_file(path)
     assert torn.good_len == len(data) + 1 and torn.torn_line == 6 and len(torn.rows) == 3
     assert read_trials_file(tmp_path / "none.csv").rows == []
+
+
+def _rows(n: int = 2) -> list[dict]:
+    import numpy as np
+
+    from analysis_fixtures import Noise, Truth, simulate_rows
+
+    return simulate_rows("calibration-fe", "P01", "20240501-090000", np.random.default_rng(0),
+                         Truth(), Noise(), practice=0)[:n]
+
+
+def test_blank_lines_torn_headers_and_bad_bytes(tmp_path):
+    """Blank lines are skipped and counted in the valid part (one at the very end without its
+    newline is not: a resumed run cuts it); rows after a blank line are read; a header cut
+    short is a torn header (warned, no rows), a whole header lacking columns names them; a
+    header that is not UTF-8, or a folder, is one error naming the file; the warning points
+    at the caller."""
+    from fovexp import FovexpError
+
+    from analysis_fixtures import write_trials
+
+    path = write_trials(tmp_path / "p", _rows())
+    data = path.read_bytes()
+    head, first, second = data.splitlines(keepends=True)
+    path.write_bytes(head + first + b"\n" + second + b"  ")
+    got = read_trials_file(path)
+    assert len(got.rows) == 2 and got.lines == [2, 4]
+    assert got.good_len == len(data) + 1
+    path.write_bytes(head[:30])
+    with pytest.warns(UserWarning, match="line 1: torn header dropped") as rec:
+        torn = read_trials_file(path)
+    assert rec[0].filename == __file__
+    assert torn.torn == "torn header" and torn.missing == [] and torn.rows == []
+    path.write_bytes(b"participant,session\nP01,x\n")
+    short = read_trials_file(path)
+    assert short.torn is None and "experiment" in short.missing and short.rows == []
+    assert short.extra == []
+    path.write_bytes(b"\xff\xfeparticipant\n")
+    with pytest.raises(FovexpError, match="line 1: not UTF-8 text"):
+        read_trials_file(path)
+    with pytest.raises(FovexpError, match="cannot read"):
+        read_trials_file(tmp_path)
