@@ -40,7 +40,11 @@ def test_linear_fit_by_hand():
 
 
 def test_the_trial_limits_and_their_rules():
+    import dataclasses
+
     lim = TrialLimits()
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        lim.max_latency_p95_ms = 100.0  # type: ignore[misc]
     assert (lim.max_blanked_fraction, lim.max_dropped_fraction, lim.max_latency_p95_ms) == (
         0.5, 0.05, 60.0)
     rules = TrialLimits(0.25, 0.1, 45.5).rules()
