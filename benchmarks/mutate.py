@@ -56,6 +56,7 @@ import sys
 import time
 from datetime import datetime, timezone
 from pathlib import Path
+from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
 BEGIN, END = "<!-- mutation-run: begin -->", "<!-- mutation-run: end -->"
@@ -246,36 +247,39 @@ def filter_session(db: Path, module: Path, max_mutants: int | None,
 
 def outcomes(dbs: list[Path]) -> tuple[dict[str, int], list[tuple[int, str, str]]]:
     """Counts by outcome (killed, survived, incompetent, pending) over the sessions of one
-    module and its survivors (line, operator, diff)."""
+    module and its survivors (line, operator, diff); each mutant counted once (a recheck's
+    parts all hold the results the last run had found)."""
     from cosmic_ray.work_db import WorkDB, use_db
     from cosmic_ray.work_item import TestOutcome, WorkerOutcome
 
     counts = {"killed": 0, "survived": 0, "incompetent": 0, "pending": 0,
               "killed by timeout": 0, "killed by an error at import or collection": 0}
-    survivors = []
+    results: dict[str, Any] = {}
+    specs: dict[str, Any] = {}
     for db in dbs:
         with use_db(db, WorkDB.Mode.open) as wdb:
-            specs = {item.job_id: item.mutations[0] for item in wdb.work_items}
-            for job_id, result in wdb.results:
-                if result.worker_outcome == WorkerOutcome.SKIPPED:
-                    continue
-                if result.test_outcome == TestOutcome.KILLED:  # failed, timed out or crashed
-                    out = result.output or ""
-                    if "ERROR: usage" in out or "file or directory not found" in out:
-                        raise SystemExit(f"{db}: pytest was called wrongly:\n{out[-2000:]}")
-                    counts["killed"] += 1
-                    last = out.strip().splitlines()[-1] if out.strip() else ""
-                    if out == "timeout":
-                        counts["killed by timeout"] += 1
-                    elif "error" in last and "failed" not in last:
-                        counts["killed by an error at import or collection"] += 1
-                elif result.test_outcome == TestOutcome.SURVIVED:
-                    counts["survived"] += 1
-                    m = specs[job_id]
-                    survivors.append((m.start_pos[0], m.operator_name, result.diff or ""))
-                else:
-                    counts["incompetent"] += 1
+            specs.update({item.job_id: item.mutations[0] for item in wdb.work_items})
+            results.update({job_id: r for job_id, r in wdb.results
+                            if r.worker_outcome != WorkerOutcome.SKIPPED})
             counts["pending"] += wdb.num_work_items - wdb.num_results
+    survivors = []
+    for job_id, result in results.items():
+        if result.test_outcome == TestOutcome.KILLED:  # failed, timed out or crashed
+            out = result.output or ""
+            if "ERROR: usage" in out or "file or directory not found" in out:
+                raise SystemExit(f"{dbs[0]}: pytest was called wrongly:\n{out[-2000:]}")
+            counts["killed"] += 1
+            last = out.strip().splitlines()[-1] if out.strip() else ""
+            if out == "timeout":
+                counts["killed by timeout"] += 1
+            elif "error" in last and "failed" not in last:
+                counts["killed by an error at import or collection"] += 1
+        elif result.test_outcome == TestOutcome.SURVIVED:
+            counts["survived"] += 1
+            m = specs[job_id]
+            survivors.append((m.start_pos[0], m.operator_name, result.diff or ""))
+        else:
+            counts["incompetent"] += 1
     return counts, sorted(survivors)
 
 
