@@ -78,6 +78,8 @@ def test_encode_adds_the_grey_images_clips_then_encodes():
     grey = encode(lin[..., 0], 2.0, "power", a, b)  # a grey image: (H, W)
     assert grey.shape == (5, 6) and np.allclose(grey, np.sqrt(np.clip(lin[..., 0] + a + b, 0, 1)))
     assert np.allclose(encode(lin, 2.2), lin ** (1 / 2.2), rtol=1e-12)
+    # without grey images too, values outside [0, 1] clip before the power (no NaN)
+    assert encode(np.array([-0.1, 0.25, 1.2]), 2.0).tolist() == [0.0, 0.5, 1.0]
     rel = encode(lin, 2.2, "release", a)
     want = np.clip(np.clip(lin + a[..., None], 0, 1) ** (1 / 2.2) * 1.055 - 0.055, 0, 1)
     assert np.allclose(rel, want, rtol=1e-12, atol=1e-15) and (rel == 0).any()

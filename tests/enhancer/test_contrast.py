@@ -99,6 +99,9 @@ def test_the_contrast_asks_for_sigma_only_where_its_change_is_not_zero():
     got = contrast_change_where_needed(grey, on_blocks, float(sigma.max()), 0.3, blocks)
     want = contrast_change(grey, sigma, 0.3, blocks)
     assert np.array_equal(got.view(np.uint32), want.view(np.uint32))
+    # ... and the whole image computed (no block left out) gives the same bits
+    full = contrast_change(grey, sigma, 0.3)
+    assert np.array_equal(full.view(np.uint32), want.view(np.uint32))
     assert len(asked) == 1 and 0.3 < asked[0].mean() < 0.8  # the flat part was not asked for
     assert np.abs(want).max() > 1e-3
     # a bound above the map's maximum reaches farther: the same result
@@ -116,6 +119,12 @@ def test_the_table_border_and_its_limit():
     assert [sat_pad_px(s) for s in (0.0, 0.9, 1.0, 2.5, 6.0)] == [3, 3, 5, 7, 15]
     assert SAT_FRACTION_BITS == 36
     check_sat_fits((4320, 7680), 64, 1.0)  # an 8K frame fits (docs: a margin of 3.8)
+    # the limit to 0.1 %, on a frame that is not square: (H + 2 pad)(W + 2 pad) 2**36 v
+    hp, wp = 4320 + 2 * 64, 7680 + 2 * 64
+    v = (2**63 - 1) / (hp * wp * 2.0**36)
+    check_sat_fits((4320, 7680), 64, 0.999 * v)
+    with pytest.raises(FovexpError, match="too large"):
+        check_sat_fits((4320, 7680), 64, 1.001 * v)
     with pytest.raises(FovexpError, match="too large for the contrast stage's exact sums"):
         check_sat_fits((4320, 7680), 64, 4.0)
     with pytest.raises(FovexpError, match="76800x43200 frame"):
@@ -134,21 +143,23 @@ def test_flat_blocks_are_left_out_exactly():
     from fovexp import pyramids
     from fovexp.contrast import contrast_change_where_needed
 
-    grey = np.full((64, 80), 0.4, np.float32)
-    grey[40:, 50:] = textured_image(24, 30, seed=7, rgb=False, flat_squares=False)
-    sigma = np.full((64, 80), 1.5, np.float32)
+    # 61 rows (not a multiple of the 8-row chunks), texture over most of them
+    grey = np.full((61, 80), 0.4, np.float32)
+    grey[12:, 50:] = textured_image(49, 30, seed=7, rgb=False, flat_squares=False)
+    sigma = np.full((61, 80), 1.5, np.float32)
     flat = pyramids.constant_radius_blocks(*pyramids.channel_block_extremes(grey[..., None], 3))
-    want = contrast_change(grey, sigma, 0.25)
-    got = contrast_change(grey, sigma, 0.25, flat)
+    want = contrast_change(grey, sigma, 0.25)  # every pixel computed
+    got = contrast_change(grey, sigma, 0.25, flat)  # the flat blocks left out
     assert np.array_equal(got.view(np.uint32), want.view(np.uint32))
-    assert np.abs(want).max() > 1e-3 and (want[:20, :30] == 0).all()
+    assert np.abs(want).max() > 1e-3 and (want[:, :30] == 0).all()
+    assert (np.abs(want[12:, 50:]) > 0).mean() > 0.9  # every textured row computed
 
     def on_blocks(need, shift):
         return sigma
 
     got = contrast_change_where_needed(grey, on_blocks, 1.5, 0.25, flat)
     assert np.array_equal(got.view(np.uint32), want.view(np.uint32))
-    const = np.full((64, 80), 0.4, np.float32)
+    const = np.full((61, 80), 0.4, np.float32)
     cflat = pyramids.constant_radius_blocks(*pyramids.channel_block_extremes(const[..., None], 3))
     assert not contrast_change_where_needed(const, on_blocks, 1.5, 0.25, cflat).any()
     assert not contrast_change(const, sigma, 0.25, cflat).any()
