@@ -233,3 +233,39 @@ def test_the_linear_and_release_models_written_out():
     with pytest.raises(FovexpError, match="does not fit at"):
         ViewingGeometry.for_image(LG, 400, 300, viewport=(-1, 0, 1920, 1080))
     ViewingGeometry.for_image(LG, 400, 300, viewport=(1520, 780, 1920, 1080))  # just fits
+
+
+def test_the_display_schema_bounds_and_the_release_display():
+    """The profile's ranges at their edges (docs/DISPLAYS: 1 px to 32768 px, up to 10 m,
+    luminance above 0 up to 100000 cd/m2) and the release's display (docs/METHOD.md, 5);
+    geometries are values (frozen)."""
+    import dataclasses
+
+    from fovexp import Display
+    from fovexp.geometry import RELEASE_DISPLAY
+
+    ok = dict(name="x", width_px=32768, height_px=18432, width_cm=1000.0, height_cm=562.5,
+              distance_cm=0.5, refresh_hz=60, peak_luminance_cd_m2=0.5, gamma=2.2)
+    Display(**ok)
+    Display(**dict(ok, distance_cm=1000.0, peak_luminance_cd_m2=100000.0))
+    for field, bad in (("width_px", 32769), ("width_cm", 1000.5), ("distance_cm", 1000.5),
+                       ("distance_cm", 0.0), ("peak_luminance_cd_m2", 0.0),
+                       ("peak_luminance_cd_m2", 100001.0)):
+        with pytest.raises(ValueError):
+            Display(**dict(ok, **{field: bad}))
+    assert (RELEASE_DISPLAY.width_px, RELEASE_DISPLAY.height_px) == (3840, 2160)
+    assert (RELEASE_DISPLAY.width_cm, RELEASE_DISPLAY.height_cm,
+            RELEASE_DISPLAY.distance_cm) == (120.0, 67.0, 60.0)
+    assert (RELEASE_DISPLAY.refresh_hz, RELEASE_DISPLAY.peak_luminance_cd_m2,
+            RELEASE_DISPLAY.gamma) == (60.0, 100.0, 2.2)
+    g = ViewingGeometry.for_image(LG, 64, 48)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        g.distance_cm = 10.0  # type: ignore[misc]
+
+
+def test_a_viewport_fits_at_the_frames_edges_and_not_past_them():
+    for vp in ((0, 0, 1920, 1080), (1520, 0, 1920, 1080), (0, 780, 1920, 1080)):
+        assert ViewingGeometry.for_image(LG, 400, 300, viewport=vp).x0_px == vp[0]
+    for vp in ((1521, 0, 1920, 1080), (0, 781, 1920, 1080), (0, -1, 1920, 1080)):
+        with pytest.raises(FovexpError, match="does not fit"):
+            ViewingGeometry.for_image(LG, 400, 300, viewport=vp)

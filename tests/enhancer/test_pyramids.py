@@ -158,7 +158,15 @@ def test_block_and_window_extremes_by_brute_force():
         ys = slice(max(int(np.ceil(y[i] - 2.5)), 0), min(int(np.floor(y[i] + 2.5)), 18) + 1)
         assert wlo[i] == grey_lo[ys, xs].min() and whi[i] == grey_hi[ys, xs].max()
     full_lo, full_hi = pyramids.window_extremes(grey_lo, grey_hi, 2.5)
-    assert full_lo[9, 10] == grey_lo[7:12, 8:13].min() and full_hi[0, 0] == grey_hi[:3, :3].max()
+    for yy in range(19):  # every pixel: the 5 x 5 window around it, clipped
+        for xx in range(21):
+            win = np.s_[max(yy - 2, 0): yy + 3, max(xx - 2, 0): xx + 3]
+            assert full_lo[yy, xx] == grey_lo[win].min() and full_hi[yy, xx] == grey_hi[win].max()
+    # the partial blocks of the right and bottom edges (23 = 5 x 4 + 3 columns)
+    lo23, _ = pyramids.block_extremes(rng.random((9, 23)), 2)
+    assert lo23.shape == (3, 6)
+    clo23, _ = pyramids.channel_block_extremes(rng.random((9, 23, 2)), 2)
+    assert clo23.shape == (3, 6, 2)
 
 
 def _keys(t, a=-0.5):
@@ -179,8 +187,8 @@ def test_sampling_a_level_at_full_resolution_coordinates():
 
     rng = np.random.default_rng(9)
     grid = rng.random((7, 9))
-    x = np.array([0.0, 3.3, 17.9, 40.0, -5.0, 12.0])
-    y = np.array([0.0, 5.2, 11.0, 30.0, 2.0, 27.5])
+    x = np.array([0.0, 3.3, 17.9, 40.0, -5.0, 12.0, 1.0, 16.9])
+    y = np.array([0.0, 5.2, 11.0, 30.0, 2.0, 27.5, 1.0, 12.9])  # and near the borders
     s = 2.0
     want = ndimage.map_coordinates(grid, [np.clip(y / s, 0, 6), np.clip(x / s, 0, 8)], order=1,
                                    mode="nearest")
