@@ -285,3 +285,45 @@ def test_the_sigma_map_of_some_blocks_on_a_small_frame():
     with pytest.raises(ValueError, match="exact geometry model"):
         sigma_on_blocks(ViewingGeometry.for_image(load_display("lg-oled55cx"), 56, 40,
                                                   "linear"), gaze, 1.7, fovea)
+
+
+def test_the_padded_copy_is_measured_exactly(monkeypatch):
+    """The guard's figure is the padded copy's size, (H + 2 pad)(W + 2 pad) C bytes-per-value
+    (pad: the blur stack's border), refused just above the limit and let through at it."""
+    from fovexp import FovexpError, foveation
+
+    img = textured_image(40, 56, seed=1, flat_squares=False)
+    sigma = np.full((40, 56), 30.0, np.float32)
+    pad = foveation.blur_stack_plan(30.0).pad_px
+    size = (40 + 2 * pad) * (56 + 2 * pad) * 3 * 4
+    monkeypatch.setattr(foveation, "MAX_PADDED_BYTES", size - 1)
+    with pytest.raises(FovexpError, match=f"would take {size / 2**30:.3g} GiB"):
+        foveate(img, sigma)
+    monkeypatch.setattr(foveation, "MAX_PADDED_BYTES", size)
+    assert foveate(img, sigma).shape == img.shape
+
+
+def test_the_pyramid_level_of_a_blur_and_a_run_of_blurred_columns():
+    """A stack level is blurred on the coarsest pyramid level where its residual blur is still
+    1.25 level px: sigma = sqrt(30) is the edge between levels 1 and 2 (the residual there
+    sqrt(sigma^2 - 5) / 4). Columns blurred next to columns left sharp: each blurred pixel as
+    the exact convolution gives it, to the stack's accuracy, to the last blurred column, and
+    bit for bit what it is when the run of blurred columns goes on farther."""
+    from fovexp.foveation import _pyramid_level_for
+
+    assert _pyramid_level_for(np.sqrt(30) - 0.01) == 1 and _pyramid_level_for(np.sqrt(30)) == 2
+    assert _pyramid_level_for(0.9) == 0
+    img = linearize(textured_image(44, 61, seed=8, rgb=False, flat_squares=False), 2.2)
+    for s in (3.0, 6.0):
+        sigma = np.zeros((44, 61), np.float32)
+        sigma[:, :30] = s  # the run ends mid-image, at column 29: off the levels' grids
+        fast = foveate(img, sigma)
+        ys, xs = np.nonzero(sigma[::3, [0, 7, 20, 27, 28, 29]])
+        ys, xs = ys * 3, np.array([0, 7, 20, 27, 28, 29])[xs]
+        err = fast[ys, xs] - foveate_exact(img, sigma, ys, xs)
+        assert np.abs(err).max() < 0.01, (s, np.abs(err).max())
+        assert np.array_equal(fast[:, 30:], img[:, 30:])
+        # a blurred pixel does not depend on how far the run of blurred columns goes on
+        wider = sigma.copy()
+        wider[:, :50] = s
+        assert np.array_equal(foveate(img, wider)[:, :30], fast[:, :30])
