@@ -26,7 +26,8 @@ def test_format_value_and_line():
 @pytest.mark.parametrize("text,ok", [
     ("P01", True), ("a" * 32, True), ("a" * 33, False), ("", False), ("P 01", False),
     ("P01\n", False), ("x-y_Z9", True), ("CON", False), ("com7", False), ("lpt0", False),
-    ("com10", True), ("lpt10", True), ("nul", False), ("aux1", True), (5, False),
+    ("com10", True), ("lpt10", True), ("com9", False), ("lpt9", False), ("com0", False),
+    ("nul", False), ("aux1", True), (5, False),
 ])
 def test_the_participant_id_rule(text, ok):
     assert is_participant_id(text) is ok
@@ -78,8 +79,9 @@ def test_the_valid_part_is_counted_in_bytes(tmp_path):
     assert whole.good_len == len(data) and len(whole.rows) == 3 and whole.lines == [2, 3, 4]
     assert whole.rows[0]["protocol_sha256"] == SHA
     path.write_bytes(data + b"\n" + data.splitlines(keepends=True)[1][:40])
-    with pytest.warns(UserWarning, match="line 6: torn last row dropped"):
+    with pytest.warns(UserWarning, match="line 6: torn last row dropped") as rec:
         torn = read_trials_file(path)
+    assert rec[0].filename == __file__  # the warning points at the caller
     assert torn.good_len == len(data) + 1 and torn.torn_line == 6 and len(torn.rows) == 3
     assert read_trials_file(tmp_path / "none.csv").rows == []
 
@@ -115,10 +117,11 @@ def test_blank_lines_torn_headers_and_bad_bytes(tmp_path):
         torn = read_trials_file(path)
     assert rec[0].filename == __file__
     assert torn.torn == "torn header" and torn.missing == [] and torn.rows == []
-    path.write_bytes(b"participant,session\nP01,x\n")
-    short = read_trials_file(path)
-    assert short.torn is None and "experiment" in short.missing and short.rows == []
-    assert short.extra == []
+    for text in (b"participant,session\nP01,x\n", b"participant,session\nP01,x"):
+        path.write_bytes(text)  # a row, with and without its final newline
+        short = read_trials_file(path)
+        assert short.torn is None and "experiment" in short.missing and short.rows == []
+        assert short.extra == []
     path.write_bytes(b"\xff\xfeparticipant\n")
     with pytest.raises(FovexpError, match="line 1: not UTF-8 text"):
         read_trials_file(path)

@@ -127,11 +127,15 @@ def test_reading_a_log_torn_unreadable_or_not_csv(tmp_path: Path) -> None:
     one included); an unreadable path or bytes that are no CSV: one error naming the file."""
     path = tmp_path / "f.csv"
     write(path, GOOD)
-    whole = path.read_bytes()
+    whole = path.read_bytes().replace(b"\r\n", b"\n")  # the runner's line ends
     path.write_bytes(whole + b"1,0,3,20.02")  # torn
     torn = read_frame_log(path)
     assert len(torn) == len(GOOD) and torn["frame"].iloc[-1] == 2
-    assert torn["value"].iloc[-1] == pytest.approx(0.12)
+    last = GOOD[-1]  # every field of the last complete line kept, to its last character
+    assert torn["flip_system_time_us"].iloc[-1] == last["flip_system_time_us"]
+    assert torn["value"].iloc[-1] == last["value"]
+    path.write_bytes(whole)
+    pd.testing.assert_frame_equal(torn, read_frame_log(path))
     with pytest.raises(FovexpError, match=r"f.csv: not a frame log"):
         path.write_bytes(b'trial_index,attempt,frame,blanked\n"1,2\n')
         read_frame_log(path)
@@ -152,6 +156,7 @@ def test_latency_summary_and_trial_quality_by_hand(tmp_path: Path) -> None:
     rows = [frame(0, n, 10.0 + n * PERIOD_S, 0.0, age_s=(n + 1) / 1000) for n in range(20)]
     rows.append(frame(0, 20, 10.0 + 20 * PERIOD_S, 0.0, ecc=None, age_s=None))
     rows[3]["dropped"] = rows[7]["dropped"] = 1
+    rows[9]["dropped"] = rows[10]["dropped"] = ""  # not recorded: not counted as dropped
     rows += [frame(1, n, 30.0 + n * PERIOD_S, 0.0, ecc=None, age_s=None, attempt=1)
              for n in range(4)]
     rows += [frame(1, n, 20.0 + n * PERIOD_S, 0.0, age_s=0.5, attempt=0) for n in range(3)]
@@ -204,6 +209,15 @@ def test_final_value_at_the_edges_of_enter(tmp_path: Path) -> None:
            {"trial_index": 0, "start_value": 0.0, "final_value": 0.02, "response_time_s": enter}]
     bad = final_value_violations(write(tmp_path / "f.csv", rows), log)
     assert bad["problem"].tolist() == ["no frames"]
+    wrong = [log[0], dict(log[1], start_value=0.5)]  # checked after a trial without frames
+    assert final_value_violations(write(tmp_path / "f.csv", rows), wrong)["problem"].tolist() == [
+        "no frames", "first frame shows 0, start_value is 0.5"]
+    # the tolerance itself is within it: values 0.5 apart with value_tol = 0.5 (exact binary)
+    halves = trial(0, 10.0, [0.25, 0.25, 0.25])
+    ok = [{"trial_index": 0, "start_value": 0.75, "final_value": 0.75, "response_time_s": enter}]
+    assert final_value_violations(write(tmp_path / "h.csv", halves), ok, value_tol=0.5).empty
+    assert len(final_value_violations(write(tmp_path / "h.csv", halves), ok,
+                                      value_tol=0.4999)) == 2
     log[1]["final_value"] = 0.02 + 1e-9  # within value_tol = 1e-9 of the frame's
     assert final_value_violations(write(tmp_path / "f.csv", rows), log[1:]).empty
     log[1]["response_time_s"] = enter - 2e-4  # the last frame now after Enter
@@ -214,3 +228,19 @@ def test_final_value_at_the_edges_of_enter(tmp_path: Path) -> None:
     log[1]["response_time_s"] = enter
     bad = final_value_violations(write(tmp_path / "f.csv", rows), log[1:])
     assert bad["problem"].tolist() == ["first frame shows 0.5, start_value is 0"]
+
+
+def test_a_frame_flipped_exactly_at_enter_plus_the_slack_is_before_it(tmp_path: Path) -> None:
+    from fovexp.results.frames import ENTER_SLACK_S
+
+    rows = trial(0, 10.0, [0.0, 0.0, 0.02])
+    frames = write(tmp_path / "f.csv", rows)
+    t = frames["flip_time_s"].to_numpy(float)
+    r = (t[2] - ENTER_SLACK_S) - t[0]
+    for _ in range(8):  # the response time whose Enter + slack lands on the flip exactly
+        if t[0] + r + ENTER_SLACK_S == t[2]:
+            break
+        r = np.nextafter(r, np.inf if t[0] + r + ENTER_SLACK_S < t[2] else -np.inf)
+    assert t[0] + r + ENTER_SLACK_S == t[2]
+    log = [{"trial_index": 0, "start_value": 0.0, "final_value": 0.02, "response_time_s": r}]
+    assert final_value_violations(frames, log).empty

@@ -436,8 +436,10 @@ def test_the_frame_rules_check_every_session_and_the_error_names_the_first_reaso
     ds = load_results(tmp_path)
     assert set(ds.trials["participant"]) == {"P01"}
     assert [e.participant for e in ds.exclusions if e.rule == "R12 dropped frames"] == ["P02"]
-    only = tmp_path / "only"
+    only = tmp_path / "only"  # P01: practice only (R4); P02: the wrong parameter (R6)
     write_trials(only / "calibration-fe" / "P01", [dict(r, practice=1) for r in rows()])
-    write_trials(only / "calibration-fe" / "P02", [dict(r, practice=1) for r in rows(pid="P02")])
-    with pytest.raises(FovexpError, match=r"no trials left .*\(e\.g\. .*P01.*practice trial\)"):
+    write_trials(only / "calibration-fe" / "P02",
+                 [dict(r, adjusted_parameter="s_k") for r in rows(pid="P02", practice=0)])
+    with pytest.raises(FovexpError, match=r"no trials left .*\(e\.g\. \S*P01\S*: practice "
+                                          r"trial\)$"):
         load_results(only)
