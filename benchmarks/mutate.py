@@ -420,9 +420,9 @@ def write_record(results: dict[str, dict]) -> None:
     """The table of benchmarks/MUTATION.md, between its markers (the text around is kept)."""
     path = ROOT / "benchmarks" / "MUTATION.md"
     text = path.read_text() if path.exists() else f"# Mutation testing\n\n{BEGIN}\n{END}\n"
-    rows = ["| module | mutants run (of all) | killed | survived | score (95 % interval) | "
-            "left out as equivalent | wall | date (UTC) | load | command |",
-            "|---|---:|---:|---:|---|---:|---:|---|---:|---|"]
+    rows = ["| module | mutants run (of all) | first run: killed / survived | killed | survived "
+            "| score (95 % interval) | left out as equivalent | wall | date (UTC) | load | "
+            "command |", "|---|---:|---:|---:|---:|---|---:|---:|---|---:|---|"]
     for name in MODULES:
         r = results.get(name)
         if r is None:
@@ -435,9 +435,12 @@ def write_record(results: dict[str, dict]) -> None:
         interval = f" ({lo}-{hi})" if of and lo is not None else ""
         equivalent = sum(v for k, v in r["left_out"].items()
                          if k in ("numba decorator", "annotation", "pragma: no mutate"))
-        cmd = r["command"] + (f" --sample {r['sample']}" if r.get("sample") else "")
+        cmd = "./dev mutate" + (f" --sample {r['sample']}" if r.get("sample") else "") + \
+            f" {name}" + (", then --recheck" if r.get("first_run") else "")
+        first = r.get("first_run") or r
         rows.append(
-            f"| {name} | {run}{of} | {r['killed']} | {r['survived']} | "
+            f"| {name} | {run}{of} | {first['killed']} / {first['survived']} | {r['killed']} | "
+            f"{r['survived']} | "
             f"{r['score']} %{interval} | {equivalent} | {r['wall_s'] / 60:.0f} min | "
             f"{r['date'][:16]} | {r['load']} | `{cmd}` |")
     machines = sorted({r["machine"] for r in results.values()})
