@@ -14,7 +14,7 @@ def closest(word: str, candidates: Iterable[str], n: int = 1) -> list[str]:
     >>> closest("seeed", ["seed", "repetitions"])
     ['seed']
     >>> closest("lab-1", ["lab-01", "lab-02", "scene-01"], n=3)
-    ['lab-01', 'lab-02', 'scene-01']
+    ['lab-01', 'lab-02']
     """
     return difflib.get_close_matches(word, list(candidates), n=n)
 

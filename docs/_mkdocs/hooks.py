@@ -18,6 +18,7 @@ import re
 from pathlib import Path
 from typing import Any
 
+from mkdocs.plugins import event_priority
 from mkdocs.structure.files import File, Files
 
 log = logging.getLogger("mkdocs.plugins.fovexp")
@@ -154,6 +155,7 @@ def on_page_markdown(markdown: str, page: Any, config: Any, files: Files) -> str
 SITE_ZIP = ROOT / "fovexp" / "site.zip"
 
 
+@event_priority(-200)  # after Material's offline plugin (-100) wrote search/search_index.js
 def on_post_build(config: Any) -> None:
     """What the installed site never loads is left out (source maps; the search's language
     packs: the site is English, and Material loads none for it), and the site is packed into

@@ -59,12 +59,14 @@ def untestable_reason(row: pd.Series) -> str:
     return "one participant: a paired test needs at least two"
 
 
-def marked_tests(tests: pd.DataFrame) -> tuple[pd.DataFrame, list[str]]:
+def marked_tests(tests: pd.DataFrame, no_test: str | None = None,
+                 ) -> tuple[pd.DataFrame, list[str]]:
     """The test table as the report shows it: in each row without a test (:func:`testable`)
     t, df, p and d_z, and any other statistic that is missing or infinite, read
-    :data:`NOT_COMPUTED` (never ``nan``); and the reasons, once each."""
+    :data:`NOT_COMPUTED` (never ``nan``); and the reasons, once each (``no_test``: there is no
+    test at all, for the reason the report gives above the table)."""
     out = tests.astype(object)
-    why: list[str] = []
+    why: list[str] = ["one participant: a paired test needs at least two"] if no_test else []
     for i, row in tests.iterrows():
         if testable(row):
             continue
@@ -73,7 +75,7 @@ def marked_tests(tests: pd.DataFrame) -> tuple[pd.DataFrame, list[str]]:
             if col in ("t", "df", "p", "d_z") or not math.isfinite(float(v)):
                 out.at[i, col] = NOT_COMPUTED
         reason = untestable_reason(row)
-        if reason not in why:
+        if not no_test and reason not in why:
             why.append(reason)
     return out, why
 
@@ -86,7 +88,7 @@ def _validation_md(res: ValidationResult, figures: bool) -> str:
              md_table(res.overall, units=BLUR_UNITS)]
     if len(res.tests):
         main = res.tests.iloc[0]
-        marked, why = marked_tests(res.tests)
+        marked, why = marked_tests(res.tests, res.no_test)
         parts += [
             "### Paired t-test, ours vs contrast\n",
             (res.no_test or "All scenes, paired by participant x scene: " + (
