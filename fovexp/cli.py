@@ -1,5 +1,7 @@
 """``fovexp`` command line: ``enhance`` and ``compile`` (this module), ``run`` (experiment
-runner), ``analyze`` (analysis) and ``bench`` (run time against error, :mod:`fovexp.bench`).
+runner), ``init`` (a study folder, :mod:`fovexp.experiment.study`), ``analyze`` (analysis),
+``docs`` (the documentation site, :mod:`fovexp.docsite`) and ``bench`` (run time against
+error, :mod:`fovexp.bench`).
 Bad input prints one ``fovexp: error: ...`` line and exits with 2.
 
 A command's module, and what it imports, is loaded only when that command runs (or its

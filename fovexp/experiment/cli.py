@@ -56,8 +56,9 @@ def add_run_parser(subparsers: Any) -> argparse.ArgumentParser:
                         "dry run at the display's size (a rehearsal); a smaller dry run "
                         "scales them")
     p.add_argument("--stimuli", type=Path, default=None, metavar="DIR",
-                   help="stimulus folder (default: the protocol's, $FOVEXP_STIMULI, ./stimuli, "
-                        "or the user data folder; see fovexp stimuli --help)")
+                   help="stimulus folder (default: the protocol's, the study folder's, "
+                        "$FOVEXP_STIMULI, ./stimuli, or the user data folder; see fovexp "
+                        "stimuli --help)")
     p.add_argument("--windowed", action="store_true", help="not full screen (pilots)")
     p.add_argument("--backend", choices=BACKENDS, default="auto",
                    help="enhancer backend: cpu, gpu (OpenGL 4.5 compute shaders), or auto: "

@@ -22,8 +22,8 @@ DEFAULT_DISPLAY = "lg-oled55cx"
 
 
 def _folder_help() -> str:
-    return ("stimulus folder (default: $FOVEXP_STIMULI, ./stimuli if there is one, else the "
-            "user data folder)")
+    return ("stimulus folder (default: the stimuli/ of the study folder (fovexp init) you are "
+            "in, $FOVEXP_STIMULI, ./stimuli if there is one, else the user data folder)")
 
 
 def add_stimuli_parser(subparsers: Any) -> argparse.ArgumentParser:
