@@ -40,8 +40,8 @@ References
 .. [tariq] Tariq, T., Tursun, C., Didyk, P. (2022). Noise-based Enhancement for Foveated
    Rendering. ACM Transactions on Graphics 41(4) (SIGGRAPH 2022). doi:10.1145/3528223.3530101
 .. [didyk] Didyk, P., Ritschel, T., Eisemann, E., Myszkowski, K., Seidel, H.-P. (2010).
-   Adaptive Image-space Stereo View Synthesis. Vision, Modeling and Visualization (VMV 2010).
-   doi:10.2312/PE/VMV/VMV10/299-306
+   Adaptive Image-space Stereo View Synthesis. Vision, Modeling and Visualization (VMV 2010)
+   (the paper's "Didyk2010"; no DOI given: not checked against the paper's bibliography)
 .. [kitti] Geiger, A., Lenz, P., Urtasun, R. (2012). Are we ready for Autonomous Driving? The
    KITTI Vision Benchmark Suite. CVPR 2012. doi:10.1109/CVPR.2012.6248074
 """
