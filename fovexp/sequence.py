@@ -133,9 +133,11 @@ def ssim(a: np.ndarray, b: np.ndarray, data_range: float = 1.0) -> float:
     so that border is never filtered here. 0.5 s on a 4K frame on 2 cores, against 2.1 s.
 
     >>> import numpy as np
-    >>> x = np.linspace(0, 1, 64 * 64, dtype=np.float32).reshape(64, 64)
-    >>> round(ssim(x, x), 6), round(ssim(x, 1 - x), 3)
-    (1.0, -1.0)
+    >>> x = np.random.default_rng(0).random((64, 64))
+    >>> round(ssim(x, x), 6)
+    1.0
+    >>> bool(ssim(x, 1 - x) < 0)  # the structure inverted
+    True
     """
     from scipy.ndimage import uniform_filter1d
 
