@@ -170,3 +170,18 @@ def test_an_8_bit_png_disparity_and_mismatched_eyes_are_refused(pair, tmp_path, 
                  str(p / "disparity.npy"), "--display", str(display), "--out",
                  str(tmp_path / "o")])
     assert code == 2 and "one size" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("argv,message", [
+    (["stereo", "--far", "8", "--near", "4"], "need 0 <= far < near"),
+    (["stereo", "--near", "200", "--size", "320x180"], "too large"),
+    (["stereo", "--scene", "scene-99"], "not a generated scene"),
+    (["pan", "--frames", "1"], "2 frames or more"),
+    (["pan", "--step", "-1"], "--step"),
+    (["pan", "--size", "12x"], "WIDTHxHEIGHT"),
+])
+def test_the_test_material_refuses_bad_input_in_one_line(tmp_path, capsys, argv, message):
+    code = main(["stimuli", *argv, "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and message in err[0], err
+    assert not (tmp_path / "o").exists()
