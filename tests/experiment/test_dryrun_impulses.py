@@ -20,11 +20,17 @@ pytestmark = [pytest.mark.gui, pytest.mark.slow]
 
 def test_both_validations_dry_run_and_the_report_compares_them(tmp_path, xvfb_display):  # noqa: F811
     ws = make_workspace(tmp_path / "project")
+    for protocol in ("validation", "validation-12"):  # two scenes: both methods on each
+        path = ws / "protocols" / f"{protocol}.yaml"
+        text = path.read_text()
+        start = text.index("images: [")
+        end = text.index("]", start) + 1
+        path.write_text(text[:start] + "images: [scene-05, scene-06]" + text[end:])
     truth = tmp_path / "truth.yaml"
     truth.write_text("validation_blur_rate: {contrast: 0.3, ours: 0.5}\n")
     for protocol in ("validation", "validation-12"):  # one participant, two scenes each
         r = run_cli(["run", f"protocols/{protocol}.yaml", "--participant", "S01", "--dry-run",
-                     "--sim-speed", "12", "--practice", "0", "--limit-trials", "4",
+                     "--sim-speed", "12", "--practice", "0",
                      "--sim-truth", str(truth), "--sim-noise-scale", "0"], cwd=ws, timeout=600)
         assert r.returncode == 0, r.stderr[-3000:]
     info = json.loads(next((ws / "results" / "validation-12" / "S01").glob(
