@@ -238,10 +238,15 @@ def add_stereo_parser(sub: Any) -> argparse.ArgumentParser:
 
 
 def stereo_command(args: argparse.Namespace) -> int:
+    from fovexp import FovexpError
+
     from . import stereo
     from .outputs import parse_blur_rates
 
-    (rate,) = parse_blur_rates(args.blur_rate)[:1]
+    rates = parse_blur_rates(args.blur_rate)
+    if len(rates) != 1:
+        raise FovexpError(f"--blur-rate {args.blur_rate}: give one blur-rate")
+    rate = rates[0]
     res = stereo.run(args.left, args.right, args.disparity, _setup(args), rate, args.out,
                      disparity_scale=args.disparity_scale, dump_maps=args.dump_maps)
     print(f"fovexp stereo: wrote {args.out}/left.png, right.png, anaglyph.png; "
