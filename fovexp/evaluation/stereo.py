@@ -69,7 +69,9 @@ CONTEXT_PX = 64
 DISPARITY_PNG_SCALE = 256.0
 
 
-@numba.njit(parallel=True, cache=True, nogil=True)
+# fastmath off, as every kernel of the package (fovexp/jit.py says why), named here since the
+# evaluation uses only the enhancer's public API
+@numba.njit(parallel=True, cache=True, nogil=True, fastmath=False)
 def _warp_rows(src: np.ndarray, disp: np.ndarray, step: float, out: np.ndarray,
                depth: np.ndarray, covered: np.ndarray) -> None:
     h, w = src.shape
