@@ -16,6 +16,7 @@ from ._version import __version__
 #: Public name -> the module of the package that defines it.
 _PUBLIC: dict[str, str] = {
     "BACKENDS": "backends", "make_enhancer": "backends",
+    "t_high_cpd": "acuity", "t_low_cpd": "acuity",
     "parse_yaml": "config", "read_yaml": "config",
     "FovexpError": "errors", "did_you_mean": "errors", "validation_error": "errors",
     "Display": "geometry", "ViewingGeometry": "geometry", "load_display": "geometry",
@@ -27,10 +28,12 @@ _PUBLIC: dict[str, str] = {
     "enhance": "pipeline",
     "find_protocol": "resources", "shipped_protocols": "resources",
     "shipped_stimuli": "resources",
+    "iter_frames": "sequence", "ssim": "sequence",
 }
 
 if TYPE_CHECKING:  # the same names for type checkers (tests/test_layers.py holds the
     # three lists equal)
+    from .acuity import t_high_cpd, t_low_cpd
     from .backends import BACKENDS, make_enhancer
     from .config import parse_yaml, read_yaml
     from .errors import FovexpError, did_you_mean, validation_error
@@ -49,6 +52,7 @@ if TYPE_CHECKING:  # the same names for type checkers (tests/test_layers.py hold
     )
     from .pipeline import MAP_NAMES, Enhancer, EnhanceResult, enhance
     from .resources import find_protocol, shipped_protocols, shipped_stimuli
+    from .sequence import iter_frames, ssim
 
 __all__ = [
     "BACKENDS", "MAP_NAMES", "METHODS", "PAPER_TABLE2", "PARAMETER_RANGES", "Display",
@@ -57,6 +61,7 @@ __all__ = [
     "find_protocol", "load_display", "make_enhancer", "make_options", "make_params",
     "parse_yaml", "read_image", "read_samples", "read_yaml", "shipped_protocols",
     "shipped_stimuli", "validation_error", "write_bytes_atomic", "write_image", "__version__",
+    "iter_frames", "ssim", "t_high_cpd", "t_low_cpd",
 ]
 
 

@@ -43,6 +43,10 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
                 "compile the Numba kernels ahead of the first run (once after installing)"),
     "bench": ("fovexp.bench", "add_bench_parser",
               "measure run time against error of the engine's options, and against size"),
+    "evaluate": ("fovexp.evaluation.cli", "add_evaluate_parser",
+                 "the paper's analyses of outputs: spectra, FovVDP, temporal, JPEG (section 6)"),
+    "stereo": ("fovexp.evaluation.cli", "add_stereo_parser",
+               "enhance a stereo pair: noise for one eye, warped to the other (section 6.4)"),
 }
 
 

@@ -145,10 +145,29 @@ def test_runner_and_analysis_use_the_public_api(graph, part):
 def test_the_engine_does_not_import_the_runner_or_the_analysis(graph):
     engine = [m for m in graph if not m.startswith(("fovexp.experiment", "fovexp.analysis",
                                                     "fovexp.results", "fovexp.cli",
-                                                    "fovexp.__main__", "fovexp.bench"))]
+                                                    "fovexp.__main__", "fovexp.bench",
+                                                    "fovexp.evaluation"))]
     bad = [(a, b) for a in engine for b in graph[a]
-           if b.startswith(("fovexp.experiment", "fovexp.analysis", "fovexp.results"))]
+           if b.startswith(("fovexp.experiment", "fovexp.analysis", "fovexp.results",
+                            "fovexp.evaluation"))]
     assert bad == []
+
+
+def test_the_evaluation_uses_the_public_api(graph):
+    """``fovexp.evaluation`` (the paper's analyses of outputs and stereo, section 6) imports of
+    the enhancer only its public names; besides its own modules it reads trial logs through
+    ``fovexp.results``, takes the t-test and the validation summary from ``fovexp.analysis``
+    and the gaze argument's parser from ``fovexp.cli``; it never imports the runner."""
+    assert _edges(graph, "fovexp.evaluation", "fovexp.experiment") == []
+    allowed = ("fovexp.evaluation", "fovexp.results", "fovexp.analysis.stats",
+               "fovexp.analysis.validation", "fovexp.cli")
+    bad = [(a, b) for a, b in _edges(graph, "fovexp.evaluation", "fovexp")
+           if not (b == "fovexp" or any(b == p or b.startswith(p + ".") for p in allowed))]
+    assert bad == []
+    # and nothing below it imports it (only the command line registers it, by name)
+    users = [a for a, deps in graph.items() for b in deps
+             if b.startswith("fovexp.evaluation") and not a.startswith("fovexp.evaluation")]
+    assert users == []
 
 
 def test_every_subpackage_is_in_the_wheel():

@@ -32,7 +32,8 @@ def add_run_parser(subparsers: Any) -> argparse.ArgumentParser:
         "run", help="run an experiment protocol with a participant",
         description="Run one of the paper's adjustment experiments (protocols/*.yaml).")
     p.add_argument("protocol", help="protocol YAML, or the name of one in ./protocols or shipped "
-                   "with fovexp (calibration-fe, calibration-sk, calibration-sf, validation)")
+                   "with fovexp (calibration-fe, calibration-sk, calibration-sf, validation, "
+                   "validation-12)")
     p.add_argument("--participant", required=True, help="participant ID ([A-Za-z0-9_-]{1,32})")
     p.add_argument("--tracker", choices=TRACKERS, default=None,
                    help="gaze source (default: tobii; simulated with --dry-run)")
