@@ -599,6 +599,15 @@ class PsychoScreen:
             return None
         return nx, ny
 
+    def window_rect(self) -> tuple[int, int, int, int]:
+        """The window's place on its screen: left, top, width, height (px); a full-screen
+        window's is the whole screen (a source that reports positions on the screen, ioHub's,
+        normalises them over it)."""
+        if getattr(self.win, "_isFullScr", False):
+            return 0, 0, self.size[0], self.size[1]
+        x, y = self.win.winHandle.get_location()
+        return int(x), int(y), self.size[0], self.size[1]
+
     def close(self) -> None:
         """Close the window (call after the render thread let go of :meth:`gl_share`)."""
         try:
