@@ -296,25 +296,22 @@ class IoHubGaze:
                               f"{type(exc).__name__}: {exc}") from None
         self.io, self._proc = io, io._server_process
         tracker = getattr(io.devices, self.config.name, None)
-        if tracker is None:
+        methods = getattr(tracker, "_methods", None) if tracker is not None else None
+        if not isinstance(methods, (list, tuple)) or "getEvents" not in methods:
             self._shutdown_server()
             raise FovexpError(
-                f"the ioHub server started, but not the {where}: the server's messages above "
-                "say why (no tracker connected or found, a wrong address or model name, a "
-                "missing vendor library)")
+                f"the ioHub server could not create the {where}: its messages above say why "
+                "(no tracker found or connected, a wrong address or model name, a missing "
+                "vendor library)")
         self.tracker = tracker
         io.udp_client.sock.settimeout(self.rpc_timeout_s)
         try:
             cfg = tracker.getConfiguration() or {}
-            connected = bool(tracker.isConnected())
             res = io.devices.display.getPixelResolution()
         except Exception as exc:
             self._shutdown_server()
-            raise FovexpError(f"the ioHub server does not answer for the {where}: {exc}") from None
-        if not connected and not self.pilot:  # MouseGaze connects when it starts recording
-            self._shutdown_server()
-            raise FovexpError(f"the {where} is not connected: check its cable, power and "
-                              "address, and that its vendor software sees it")
+            raise FovexpError(f"the ioHub server does not answer for the {where}: "
+                              f"{type(exc).__name__}: {exc}") from None
         self.device_config = dict(cfg)
         rt = cfg.get("runtime_settings") or {}
         if self.rate_hz is None and rt.get("sampling_rate") is not None:
@@ -333,6 +330,32 @@ class IoHubGaze:
                     self._layouts[int(type_id)] = SampleLayout.of(cls.CLASS_ATTRIBUTE_NAMES)
                 except KeyError:  # a sample class without gaze fields
                     pass
+        self._probe(where)
+        self._own_move_callback()  # a new connection took the window's moves again
+
+    def _probe(self, where: str, timeout_s: float = 3.0) -> None:
+        """Record until the first sample arrives (a plugin may say it is connected when it is
+        not: EyeLink's without its host PC): none within ``timeout_s`` stops the run."""
+        tracker = self.tracker
+        got = False
+        try:
+            tracker.setRecordingState(True)
+            t_end = time.monotonic() + timeout_s
+            while not got and time.monotonic() < t_end:
+                evs = tracker.getEvents(asType="list") or []
+                got = any(int(e[4]) in self._layouts for e in evs)
+                time.sleep(0.01)
+            tracker.setRecordingState(False)
+        except Exception as exc:  # the plugin's own errors
+            self._shutdown_server()
+            raise FovexpError(f"the {where} failed when asked to record: "
+                              f"{type(exc).__name__}: {exc}") from None
+        if not got:
+            self._shutdown_server()
+            raise FovexpError(
+                f"the {where} sent no gaze sample within {timeout_s:g} s of recording: check "
+                "that it is connected and powered, its address, and that its vendor software "
+                "sees it")
 
     def _shutdown_server(self) -> None:
         """Stop the server (asking it first; killed when it does not stop within 5 s)."""
@@ -366,6 +389,22 @@ class IoHubGaze:
         if rect is not None:
             left, top, w, h = rect()
             self.pixels = PixelMap(self.display_px, (float(left), float(top), float(w), float(h)))
+        self._win = getattr(screen, "win", None)
+        self._own_move_callback()
+
+    def _own_move_callback(self) -> None:
+        """ioHub's client asks its server on every move of a PsychoPy window (on the display
+        thread, over the reader thread's socket): the window's moves update the map here
+        instead."""
+        win = getattr(self, "_win", None)
+        if win is None:
+            return
+
+        def moved(_win: Any, x: int, y: int) -> None:
+            _, _, w, h = self.pixels.rect
+            self.pixels = PixelMap(self.display_px, (float(x), float(y), w, h))
+
+        win.backend.onMoveCallback = moved
 
     def start(self) -> None:
         with self._lock:
@@ -458,6 +497,8 @@ class IoHubGaze:
             "clock": "system_time_us = round(1e6 * ioHub time), PsychoPy's clock; "
                      f"device_time_us = round(1e6 * device_time), {fam.clock}",
             "server_pid": self.server_pid, "config": self.config.to_dict(),
+            "display_px": list(getattr(self, "display_px", ())),
+            "window_px": list(self.pixels.rect) if hasattr(self, "pixels") else None,
         }
 
     def measured(self) -> dict[str, Any]:
