@@ -26,6 +26,7 @@ _PUBLIC: dict[str, str] = {
     "MAP_NAMES": "pipeline", "Enhancer": "pipeline", "EnhanceResult": "pipeline",
     "enhance": "pipeline",
     "find_protocol": "resources", "shipped_stimuli": "resources",
+    "profile_stages": "gpu.profiling",
 }
 
 if TYPE_CHECKING:  # the same names for type checkers (tests/test_layers.py holds the
@@ -34,6 +35,7 @@ if TYPE_CHECKING:  # the same names for type checkers (tests/test_layers.py hold
     from .config import parse_yaml, read_yaml
     from .errors import FovexpError, validation_error
     from .geometry import Display, ViewingGeometry, load_display
+    from .gpu.profiling import profile_stages
     from .io import read_image, read_samples, write_bytes_atomic, write_image
     from .params import (
         METHODS,
@@ -53,7 +55,8 @@ __all__ = [
     "BACKENDS", "MAP_NAMES", "METHODS", "PAPER_TABLE2", "PARAMETER_RANGES", "Display",
     "EngineOptions", "EnhanceParams", "EnhanceResult", "Enhancer", "FovexpError",
     "ParameterTable", "ViewingGeometry", "check_parameter", "enhance", "find_protocol",
-    "load_display", "make_enhancer", "make_options", "make_params", "parse_yaml", "read_image",
+    "load_display", "make_enhancer", "make_options", "make_params", "parse_yaml",
+    "profile_stages", "read_image",
     "read_samples", "read_yaml", "shipped_stimuli", "validation_error", "write_bytes_atomic",
     "write_image", "__version__",
 ]

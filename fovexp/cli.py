@@ -37,6 +37,8 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
                 "compile the Numba kernels ahead of the first run (once after installing)"),
     "bench": ("fovexp.bench", "add_bench_parser",
               "measure run time against error of the engine's options, and against size"),
+    "rig": ("fovexp.rig.cli", "add_rig_parser",
+            "measure the rig before the first participant: display, GPU, tracker"),
 }
 
 

@@ -39,6 +39,7 @@ import numpy as np
 
 from fovexp import FovexpError
 from fovexp.results.format import SIMULATED_TRACKER
+from fovexp.results.rigcheck import session_rig_record
 
 from .calibration import QUIT_KEYS, QUIT_PROMPT, QUIT_QUESTION, CalibrationTiming
 from .frameloop import TrialIO, TrialLoop, display_thread_first
@@ -339,6 +340,7 @@ class Session:
                                                 self.opts.sim_speed, self.opts.sim_noise_scale)
             self.tracker = self._make_tracker_setup()
             self._display_setup()
+            self._check_rig()
             self._check_render_budget()
             self.tracker.setup()
             self._instructions()
@@ -444,6 +446,16 @@ class Session:
             self._message(checklist_text(), ["c"], None)
             entry = {"confirmed": True, "time": now_iso(), "items": list(DISPLAY_CHECKLIST)}
         self.file.set_in_run("display_setup", entry)
+
+    def _check_rig(self) -> None:
+        """The newest rig check under the results root (``fovexp rig check``): its name and
+        sha256 in this run's entry (``runs[].rig_check``); a warning for the operator when
+        there is none from today, it failed, or it was only a dry run."""
+        rec, warning = session_rig_record(self.opts.results_root, now_iso()[:10],
+                                          self.opts.dry_run)
+        self.file.set_in_run("rig_check", rec)
+        if warning is not None and not self.opts.dry_run:
+            self._operator_note(warning, "rig_check_warning", warning=warning)
 
     def _check_render_budget(self) -> None:
         """Warn when the backend cannot show a wheel step within the protocol's budget

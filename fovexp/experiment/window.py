@@ -262,6 +262,13 @@ class PsychoScreen:
         self._shared: SharedGLContext | None = None
         #: seconds the last :meth:`set_test` / :meth:`set_reference` spent uploading
         self.last_upload_s = 0.0
+        #: the photodiode patch in the bottom-left corner (``fovexp rig check --photodiode``):
+        #: None not drawn, True white, False black (on every frame until changed)
+        self.photodiode: bool | None = None
+        side = max(16, h // 20)
+        self._patch = visual.Rect(self.win, width=side, height=side, units="pix",
+                                  pos=(-w / 2 + side / 2, -h / 2 + side / 2), lineColor=None,
+                                  fillColor=(1, 1, 1))
         #: keep a copy of every frame shown in ``last_frame`` (tests; slow)
         self.capture = False
         self.last_frame: np.ndarray | None = None
@@ -345,6 +352,9 @@ class PsychoScreen:
             self.right.draw()
         for c in self.cross:
             c.draw()
+        if self.photodiode is not None:
+            self._patch.fillColor = (1, 1, 1) if self.photodiode else (-1, -1, -1)
+            self._patch.draw()
 
     def flip(self) -> float:
         """Show the back buffer; returns the flip time (``time.monotonic`` seconds) from

@@ -124,8 +124,8 @@ def test_samples_follow_the_pointer_on_psychopys_clock(mousegaze) -> None:
 def test_killed_server_is_a_lost_tracker_then_started_again(mousegaze) -> None:
     """SIGKILL to the server: the source says disconnected within 0.5 s (one unanswered
     request, 0.1 s, plus a loaded machine's scheduling; the frame loop then blanks and ends
-    the attempt; the gaze timeout has blanked the stimulus already), with the reason; the server is started again and samples
-    flow again (the trial restarts)."""
+    the attempt; the gaze timeout has blanked the stimulus already), with the reason; the
+    server is started again and samples flow again (the trial restarts)."""
     g = mousegaze()
     g.start()
     wait_for(g, lambda s: True)
