@@ -374,11 +374,14 @@ def run_measurements(opts: RigOptions) -> Measured:
 def _gl_version() -> dict[str, str | None]:
     """The window's GL_VERSION and GL_RENDERER (PsychoPy's context, current on this thread)."""
     try:
+        import ctypes
+
         from pyglet import gl
 
         def s(name: Any) -> str | None:
             p = gl.glGetString(name)
-            return None if not p else gl.cast(p, gl.c_char_p).value.decode()
+            v = ctypes.cast(p, ctypes.c_char_p).value if p else None
+            return None if v is None else v.decode()
 
         return {"version": s(gl.GL_VERSION), "renderer": s(gl.GL_RENDERER),
                 "vendor": s(gl.GL_VENDOR)}

@@ -100,9 +100,10 @@ def write_report(results_root: str | Path, report: dict[str, Any], created: _dt.
         pd_path = folder / f"{stem}-photodiode.csv"
         write_bytes_atomic(pd_path, buf.getvalue().encode())
         report.setdefault("photodiode", {})["log"] = pd_path.name
+    report = _clean(report)
     write_bytes_atomic(folder / f"{stem}.md", markdown(report).encode())
     path = folder / f"{stem}.json"
-    write_bytes_atomic(path, (json.dumps(report, indent=1) + "\n").encode())
+    write_bytes_atomic(path, (json.dumps(report, indent=1, allow_nan=False) + "\n").encode())
     return path
 
 
