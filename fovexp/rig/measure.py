@@ -179,7 +179,7 @@ def run_measurements(opts: RigOptions) -> Measured:
         while time.monotonic() < t_end:
             if opts.photodiode:
                 screen.photodiode = pattern[k % 31]
-            t = screen.draw(blank=True)
+            t = _flip_s(screen.draw(blank=True))
             now_us = gaze.now_us()
             mono = time.monotonic()
             flips.append(t)
@@ -369,6 +369,12 @@ def run_measurements(opts: RigOptions) -> Measured:
     out.sections["machine"] = {"platform": platform.platform(), "node": platform.node(),
                                "python": platform.python_version()}
     return out
+
+
+def _flip_s(flip: Any) -> float:
+    """A flip's time (s, ``time.monotonic``): a screen's ``draw`` returns it, or a
+    ``FlipTimes`` whose ``flip_s`` it is."""
+    return float(getattr(flip, "flip_s", flip))
 
 
 def _gl_version() -> dict[str, str | None]:
