@@ -258,6 +258,8 @@ class IoHubGaze:
         self._connected = True
         self._stalled = False
         self._server_gone: str | None = None
+        #: the frame loop saw the server's process gone (before the reader thread did)
+        self._proc_dead = False
         self._fatal: str | None = None
         self._last_sample_us: int | None = None
         self._layouts: dict[int, SampleLayout] = {}
@@ -437,7 +439,8 @@ class IoHubGaze:
 
     @property
     def connected(self) -> bool:
-        return self._connected and not self._stalled and self._server_gone is None
+        return (self._connected and not self._stalled and self._server_gone is None
+                and not self._proc_dead)
 
     def poll(self) -> list[GazeSample]:
         out = []
@@ -464,6 +467,9 @@ class IoHubGaze:
             events.append(SourceEvent(kind, t_us, detail))
         if self._fatal is not None:
             raise FovexpError(self._fatal)
+        proc = self._proc
+        if proc is not None and self._server_gone is None and proc.poll() is not None:
+            self._proc_dead = True  # lost now; the reader thread notes why and restarts it
         now = self.now_us()
         watch = self._recording and not self._calibrating and self._server_gone is None
         stalled = (watch and self._last_sample_us is not None
@@ -634,6 +640,7 @@ class IoHubGaze:
                 continue
             self.restarted += 1
             self._server_gone = None
+            self._proc_dead = False
             self._note("connection_restored", reason="the ioHub server was started again",
                        pid=self.server_pid)
             return
