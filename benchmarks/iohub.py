@@ -98,6 +98,8 @@ def main() -> None:
     }
     (HERE / "iohub.json").write_text(json.dumps(out, indent=1) + "\n")
     r, a = out["roundtrip_ms"], out["sample_age_at_poll_ms"]
+    rtt_s = f"{r['p50']:.3f} / {r['p99']:.3f} / {r['max']:.3f} ms"
+    age_s = f"{a['p50']:.2f} / {a['p99']:.2f} / {a['max']:.2f} ms"
     md = f"""# ioHub as a gaze source (benchmarks/iohub.py)
 
 MouseGaze at 250 Hz (server polling every 4 ms) under Xvfb, {out['machine']['platform']},
@@ -107,8 +109,8 @@ it started: the machine is shared with other engineers' runs.
 | figure | value |
 |---|---|
 | server start (launch, tracker created, first sample) | {start_s:.2f} s |
-| getEvents round trip, p50 / p99 / max ({r['n']} requests) | {r['p50']:.3f} / {r['p99']:.3f} / {r['max']:.3f} ms |
-| newest sample's age when the frame loop polls, p50 / p99 / max | {a['p50']:.2f} / {a['p99']:.2f} / {a['max']:.2f} ms |
+| getEvents round trip, p50 / p99 / max ({r['n']} requests) | {rtt_s} |
+| newest sample's age when the frame loop polls, p50 / p99 / max | {age_s} |
 | SIGKILL to `connected` False | {noticed_ms:.1f} ms |
 | SIGKILL to samples again (server started again) | {back_s:.2f} s |
 
