@@ -137,8 +137,10 @@ def test_killed_server_is_a_lost_tracker_then_started_again(mousegaze) -> None:
         events += g.poll_events()
         assert time.monotonic() - t_kill < 0.5, "the lost server was not noticed in 0.5 s"
         time.sleep(0.002)
-    time.sleep(0.01)
-    events += g.poll_events()
+    t_end = time.monotonic() + 5  # the reader thread notes why (the frame loop saw it first)
+    while not any(e.kind == "connection_lost" for e in events) and time.monotonic() < t_end:
+        events += g.poll_events()
+        time.sleep(0.005)
     lost = [e for e in events if e.kind == "connection_lost"]
     assert lost and f"(pid {pid}) exited (killed by signal 9)" in lost[0].detail["reason"]
     t_end = time.monotonic() + 30
@@ -341,3 +343,29 @@ def test_server_killed_mid_trial(tmp_path, xvfb_display) -> None:  # noqa: F811
     attempts = set(frames[frames["trial_index"] == trial]["attempt"])
     assert attempts == {0, 1}  # the interrupted attempt, and the one that counted
     assert info["tracker"]["measured"]["server_restarts"] == 1
+
+
+def test_orphan_servers_of_killed_sessions_are_stopped(tmp_path) -> None:
+    """A session killed with SIGKILL leaves its ioHub server running (holding the tracker and
+    ioHub's port): the next start stops servers whose experiment process is gone, and only
+    those."""
+    import sys
+
+    from fovexp.experiment.trackers.iohub import stop_orphan_servers
+
+    script = tmp_path / "start_iohub_process.py"
+    script.write_text("import time\ntime.sleep(60)\n")
+    gone = subprocess.Popen([sys.executable, "-c", "pass"])
+    gone.wait()
+    orphan = subprocess.Popen([sys.executable, str(script), "0.0", "/", "cfg", str(gone.pid)])
+    kept = subprocess.Popen([sys.executable, str(script), "0.0", "/", "cfg", str(os.getpid())])
+    try:
+        time.sleep(0.3)
+        stopped = stop_orphan_servers()
+        assert orphan.pid in stopped and kept.pid not in stopped
+        assert orphan.wait(timeout=5) == -signal.SIGKILL and kept.poll() is None
+    finally:
+        for p in (orphan, kept):
+            if p.poll() is None:
+                p.kill()
+                p.wait()

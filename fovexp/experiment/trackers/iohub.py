@@ -285,6 +285,7 @@ class IoHubGaze:
                               "'fovexp[experiment]'") from None
         fam = self.family
         where = f"{fam.label} ({self.config.device_class}, {self.config.path})"
+        self.orphans_stopped = stop_orphan_servers()
         # launchHubServer reads the Display from a file (keyword arguments would add a second)
         with tempfile.NamedTemporaryFile("w", suffix=".yaml", prefix="fovexp-iohub-",
                                          delete=False) as fh:
@@ -297,9 +298,10 @@ class IoHubGaze:
             raise FovexpError(f"the ioHub server did not start for the {where}: "
                               f"{type(exc).__name__}: {exc}") from None
         self.io, self._proc = io, io._server_process
-        tracker = getattr(io.devices, self.config.name, None)
+        tracker: Any = getattr(io.devices, self.config.name, None)
         methods = getattr(tracker, "_methods", None) if tracker is not None else None
-        if not isinstance(methods, (list, tuple)) or "getEvents" not in methods:
+        if tracker is None or not isinstance(methods, (list, tuple)) \
+                or "getEvents" not in methods:
             self._shutdown_server()
             raise FovexpError(
                 f"the ioHub server could not create the {where}: its messages above say why "
@@ -420,7 +422,8 @@ class IoHubGaze:
     def stop(self) -> None:
         self._halt.set()
         if self._thread is not None:
-            self._thread.join(2.0)
+            # a restart under way finishes first (then shuts its server down: see below)
+            self._thread.join(60.0 if self._server_gone is not None else 2.0)
             self._thread = None
         if self.io is not None and self._server_gone is None:
             try:
@@ -503,6 +506,7 @@ class IoHubGaze:
             "clock": "system_time_us = round(1e6 * ioHub time), PsychoPy's clock; "
                      f"device_time_us = round(1e6 * device_time), {fam.clock}",
             "server_pid": self.server_pid, "config": self.config.to_dict(),
+            "orphan_servers_stopped": getattr(self, "orphans_stopped", []),
             "display_px": list(getattr(self, "display_px", ())),
             "window_px": list(self.pixels.rect) if hasattr(self, "pixels") else None,
         }
@@ -638,6 +642,9 @@ class IoHubGaze:
                 error = str(exc)
                 self._shutdown_server()
                 continue
+            if self._halt.is_set():  # stopped meanwhile: no server may outlive the source
+                self._shutdown_server()
+                return
             self.restarted += 1
             self._server_gone = None
             self._proc_dead = False
@@ -713,6 +720,30 @@ class PointerCalibration:
         return None, None
 
 
+def stop_orphan_servers() -> list[int]:
+    """Kill ioHub servers whose experiment process is gone (a session killed with SIGKILL
+    leaves its server running, holding the tracker and ioHub's port); their pids. ioHub passes
+    the experiment's pid as the server's last argument."""
+    import psutil
+
+    out = []
+    for p in psutil.process_iter(["pid", "cmdline"]):
+        cmd = p.info.get("cmdline") or []
+        if len(cmd) < 5 or not str(cmd[1]).endswith("start_iohub_process.py"):
+            continue
+        try:
+            parent = int(cmd[-1])
+        except ValueError:
+            continue
+        if not psutil.pid_exists(parent):
+            try:
+                p.kill()
+                out.append(int(p.info["pid"]))
+            except psutil.Error:
+                pass
+    return out
+
+
 _xdisplay: Any = None
 
 
@@ -742,4 +773,4 @@ def wake_socket(sock: socket.socket, reason: str) -> None:
 
 __all__ = ["IoHubCalibration", "IoHubGaze", "PixelMap", "PointerCalibration", "RateMeter",
            "SampleLayout", "device_time_us", "eyes_of", "move_pointer", "sample_from_event",
-           "system_time_us", "wake_socket"]
+           "stop_orphan_servers", "system_time_us", "wake_socket"]
