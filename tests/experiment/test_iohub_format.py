@@ -391,3 +391,50 @@ def test_iohub_calibration_reads_runSetupProcedures_result() -> None:
     assert aborted.failed and "CALIBRATION_ABORTED" in aborted.reason
     none = IoHubCalibration(Gaze({"result": 202})).compute()  # no set-up through ioHub
     assert not none.failed and none.status == "not offered through ioHub"
+
+
+def test_the_protocol_names_the_iohub_configuration(tmp_path: Path) -> None:
+    """``tracker.iohub_config`` in the protocol, relative to its file; ``--tracker-config``
+    overrides it; neither: one line saying both ways."""
+    import yaml
+
+    from fovexp.experiment.protocol import load_protocol
+    from fovexp.experiment.session import Session, SessionOptions
+
+    from experiment_helpers import make_workspace
+
+    ws = make_workspace(tmp_path / "w")
+    path = ws / "protocols" / "calibration-fe.yaml"
+    data = yaml.safe_load(path.read_text())
+    data.setdefault("tracker", {})["iohub_config"] = "lab/eyelink.yaml"
+    path.write_text(yaml.safe_dump(data))
+    lp = load_protocol(path, results_root=ws / "results")
+
+    def session(**kw) -> Session:
+        return Session(lp, SessionOptions(participant="P01", results_root=ws / "results",
+                                          tracker="iohub", dry_run=True, **kw))
+
+    s = session()
+    assert s.iohub_config_path() == ws / "protocols" / "lab" / "eyelink.yaml"
+    s.release()
+    s = session(tracker_config=Path("other.yaml"))
+    assert s.iohub_config_path() == Path("other.yaml")
+    s.release()
+    plain = load_protocol(REPO_PROTOCOLS / "calibration-fe.yaml", results_root=ws / "results")
+    s = Session(plain, SessionOptions(participant="P02", results_root=ws / "results",
+                                      tracker="iohub", dry_run=True))
+    with pytest.raises(FovexpError, match="--tracker-config FILE .* or tracker.iohub_config"):
+        s.iohub_config_path()
+    s.release()
+
+
+REPO_PROTOCOLS = Path(__file__).resolve().parents[2] / "protocols"
+
+
+def test_tracker_config_only_with_iohub(tmp_path: Path) -> None:
+    from experiment_helpers import make_workspace, run_cli
+
+    ws = make_workspace(tmp_path / "c")
+    r = run_cli(["run", "calibration-fe", "--participant", "P01", "--dry-run",
+                 "--tracker-config", "x.yaml"], cwd=ws)
+    assert r.returncode == 2 and "--tracker-config is for --tracker iohub" in r.stderr
