@@ -95,7 +95,7 @@ def _pct(v: list[float], q: float) -> float:
 
 def run_measurements(opts: RigOptions) -> Measured:
     """The whole check (module docstring); returns the figures and verdicts."""
-    from fovexp.experiment.frameloop import TrialIO, TrialLoop, display_thread_first
+    from fovexp.experiment.frameloop import LateLatch, TrialIO, TrialLoop, display_thread_first
     from fovexp.experiment.gaze import BlankDecision, BlankingMonitor, FixationGeometry
     from fovexp.experiment.protocol import load_protocol
     from fovexp.experiment.render import TestRenderer
@@ -254,10 +254,11 @@ def run_measurements(opts: RigOptions) -> Measured:
 
         # a rig check has no participant: the halves are drawn whatever the gaze says
         monitor = NeverBlank(fixation, spec.fixation.radius_deg, spec.fixation.gaze_timeout_s)
+        latch = LateLatch(1.0 / nominal_hz)  # as a session: the gaze read late in each frame
         loop = TrialLoop(screen=screen, gaze=gaze, renderer=renderer, monitor=monitor, state=st,
                          params_for=lambda v: protocol.make_params(trial, v, seed),
                          parameter=adj.parameter, trial_index=0, attempt=0,
-                         participant=participant, timings=timings,
+                         participant=participant, timings=timings, latch=latch,
                          io=TrialIO(frame=rows.append, gaze=lambda i, a, got: keep(got),
                                     event=lambda kind, detail: None))
         loop.show_first()
@@ -325,7 +326,8 @@ def run_measurements(opts: RigOptions) -> Measured:
                             "seconds": round(refresh_s, 3), **refresh_stats},
                 "load": {"seconds": round(load_s, 3), "outcome": outcome,
                          "wheel_steps": adjuster.notches, "renders_shown": len(uploads),
-                         **load_stats, "display_thread": priority},
+                         **load_stats, "display_thread": priority,
+                         "late_latch": latch.info()},
                 "virtual": virtual,
             },
             "gpu": {"renderer": info, "auto": {k: auto.get(k) for k in ("backend", "fallback")},

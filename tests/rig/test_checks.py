@@ -47,7 +47,7 @@ def test_refresh_check_thresholds() -> None:
     (lambda v: C.handover_check(v, 120.0, "texture", False), 2.08, 2.09),
     (lambda v: C.rate_check(v, 600.0, False), 612.0, 612.1),
     (lambda v: C.loss_check(v, False), 0.02, 0.021),
-    (lambda v: C.latency_check(v, False), 60.0, 60.1),
+    (lambda v: C.latency_check(v, False), C.MAX_LATENCY_P95_MS, C.MAX_LATENCY_P95_MS + 0.1),
 ])
 def test_each_check_at_its_threshold(make, good, bad) -> None:
     """Pass at the threshold, fail just past it, with advice only when failed."""
@@ -100,7 +100,7 @@ def test_photodiode_pattern_is_a_maximal_length_sequence() -> None:
 
 def _report(passed: bool, dry_run: bool = False) -> dict:
     checks = [C.refresh_check(120.0, 120.0, 10.0, "lg", dry_run),
-              C.latency_check(20.0 if passed else 80.0, dry_run)]
+              C.latency_check(10.0 if passed else 80.0, dry_run)]
     return build_report(checks, {"display": {"window_size": [3840, 2160]}}, dry_run=dry_run,
                         command="fovexp rig check", versions={"fovexp": "x"},
                         created=dt.datetime(2026, 11, 25, 9, 0, tzinfo=dt.timezone.utc),
