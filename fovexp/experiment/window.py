@@ -294,9 +294,9 @@ class PsychoScreen:
 
     @staticmethod
     def _open_keyboard() -> tuple[Any, str]:
-        """PsychoPy's ``Keyboard`` with a backend that stamps the press: 'iohub' when an ioHub
-        server already runs (an ioHub gaze source; start it with
-        ``Keyboard=dict(use_keymap='psychopy')`` for PsychoPy's key names), else 'ptb'. Returns
+        """PsychoPy's ``Keyboard`` with a backend that stamps the press: 'ptb', else 'iohub'
+        when an ioHub server already runs (an ioHub gaze source, started with
+        ``Keyboard=dict(use_keymap='psychopy')`` for PsychoPy's key names). Returns
         (None, 'event') when neither is to be had (psychtoolbox not importable: libjack
         missing); PsychoPy picks its keyboard backend once per process."""
         import sys
@@ -304,10 +304,12 @@ class PsychoScreen:
         from psychopy.hardware import keyboard
 
         iohub = sys.modules.get("psychopy.iohub.client")
-        if iohub is not None and iohub.ioHubConnection.getActiveConnection() is not None:
-            want = "iohub"
-        elif keyboard.havePTB:
+        # 'ptb' first: ioHub's keyboard asks the ioHub server on every poll, so the display
+        # thread would wait on it (up to a request's timeout when the server is gone)
+        if keyboard.havePTB:
             want = "ptb"
+        elif iohub is not None and iohub.ioHubConnection.getActiveConnection() is not None:
+            want = "iohub"
         else:
             return None, "event"
         kb = keyboard.Keyboard(backend=want)
@@ -382,7 +384,10 @@ class PsychoScreen:
         self.last_upload_s = time.perf_counter() - t0
         self._wheel, self._wheel_carry = [], (0.0, False)
         if self._kb is not None:
-            self._kb.clearEvents()
+            try:
+                self._kb.clearEvents()
+            except RuntimeError:  # ioHub's keyboard without its server (gone; started again)
+                pass
 
     def set_test(self, right: Rendered | np.ndarray) -> None:
         """The test half from now on: a render (its 8-bit RGBA uploaded, or its texture drawn as
@@ -667,7 +672,10 @@ class PsychoScreen:
         if self._kb is None:
             out += [Key(name) for name in self._event.getKeys(keyList=KEYS)]
             return out
-        return out + self._pressed_keys()
+        try:
+            return out + self._pressed_keys()
+        except RuntimeError:  # ioHub's keyboard without its server (gone; started again)
+            return out + [Key(name) for name in self._event.getKeys(keyList=KEYS)]
 
     def _pressed_keys(self) -> list[Key]:
         """The keys that went down since the last call, with their press times: those still

@@ -18,6 +18,7 @@ from pathlib import Path
 import pytest
 
 from fovexp import FovexpError, load_display
+from fovexp.results.blanking import BlankingRule
 from fovexp.results.frames import final_value_violations, read_frame_log, unblanked_violations
 
 from experiment_helpers import make_workspace, popen_cli, run_cli, xvfb_display  # noqa: F401
@@ -154,6 +155,33 @@ def test_killed_server_is_a_lost_tracker_then_started_again(mousegaze) -> None:
 
 
 @pytest.mark.slow
+def test_the_trackers_own_status_is_a_lost_tracker(mousegaze) -> None:
+    """The tracker says it is not connected (MouseGaze's connection to ioHub's mouse cut, as a
+    tracker's own status would say): lost, with the reason; connected again: back."""
+    g = mousegaze()
+    g.start()
+    wait_for(g, lambda s: True)
+    with g._lock:
+        g.tracker.setConnectionState(False)
+    events: list = []
+    t_end = time.monotonic() + 5
+    while g.connected and time.monotonic() < t_end:
+        events += g.poll_events()
+        time.sleep(0.005)
+    assert not g.connected
+    lost = [e for e in events if e.kind == "connection_lost"]
+    assert lost and lost[0].detail["reason"] == "the tracker reports it is not connected"
+    with g._lock:
+        g.tracker.setConnectionState(True)
+    t_end = time.monotonic() + 5
+    while not g.connected and time.monotonic() < t_end:
+        events += g.poll_events()
+        g.poll()
+        time.sleep(0.005)
+    assert g.connected and events[-1].kind in ("connection_restored", "stream_resumed")
+
+
+@pytest.mark.slow
 def test_killed_server_that_does_not_come_back_is_one_line(mousegaze) -> None:
     g = mousegaze(restarts=0)
     g.start()
@@ -240,7 +268,7 @@ def _check_logs(folder: Path) -> tuple[dict, object, list]:
     sid = info["session"]
     frames = read_frame_log(folder / f"frames-{sid}.csv")
     rows, _ = read_trials(folder / "trials.csv")
-    bad = unblanked_violations(frames, 1.25, 0.05, 2 / info["display_check"]["refresh_hz"])
+    bad = unblanked_violations(frames, BlankingRule())
     assert bad.empty, bad.to_string()
     wrong = final_value_violations(frames, rows)
     assert wrong.empty, wrong.to_string()

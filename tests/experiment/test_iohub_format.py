@@ -146,6 +146,10 @@ def test_iohub_config_file_form_and_what_fovexp_replaces() -> None:
     tracker = devs[-1]["eyetracker.hw.tobii.EyeTracker"]
     assert tracker["runtime_settings"] == {"sampling_rate": 300, "track_eyes": "BINOCULAR"}
     assert len([d for d in devs if "Display" in d]) == 1
+    # the window reads keys through ioHub's keyboard while a server runs: PsychoPy's names
+    assert {"Keyboard": {"use_keymap": "psychopy"}} in devs
+    builder = hub_config(parse_iohub_config(BUILDER, Path("b.yaml")), LG, 0)
+    assert {"Keyboard": {"use_keymap": "psychopy"}} in builder["monitor_devices"]
 
 
 @pytest.mark.parametrize("text, problem", [

@@ -241,13 +241,18 @@ def hub_config(config: IoHubConfig, display: Any, screen: int,
                overrides: dict[str, Any] | None = None) -> dict[str, Any]:
     """The ``iohub_config.yaml`` the server starts with (``launchHubServer(iohub_config_name=
     ...)``): fovexp's ``Display``, the file's other devices, and its tracker (with
-    ``overrides`` merged into the tracker's settings, one level deep)."""
+    ``overrides`` merged into the tracker's settings, one level deep); its ``Keyboard`` uses
+    PsychoPy's key names unless the file says otherwise."""
     tracker = dict(config.tracker)
     for k, v in (overrides or {}).items():
         tracker[k] = {**tracker.get(k, {}), **v} if isinstance(v, dict) else v
     tracker.setdefault("name", "tracker")
+    others = {k: dict(v or {}) for k, v in config.devices.items()}
+    # PsychoPy's key names ('space', 'return'): the window reads keys through ioHub's keyboard
+    # while a server runs
+    others.setdefault("Keyboard", {}).setdefault("use_keymap", "psychopy")
     devices = [{"Display": display_config(display, screen)}]
-    devices += [{k: v or {}} for k, v in config.devices.items()]
+    devices += [{k: v} for k, v in others.items()]
     devices.append({config.device_class: tracker})
     return {"monitor_devices": devices}
 

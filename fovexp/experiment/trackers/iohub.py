@@ -250,7 +250,11 @@ class IoHubGaze:
         self._restarts = int(restarts)
         self.buffer = SampleBuffer(maxlen=int((self.rate_hz or 2000.0) * GAZE_BUFFER_S))
         self._notes = SampleBuffer(maxlen=1000)
-        self._lock = threading.Lock()  # the server's socket: one request at a time
+        #: the connection's socket: one request and its reply at a time, whichever thread
+        #: asks (PsychoPy's keyboard on the display thread shares it: PsychoScreen takes
+        #: ioHub's keyboard when a server runs); re-entrant for a caller's own sections
+        self._lock = threading.RLock()
+        self._reader_send: Any = None
         self._halt = threading.Event()
         self._thread: threading.Thread | None = None
         self._recording = False
@@ -298,6 +302,13 @@ class IoHubGaze:
             raise FovexpError(f"the ioHub server did not start for the {where}: "
                               f"{type(exc).__name__}: {exc}") from None
         self.io, self._proc = io, io._server_process
+        send = io._sendToHubServer
+
+        def one_at_a_time(tx: Any) -> Any:
+            with self._lock:
+                return send(tx)
+
+        io._sendToHubServer = one_at_a_time  # device views look it up at every call
         tracker: Any = getattr(io.devices, self.config.name, None)
         methods = getattr(tracker, "_methods", None) if tracker is not None else None
         if tracker is None or not isinstance(methods, (list, tuple)) \
@@ -309,6 +320,7 @@ class IoHubGaze:
                 "vendor library)")
         self.tracker = tracker
         io.udp_client.sock.settimeout(self.rpc_timeout_s)
+        self._reader_send = _own_socket_sender(io, self.rpc_timeout_s)
         try:
             cfg = tracker.getConfiguration() or {}
             res = io.devices.display.getPixelResolution()
@@ -365,6 +377,9 @@ class IoHubGaze:
         """Stop the server (asking it first; killed when it does not stop within 5 s)."""
         io, self.io = self.io, None
         proc = self._proc
+        reader, self._reader_send = self._reader_send, None
+        if reader is not None:
+            reader.close()
         if io is not None:
             t = threading.Thread(target=io.quit, daemon=True, name="fovexp-iohub-quit")
             t.start()
@@ -566,20 +581,17 @@ class IoHubGaze:
             if code is not None:
                 self._on_server_exit(int(code))
                 continue
-            if not self._lock.acquire(timeout=0.05):
-                continue  # the calibration has the socket
+            rpc, device = self._reader_send, self.tracker.device_class
             status = None
-            try:
-                evs = self.tracker.getEvents(asType="list")
+            try:  # on the reader's own socket: no other thread's reply can be taken for its
+                evs = rpc(device, "getEvents", asType="list")
                 if evs is not None and time.monotonic() >= next_status:
                     next_status = time.monotonic() + STATUS_INTERVAL_S
-                    status = self.tracker.isConnected()
+                    status = rpc(device, "isConnected")
             except Exception:  # noqa: BLE001 (a reply that did not come; the server is checked)
                 evs = None
-            finally:
-                self._lock.release()
             if evs is None:
-                self._drain_socket()
+                rpc.drain()
                 continue
             for ev in evs:
                 self.buffer.append(ev)
@@ -591,24 +603,6 @@ class IoHubGaze:
             self._halt.wait(self.poll_interval_s)
 
     _tracker_ok = True
-
-    def _drain_socket(self) -> None:
-        """A late reply must not be taken for the next request's."""
-        io = self.io
-        if io is None:
-            return
-        sock = io.udp_client.sock
-        try:
-            sock.setblocking(False)
-            while True:
-                sock.recvfrom(65536)
-        except (BlockingIOError, OSError):
-            pass
-        finally:
-            try:
-                sock.settimeout(self.rpc_timeout_s)
-            except OSError:
-                pass
 
     def _on_server_exit(self, code: int) -> None:
         """The server is gone: the tracker is lost (at once); start it again, or end the
@@ -654,6 +648,56 @@ class IoHubGaze:
         self._fatal = (f"{why} and did not start again{': ' + error if error else ''}; "
                        "everything logged so far is saved")
         self._halt.set()
+
+
+class _OwnSocketRPC:
+    """Device calls to the server on a socket of the reader thread's own (ioHub's client has
+    one socket per connection, and its replies carry no request id)."""
+
+    def __init__(self, io: Any, timeout_s: float) -> None:
+        from psychopy.iohub.net import UDPClientConnection
+
+        self.io = io
+        self.timeout_s = timeout_s
+        port = (io._iohub_server_config or {}).get("udp_port", 9000)
+        self.conn = UDPClientConnection(remote_port=port, timeout=timeout_s)
+
+    def __call__(self, device: str, method: str, *args: Any, **kwargs: Any) -> Any:
+        from psychopy.iohub.errors import ioHubError
+
+        self.conn.sendTo(("EXP_DEVICE", "DEV_RPC", device, method, args, kwargs))
+        got = self.conn.receive()  # None when no reply came in time
+        if not got:
+            return None
+        reply = got[0]
+        if type(self.io)._isErrorReply(reply):
+            raise ioHubError(reply)
+        if isinstance(reply, (list, tuple)):
+            reply = self.io._convertList(reply)
+        r = reply[1:]
+        return r[0] if len(r) == 1 else r
+
+    def drain(self) -> None:
+        """A late reply must not be taken for the next request's."""
+        sock = self.conn.sock
+        try:
+            sock.setblocking(False)
+            while True:
+                sock.recvfrom(65536)
+        except OSError:  # BlockingIOError: nothing left
+            pass
+        finally:
+            try:
+                sock.settimeout(self.timeout_s)
+            except OSError:
+                pass
+
+    def close(self) -> None:
+        self.conn.close()
+
+
+def _own_socket_sender(io: Any, timeout_s: float) -> _OwnSocketRPC:
+    return _OwnSocketRPC(io, timeout_s)
 
 
 class IoHubCalibration:
