@@ -174,9 +174,11 @@ def run_measurements(opts: RigOptions) -> Measured:
         flips: list[float] = []
         clock_x: list[float] = []
         clock_y: list[int] = []
-        t_end = time.monotonic() + opts.duration_s
+        t_cap = time.monotonic() + 2 * opts.duration_s + 5.0  # a display that never flips
         k = 0
-        while time.monotonic() < t_end:
+        # until the flips span the duration (the rate is judged over at least 10 s of them)
+        while (len(flips) < 2 or flips[-1] - flips[0] < opts.duration_s) \
+                and time.monotonic() < t_cap:
             if opts.photodiode:
                 screen.photodiode = pattern[k % 31]
             t = _flip_s(screen.draw(blank=True))
