@@ -612,6 +612,9 @@ class IoHubGaze:
         self._server_gone = why
         self._note("connection_lost", reason=why)
         self._proc = None
+        reader, self._reader_send = self._reader_send, None
+        if reader is not None:
+            reader.close()
         if self._calibrating and self.io is not None:  # its request would wait for ever
             try:
                 wake_socket(self.io.udp_client.sock, why)
