@@ -1,5 +1,7 @@
 """``fovexp`` command line: ``enhance`` and ``compile`` (this module), ``run`` (experiment
-runner), ``analyze`` (analysis) and ``bench`` (run time against error, :mod:`fovexp.bench`).
+runner), ``init`` (a study folder, :mod:`fovexp.experiment.study`), ``analyze`` (analysis),
+``docs`` (the documentation site, :mod:`fovexp.docsite`) and ``bench`` (run time against
+error, :mod:`fovexp.bench`).
 Bad input prints one ``fovexp: error: ...`` line and exits with 2.
 
 A command's module, and what it imports, is loaded only when that command runs (or its
@@ -33,6 +35,10 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
                 "generate scenes, add a lab's frames, check a protocol's images"),
     "analyze": ("fovexp.analysis.cli", "add_analyze_parser",
                 "turn trial logs into the paper's results (Table 2, validation tests)"),
+    "init": ("fovexp.experiment.study", "add_init_parser",
+             "make a study folder: copies of the shipped protocols, stimuli/, results/"),
+    "docs": ("fovexp.docsite", "add_docs_parser",
+             "the documentation: print where the built site is, or open it"),
     "compile": ("fovexp.cli", "add_compile_parser",
                 "compile the Numba kernels ahead of the first run (once after installing)"),
     "bench": ("fovexp.bench", "add_bench_parser",
