@@ -416,7 +416,8 @@ def test_the_protocol_names_the_iohub_configuration(tmp_path: Path) -> None:
 
     def session(**kw) -> Session:
         return Session(lp, SessionOptions(participant="P01", results_root=ws / "results",
-                                          tracker="iohub", dry_run=True, **kw))
+                                          tracker="iohub", dry_run=True,
+                                          window_size=(480, 270), **kw))
 
     s = session()
     assert s.iohub_config_path() == ws / "protocols" / "lab" / "eyelink.yaml"
@@ -426,7 +427,7 @@ def test_the_protocol_names_the_iohub_configuration(tmp_path: Path) -> None:
     s.release()
     plain = load_protocol(REPO_PROTOCOLS / "calibration-fe.yaml", results_root=ws / "results")
     s = Session(plain, SessionOptions(participant="P02", results_root=ws / "results",
-                                      tracker="iohub", dry_run=True))
+                                      tracker="iohub", dry_run=True, window_size=(480, 270)))
     with pytest.raises(FovexpError, match="--tracker-config FILE .* or tracker.iohub_config"):
         s.iohub_config_path()
     s.release()
