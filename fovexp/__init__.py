@@ -29,6 +29,7 @@ _PUBLIC: dict[str, str] = {
     "find_protocol": "resources", "shipped_protocols": "resources",
     "shipped_stimuli": "resources",
     "iter_frames": "sequence", "ssim": "sequence",
+    "profile_stages": "gpu.profiling",
 }
 
 if TYPE_CHECKING:  # the same names for type checkers (tests/test_layers.py holds the
@@ -38,6 +39,7 @@ if TYPE_CHECKING:  # the same names for type checkers (tests/test_layers.py hold
     from .config import parse_yaml, read_yaml
     from .errors import FovexpError, did_you_mean, validation_error
     from .geometry import Display, ViewingGeometry, load_display
+    from .gpu.profiling import profile_stages
     from .io import read_image, read_samples, write_bytes_atomic, write_image
     from .params import (
         METHODS,
@@ -59,7 +61,8 @@ __all__ = [
     "EngineOptions", "EnhanceParams", "EnhanceResult", "Enhancer", "FovexpError",
     "ParameterTable", "ViewingGeometry", "check_parameter", "did_you_mean", "enhance",
     "find_protocol", "load_display", "make_enhancer", "make_options", "make_params",
-    "parse_yaml", "read_image", "read_samples", "read_yaml", "shipped_protocols",
+    "parse_yaml", "profile_stages", "read_image", "read_samples", "read_yaml",
+    "shipped_protocols",
     "shipped_stimuli", "validation_error", "write_bytes_atomic", "write_image", "__version__",
     "iter_frames", "ssim", "t_high_cpd", "t_low_cpd",
 ]

@@ -47,6 +47,8 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
                  "the paper's analyses of outputs: spectra, FovVDP, temporal, JPEG (section 6)"),
     "stereo": ("fovexp.evaluation.cli", "add_stereo_parser",
                "enhance a stereo pair: noise for one eye, warped to the other (section 6.4)"),
+    "rig": ("fovexp.rig.cli", "add_rig_parser",
+            "measure the rig before the first participant: display, GPU, tracker"),
 }
 
 

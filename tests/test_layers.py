@@ -146,7 +146,7 @@ def test_the_engine_does_not_import_the_runner_or_the_analysis(graph):
     engine = [m for m in graph if not m.startswith(("fovexp.experiment", "fovexp.analysis",
                                                     "fovexp.results", "fovexp.cli",
                                                     "fovexp.__main__", "fovexp.bench",
-                                                    "fovexp.evaluation",
+                                                    "fovexp.evaluation", "fovexp.rig",
                                                     # compiles every kernel, the evaluation's too
                                                     "fovexp.warmup"))]
     bad = [(a, b) for a in engine for b in graph[a]
@@ -172,6 +172,18 @@ def test_the_evaluation_uses_the_public_api(graph):
              if b.startswith("fovexp.evaluation")
              and not a.startswith(("fovexp.evaluation", "fovexp.warmup"))]
     assert users == []
+
+
+def test_the_rig_check_sits_on_the_runner(graph):
+    """``fovexp.rig`` measures with the session's own parts (``fovexp.experiment``), the logs
+    layer and the enhancer's public API; nothing below it imports it (a session reads its
+    reports through ``fovexp.results``)."""
+    allowed = ("fovexp.results", "fovexp.experiment", "fovexp.rig")
+    bad = [(a, b) for a, b in _edges(graph, "fovexp.rig", "fovexp")
+           if not (b == "fovexp" or any(b == p or b.startswith(p + ".") for p in allowed))]
+    assert bad == []
+    for part in ("fovexp.experiment", "fovexp.results", "fovexp.analysis"):
+        assert _edges(graph, part, "fovexp.rig") == []
 
 
 def test_every_subpackage_is_in_the_wheel():

@@ -36,7 +36,12 @@ def add_run_parser(subparsers: Any) -> argparse.ArgumentParser:
                    "validation-12)")
     p.add_argument("--participant", required=True, help="participant ID ([A-Za-z0-9_-]{1,32})")
     p.add_argument("--tracker", choices=TRACKERS, default=None,
-                   help="gaze source (default: tobii; simulated with --dry-run)")
+                   help="gaze source (default: tobii; simulated with --dry-run); iohub: any "
+                        "eye tracker PsychoPy's ioHub reaches (EyeLink, Tobii, Gazepoint, Pupil "
+                        "Labs, EyeLogic, MouseGaze), configured by --tracker-config")
+    p.add_argument("--tracker-config", type=Path, default=None, metavar="FILE",
+                   help="--tracker iohub: the ioHub configuration, the YAML PsychoPy Builder "
+                        "or ioHub uses (default: the protocol's tracker.iohub_config)")
     p.add_argument("--tracker-address", default=None,
                    help="Tobii tracker address or serial number (default: the first found)")
     p.add_argument("--dry-run", action="store_true",
@@ -153,6 +158,8 @@ def run_command(args: argparse.Namespace) -> int:
         if args.resume and args.new_session:
             raise FovexpError("--resume and --new-session exclude each other")
         tracker = args.tracker or (SIMULATED_TRACKER if args.dry_run else "tobii")
+        if args.tracker_config is not None and tracker != "iohub":
+            raise FovexpError("--tracker-config is for --tracker iohub")
         if args.screen < 0:
             raise FovexpError("--screen must be 0 or more")
         from .operator import parse_form
@@ -161,7 +168,8 @@ def run_command(args: argparse.Namespace) -> int:
         truth = SimTruth.load(args.sim_truth) if args.sim_truth else SimTruth()
         # dependencies come from the same results root; a participant's never from dry runs
         protocol = load_protocol(find_protocol(args.protocol), results_root=args.results,
-                                 real_only=tracker != SIMULATED_TRACKER, stimuli=args.stimuli,
+                                 real_only=not args.dry_run and tracker != SIMULATED_TRACKER,
+                                 stimuli=args.stimuli,
                                  include_pilots=args.include_pilots)
         # Every image's sha256 and size, for the frames this run shows, before any window.
         frame_size = args.window or (DRY_RUN_SIZE if args.dry_run else protocol.native_size)
@@ -184,6 +192,7 @@ def run_command(args: argparse.Namespace) -> int:
             window_size=args.window or (DRY_RUN_SIZE if args.dry_run else None),
             fullscreen=not (args.windowed or args.dry_run),
             skip_display_check=args.skip_display_check, tracker_address=args.tracker_address,
+            tracker_config=args.tracker_config,
             backend=args.backend, screen=args.screen,
             sim_truth=truth, sim_speed=args.sim_speed, sim_noise_scale=args.sim_noise_scale,
             sim_seed=args.sim_seed,

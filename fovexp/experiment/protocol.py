@@ -158,6 +158,9 @@ class TrackerSpec(_Strict):
     drift_check_every: int = Field(default=0, ge=0)
     #: a drift check fails above this offset at the centre (deg); default the central limit
     max_drift_deg: float | None = Field(default=None, gt=0, le=10)
+    #: ``--tracker iohub``'s configuration (the YAML PsychoPy Builder or ioHub uses), relative
+    #: to this file; ``--tracker-config`` overrides it
+    iohub_config: str | None = None
 
 
 class RenderSpec(_Strict):

@@ -38,6 +38,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from fovexp import FovexpError
+from fovexp.results.format import SIMULATED_TRACKER
+from fovexp.results.rigcheck import session_rig_record
 
 from .calibration import QUIT_KEYS, QUIT_PROMPT, QUIT_QUESTION, CalibrationTiming
 from .frameloop import LateLatch, TrialIO, TrialLoop, display_thread_first
@@ -112,6 +114,9 @@ class SessionOptions:
     fullscreen: bool = True
     skip_display_check: bool = False
     tracker_address: str | None = None
+    #: ``--tracker iohub``: the ioHub configuration (default: the protocol's
+    #: ``tracker.iohub_config``)
+    tracker_config: Path | None = None
     #: enhancer backend: auto (a hardware GPU if there is one), cpu or gpu
     backend: str = "auto"
     #: the monitor of a multi-monitor rig (PsychoPy's ``screen``)
@@ -147,9 +152,10 @@ class Session:
         self.protocol = protocol
         self.opts = opts
         self.participant = check_participant(opts.participant)
-        if opts.dry_run and opts.tracker != "simulated":
+        if opts.dry_run and opts.tracker not in ("simulated", "iohub"):
             raise FovexpError("--dry-run uses simulated gaze: leave out --tracker or use "
-                              "--tracker simulated")
+                              "--tracker simulated (or --tracker iohub, to test an ioHub "
+                              "configuration)")
         self.display = load_display(protocol.display_name)
         # Every image checked for the frames this session shows, before anything is written:
         # a real session refuses any size but the window's (the display's own, unless
@@ -256,7 +262,26 @@ class Session:
                                  params=params)
         if kind == "mouse":
             return MouseGaze()
-        raise FovexpError(f"--tracker {kind!r}: choose tobii, simulated or mouse")
+        if kind == "iohub":
+            from .trackers.families import load_iohub_config
+            from .trackers.iohub import IoHubGaze
+
+            # a dry run's MouseGaze: the pointer goes to the calibration targets by itself
+            return IoHubGaze(load_iohub_config(self.iohub_config_path()), self.display,
+                             self.opts.screen, pointer=self.opts.dry_run)
+        raise FovexpError(f"--tracker {kind!r}: choose tobii, simulated, mouse or iohub")
+
+    def iohub_config_path(self) -> Path:
+        """``--tracker-config``, else the protocol's ``tracker.iohub_config`` (relative to the
+        protocol file)."""
+        if self.opts.tracker_config is not None:
+            return Path(self.opts.tracker_config)
+        name = self.protocol.spec.tracker.iohub_config
+        if name is None:
+            raise FovexpError("--tracker iohub needs an ioHub configuration: --tracker-config "
+                              "FILE (the YAML PsychoPy Builder or ioHub uses), or "
+                              "tracker.iohub_config in the protocol")
+        return Path(self.protocol.path).parent / name
 
     def _gaze_row(self, item: GazeItem) -> tuple[Any, ...]:
         """A gaze log row (made on the log's flusher thread)."""
@@ -296,6 +321,9 @@ class Session:
             raise
         if isinstance(self.gaze, MouseGaze):
             self.gaze.position = self.screen.mouse_position
+        attach = getattr(self.gaze, "attach", None)  # a source that needs the window's place
+        if attach is not None:
+            attach(self.screen)
         self._start_info()
         self.file.start_writer()
         self.file.update(display_check={**check, "screen": self.opts.screen},
@@ -316,6 +344,7 @@ class Session:
             self.tracker = self._make_tracker_setup()
             self._display_setup()
             self._check_keyboard()
+            self._check_rig()
             self._check_render_budget()
             self.tracker.setup()
             self._instructions()
@@ -411,7 +440,10 @@ class Session:
         done = {int(r["trial_index"]) for r in self.trial_log.rows
                 if r["session"] == self.session_id}
         complete = state == "completed" and len(done) == len(self.trials)
-        extra = {"failure": failure} if failure is not None else {}
+        extra: dict[str, Any] = {"failure": failure} if failure is not None else {}
+        measured = getattr(self.gaze, "measured", None)  # the sampling rate over the run
+        if measured is not None and "tracker" in self.info:
+            extra["tracker"] = {**self.info["tracker"], "measured": measured()}
         self.file.stop_writer()  # the events it had still to write are in the final write
         self.file.update(state=state if not (state == "completed" and not complete)
                          else "incomplete", completed=complete, ended=now_iso(),
@@ -427,6 +459,16 @@ class Session:
             self._message(checklist_text(), ["c"], None)
             entry = {"confirmed": True, "time": now_iso(), "items": list(DISPLAY_CHECKLIST)}
         self.file.set_in_run("display_setup", entry)
+
+    def _check_rig(self) -> None:
+        """The newest rig check under the results root (``fovexp rig check``): its name and
+        sha256 in this run's entry (``runs[].rig_check``); a warning for the operator when
+        there is none from today, it failed, or it was only a dry run."""
+        rec, warning = session_rig_record(self.opts.results_root, now_iso()[:10],
+                                          self.opts.dry_run)
+        self.file.set_in_run("rig_check", rec)
+        if warning is not None and not self.opts.dry_run:
+            self._operator_note(warning, "rig_check_warning", warning=warning)
 
     def _check_keyboard(self) -> None:
         """Record the window's keyboard (its backend, and whether keys carry the time they went
@@ -663,7 +705,8 @@ class Session:
             log.flush(sync=True)
         self.trial_log.append(trial_row(self.protocol, trial, st, participant=self.participant,
                                         session_id=self.session_id, seed=self.seed,
-                                        tracker=self.gaze.name))
+                                        tracker=SIMULATED_TRACKER if self.opts.dry_run
+                                        else self.gaze.name))
         self.done.add(trial.index)
         return "done"
 

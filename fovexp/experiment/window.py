@@ -281,15 +281,22 @@ class PsychoScreen:
         self._shared: SharedGLContext | None = None
         #: seconds the last :meth:`set_test` / :meth:`set_reference` spent uploading
         self.last_upload_s = 0.0
+        #: the photodiode patch in the bottom-left corner (``fovexp rig check --photodiode``):
+        #: None not drawn, True white, False black (on every frame until changed)
+        self.photodiode: bool | None = None
+        side = max(16, h // 20)
+        self._patch = visual.Rect(self.win, width=side, height=side, units="pix",
+                                  pos=(-w / 2 + side / 2, -h / 2 + side / 2), lineColor=None,
+                                  fillColor=(1, 1, 1))
         #: keep a copy of every frame shown in ``last_frame`` (tests; slow)
         self.capture = False
         self.last_frame: np.ndarray | None = None
 
     @staticmethod
     def _open_keyboard() -> tuple[Any, str]:
-        """PsychoPy's ``Keyboard`` with a backend that stamps the press: 'iohub' when an ioHub
-        server already runs (an ioHub gaze source; start it with
-        ``Keyboard=dict(use_keymap='psychopy')`` for PsychoPy's key names), else 'ptb'. Returns
+        """PsychoPy's ``Keyboard`` with a backend that stamps the press: 'ptb', else 'iohub'
+        when an ioHub server already runs (an ioHub gaze source, started with
+        ``Keyboard=dict(use_keymap='psychopy')`` for PsychoPy's key names). Returns
         (None, 'event') when neither is to be had (psychtoolbox not importable: libjack
         missing); PsychoPy picks its keyboard backend once per process."""
         import sys
@@ -297,10 +304,12 @@ class PsychoScreen:
         from psychopy.hardware import keyboard
 
         iohub = sys.modules.get("psychopy.iohub.client")
-        if iohub is not None and iohub.ioHubConnection.getActiveConnection() is not None:
-            want = "iohub"
-        elif keyboard.havePTB:
+        # 'ptb' first: ioHub's keyboard asks the ioHub server on every poll, so the display
+        # thread would wait on it (up to a request's timeout when the server is gone)
+        if keyboard.havePTB:
             want = "ptb"
+        elif iohub is not None and iohub.ioHubConnection.getActiveConnection() is not None:
+            want = "iohub"
         else:
             return None, "event"
         kb = keyboard.Keyboard(backend=want)
@@ -375,7 +384,10 @@ class PsychoScreen:
         self.last_upload_s = time.perf_counter() - t0
         self._wheel, self._wheel_carry = [], (0.0, False)
         if self._kb is not None:
-            self._kb.clearEvents()
+            try:
+                self._kb.clearEvents()
+            except RuntimeError:  # ioHub's keyboard without its server (gone; started again)
+                pass
 
     def set_test(self, right: Rendered | np.ndarray) -> None:
         """The test half from now on: a render (its 8-bit RGBA uploaded, or its texture drawn as
@@ -408,6 +420,9 @@ class PsychoScreen:
             self.right.draw()
         for c in self.cross:
             c.draw()
+        if self.photodiode is not None:
+            self._patch.fillColor = (1, 1, 1) if self.photodiode else (-1, -1, -1)
+            self._patch.draw()
         self._gl.glFinish()
 
     def flip(self) -> FlipTimes:
@@ -657,7 +672,10 @@ class PsychoScreen:
         if self._kb is None:
             out += [Key(name) for name in self._event.getKeys(keyList=KEYS)]
             return out
-        return out + self._pressed_keys()
+        try:
+            return out + self._pressed_keys()
+        except RuntimeError:  # ioHub's keyboard without its server (gone; started again)
+            return out + [Key(name) for name in self._event.getKeys(keyList=KEYS)]
 
     def _pressed_keys(self) -> list[Key]:
         """The keys that went down since the last call, with their press times: those still
@@ -683,6 +701,15 @@ class PsychoScreen:
         if not (0 <= nx <= 1 and 0 <= ny <= 1):
             return None
         return nx, ny
+
+    def window_rect(self) -> tuple[int, int, int, int]:
+        """The window's place on its screen: left, top, width, height (px); a full-screen
+        window's is the whole screen (a source that reports positions on the screen, ioHub's,
+        normalises them over it)."""
+        if getattr(self.win, "_isFullScr", False):
+            return 0, 0, self.size[0], self.size[1]
+        x, y = self.win.winHandle.get_location()
+        return int(x), int(y), self.size[0], self.size[1]
 
     def close(self) -> None:
         """Close the window (call after the render thread let go of :meth:`gl_share`)."""

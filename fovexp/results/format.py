@@ -42,8 +42,9 @@ REQUIRED_VALUES: tuple[str, ...] = (
     "image", "blur_rate", "method", "adjusted_parameter", "final_value", "timestamp",
 )
 ADJUSTABLE: tuple[str, ...] = ("f_e", "s_k", "s_f", "blur_rate")
-#: Gaze sources (the ``tracker`` column); the simulated one marks dry runs, never a participant.
-TRACKERS: tuple[str, ...] = ("tobii", "simulated", "mouse")
+#: Gaze sources (the ``tracker`` column); the simulated one marks dry runs, never a participant
+#: (a dry run through ioHub too). ``iohub``: any ioHub eye tracker (its MouseGaze is ``mouse``).
+TRACKERS: tuple[str, ...] = ("tobii", "simulated", "mouse", "iohub")
 SIMULATED_TRACKER = "simulated"
 #: Mouse gaze: a person, but a pilot (no eye tracker): the analysis and the calibration chain
 #: leave pilot sessions out unless asked (``--include-pilots``).
