@@ -1,6 +1,7 @@
 """``fovexp`` command line: ``enhance`` and ``compile`` (this module), ``run`` (experiment
-runner), ``analyze`` (analysis) and ``bench`` (run time against error, :mod:`fovexp.bench`).
-Bad input prints one ``fovexp: error: ...`` line and exits with 2.
+runner), ``analyze`` (analysis), ``monitor`` (the live view of running sessions) and ``bench``
+(run time against error, :mod:`fovexp.bench`). Bad input prints one ``fovexp: error: ...``
+line and exits with 2.
 
 A command's module, and what it imports, is loaded only when that command runs (or its
 ``--help`` is asked for): ``fovexp enhance`` loads neither the runner nor the analysis (nor
@@ -33,6 +34,8 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
                 "generate scenes, add a lab's frames, check a protocol's images"),
     "analyze": ("fovexp.analysis.cli", "add_analyze_parser",
                 "turn trial logs into the paper's results (Table 2, validation tests)"),
+    "monitor": ("fovexp.monitor.cli", "add_monitor_parser",
+                "watch running sessions in a browser (read-only)"),
     "compile": ("fovexp.cli", "add_compile_parser",
                 "compile the Numba kernels ahead of the first run (once after installing)"),
     "bench": ("fovexp.bench", "add_bench_parser",
