@@ -46,3 +46,16 @@ def test_no_tobii_sdk_names_the_tracker_extra(monkeypatch):
     _without(monkeypatch, "tobii_research")
     with pytest.raises(FovexpError, match=r"pip install 'fovexp\[tracker\]'"):
         import_tobii()
+
+
+def test_no_web_server_names_the_monitor_extra(monkeypatch):
+    """``fovexp monitor`` and ``fovexp run --monitor`` without starlette or uvicorn."""
+    from fovexp.monitor.cli import require_server
+
+    for name in ("starlette", "uvicorn"):
+        with monkeypatch.context() as m:
+            _without(m, name)
+            with pytest.raises(FovexpError) as exc:
+                require_server()
+            msg = str(exc.value)
+            assert "pip install 'fovexp[monitor]'" in msg and name in msg and "\n" not in msg

@@ -5,7 +5,6 @@ it beside a session (:func:`start_beside`)."""
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import os
 import secrets
 import socket
@@ -27,9 +26,11 @@ MISSING_EXTRA = ("fovexp monitor needs starlette and uvicorn: pip install 'fovex
 
 def require_server() -> None:
     """Raise one line naming the ``monitor`` extra when its packages are missing."""
-    missing = [m for m in ("starlette", "uvicorn") if importlib.util.find_spec(m) is None]
-    if missing:
-        raise FovexpError(f"{MISSING_EXTRA} ({', '.join(missing)} not installed)")
+    try:
+        import starlette  # noqa: F401
+        import uvicorn  # noqa: F401
+    except ImportError as exc:
+        raise FovexpError(f"{MISSING_EXTRA} ({exc})") from None
 
 
 def _configure(p: argparse.ArgumentParser) -> argparse.ArgumentParser:

@@ -280,13 +280,18 @@ class ResultsView:
         return True
 
     def _status(self, ref: SessionRef, live: Mapping[str, Any] | None,
-                info: Mapping[str, Any] | None) -> tuple[str, str | None]:
+                info: Mapping[str, Any] | None,
+                problem: str | None = None) -> tuple[str, str | None]:
         """``running``, ``stopped`` (a run that stopped without saying so: killed, crashed) or
         ``finished``; and why it is not running, when it says."""
         file_state = _str(info.get("state")) if info else None
+        if info and info.get("completed") is True:
+            file_state = "completed"
         if live is None:
             if file_state in FINAL_STATES:
                 return "finished", None
+            if problem not in (None, "no status file"):
+                return "stopped", f"its live status file cannot be read ({problem})"
             return "stopped", ("no live status file: started by a fovexp without one, or it "
                                "stopped before its first write")
         state = _str(live.get("state"))
@@ -322,7 +327,7 @@ class ResultsView:
         live = lr.data
         if lr.problem is not None and lr.problem != "no status file":
             skipped.append(f"live-{ref.session}.json: {lr.problem}")
-        status, why = self._status(ref, live, info)
+        status, why = self._status(ref, live, info, lr.problem)
         live = live or {}
         dry = bool(live.get("dry_run")) if "dry_run" in live else bool(
             info and any(r.get("dry_run") for r in info.get("runs", []) if isinstance(r, Mapping)))
@@ -440,7 +445,7 @@ class ResultsView:
             info, _ = self._session_file(ref)
             lr = self._live(ref)
             live = lr.data or {}
-            status, why = self._status(ref, lr.data, info)
+            status, why = self._status(ref, lr.data, info, lr.problem)
             trial = None
             if isinstance(live.get("trial"), Mapping):
                 trial = self._attempt(live["trial"], [], "trial")

@@ -225,7 +225,8 @@ function renderTrial(view, data) {
   let state = view.state || "";
   if (view.text) state += `: “${view.text}”`;
   if (view.since && view.status === "running") state += ` (${ago(data.server_time, view.since)})`;
-  $("state").textContent = state ? "now: " + state : "";
+  $("state").textContent = state ? (view.status === "running" ? "now: " : "last state: ") + state
+                                  : "";
   $("eta").textContent = view.status === "running" && view.eta_s !== null ?
     `ETA ${duration(view.eta_s)}` : (view.ended ? `ended ${view.ended}` : "");
   const tot = view.totals || {};
@@ -254,7 +255,8 @@ function renderTrial(view, data) {
 function renderTracker(view, data) {
   const tr = view.tracker || {};
   const st = tr.connected === false || view.state === "disconnected" ? "LOST" : "connected";
-  $("tracker").textContent = `${tr.name || "?"}: ${st}`;
+  $("tracker").textContent = `${tr.name || "?"}: ${st}` +
+    (view.status === "running" ? "" : " (as last written)");
   $("tracker").className = "info" + (st === "LOST" ? " warn" : "");
   const q = tr.quality;
   let qt = "no validation yet";
