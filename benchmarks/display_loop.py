@@ -192,6 +192,252 @@ def run_loop(screen, backend: str, parameter: str, seconds: float, seed: int = 1
     }
 
 
+class _Monitor:
+    """``fovexp monitor`` on a results folder, as ``fovexp run --monitor`` starts it (its own
+    process, nice +10), with its page open in headless Chromium on this machine (when
+    Chromium, its driver and Selenium are installed): the operator's live view, open."""
+
+    def __init__(self, results: Path, key: str, browser: bool) -> None:
+        import re
+        import subprocess
+
+        from fovexp.monitor.cli import MONITOR_NICE
+
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "fovexp", "monitor", str(results), "--port", "0"],
+            stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True)
+        try:
+            os.setpriority(os.PRIO_PROCESS, self.proc.pid,
+                           os.getpriority(os.PRIO_PROCESS, 0) + MONITOR_NICE)
+        except OSError:
+            pass
+        line = self.proc.stderr.readline()
+        m = re.search(r"(http://\S+)", line)
+        if m is None:
+            self.proc.kill()
+            raise RuntimeError(f"fovexp monitor did not start: {line}")
+        self.url = f"{m.group(1)}?key={key}"
+        self.driver = None
+        if browser:
+            os.environ["SE_OFFLINE"] = "true"
+            from selenium import webdriver
+            from selenium.webdriver.chrome.options import Options
+            from selenium.webdriver.chrome.service import Service
+
+            opts = Options()
+            for arg in ("--headless=new", "--no-sandbox", "--disable-dev-shm-usage",
+                        "--window-size=1400,1000"):
+                opts.add_argument(arg)
+            self.driver = webdriver.Chrome(
+                service=Service(executable_path="/usr/bin/chromedriver"), options=opts)
+            self.driver.get(self.url)
+            t_end = time.monotonic() + 30
+            while self.events() < 2 and time.monotonic() < t_end:
+                time.sleep(0.2)
+
+    def events(self) -> int:
+        """Server-sent events the page has received (``monitor.js`` counts them)."""
+        if self.driver is None:
+            return 0
+        return int(self.driver.execute_script(
+            "return Number(document.documentElement.dataset.events || 0)"))
+
+    def close(self) -> None:
+        if self.driver is not None:
+            self.driver.quit()
+        self.proc.terminate()
+        self.proc.wait(timeout=10)
+
+
+def _cpu_busy() -> tuple[float, float]:
+    """The machine's (busy, total) CPU time so far, from /proc/stat (all processes)."""
+    fields = [float(v) for v in Path("/proc/stat").read_text().split("\n")[0].split()[1:]]
+    idle = fields[3] + fields[4]
+    return sum(fields) - idle, sum(fields)
+
+
+def run_monitor_ab(screen, seconds: float, blocks: int, browser: bool, seed: int = 1) -> dict:
+    """The display loop with and without the operator's live view, in the same run and window
+    (issue 23): blocks of ``seconds`` in rotation, each a new attempt of the session's frame
+    loop with the session's own log writing (the gaze and frame logs in batches by their
+    flusher thread): ``off`` (no status file), ``publisher`` (the live status file written 4
+    times a second, as every session does: :class:`fovexp.experiment.live.LivePublisher` fed
+    by the logs' taps), ``monitor`` (the same, and ``fovexp monitor`` serving it with its page
+    open in Chromium on this machine). Each block's display-thread work per frame is kept."""
+    import tempfile
+
+    from fovexp import load_display, make_params
+    from fovexp.experiment.frameloop import TrialIO, TrialLoop, display_thread_first
+    from fovexp.experiment.gaze import BlankingMonitor, FixationGeometry, SimulatedGaze
+    from fovexp.experiment.live import LivePublisher
+    from fovexp.experiment.logs import (
+        FRAME_COLUMNS,
+        GAZE_COLUMNS,
+        BatchLog,
+        PeriodicFlusher,
+    )
+    from fovexp.experiment.render import TestRenderer
+    from fovexp.experiment.rows import gaze_items, gaze_row
+    from fovexp.experiment.trial import TrialState, ValueAdjuster, Wheel
+
+    display = load_display("lg-oled55cx")
+    fix = FixationGeometry(display)
+    frame, _ = _frame()
+    screen.set_reference(frame[:, : W // 2])
+    renderer = TestRenderer(display, backend="cpu")
+    renderer.set_image(frame[:, W // 2:], (W, H))
+    lo, hi, step = 0.0, 0.4, 0.02
+    gaze = ThreadedSimulatedGaze(SimulatedGaze(fix, seed=seed))
+    gaze.start()
+    tmp = Path(tempfile.mkdtemp(prefix="fovexp-display-loop-"))
+    sid = time.strftime("%Y%m%d-%H%M%S")
+    folder = tmp / "results" / "calibration-fe" / "BENCH"
+    folder.mkdir(parents=True)
+    gaze_log = BatchLog(folder / f"gaze-{sid}.csv", GAZE_COLUMNS,
+                        formatter=lambda item: gaze_row(fix, item))
+    frame_log = BatchLog(folder / f"frames-{sid}.csv", FRAME_COLUMNS)
+    flusher = PeriodicFlusher([gaze_log, frame_log]).start()
+    header = {"participant": "BENCH", "experiment": "calibration-fe", "dry_run": True,
+              "tracker_name": "simulated", "radius_deg": 1.25, "protocol_title": "benchmark",
+              "n_trials": blocks * 3}
+    order = ["off", "publisher", "monitor"]
+    out: dict[str, dict] = {c: {"blocks": []} for c in order}
+    timings: dict[str, list] = {c: [] for c in order}
+    try:
+        for b in range(blocks * len(order)):
+            cond = order[b % len(order)]
+            pub = mon = None
+            if cond != "off":
+                pub = LivePublisher(folder, sid, header, fix).start()
+                gaze_log.tap, frame_log.tap = pub.gaze, pub.frames
+                pub.tracker_quality([])
+            if cond == "monitor":
+                mon = _Monitor(tmp / "results", f"calibration-fe/BENCH/{sid}", browser)
+                time.sleep(2.0)  # its start-up is over
+            adjuster = ValueAdjuster(lo, hi, step, step / 4, (lo + hi) / 2)
+            st = TrialState(adjuster, REFRESH_HZ)
+            ticks = {"next": 0.1, "dir": 1}
+
+            def participant(t: float, value: float, judgeable: bool, ticks: dict = ticks,
+                            adjuster: ValueAdjuster = adjuster) -> list:
+                if t < ticks["next"]:
+                    return []
+                ticks["next"] += 0.1
+                if not lo < adjuster.value + ticks["dir"] * step < hi:
+                    ticks["dir"] *= -1
+                return [Wheel(ticks["dir"])]
+
+            def params_for(v: float):
+                return make_params(method="contrast", blur_rate=0.34, f_e=v, impulses=12,
+                                   seed=seed)
+
+            block_t: list = []
+            loop = TrialLoop(
+                screen=screen, gaze=gaze, renderer=renderer, monitor=BlankingMonitor(fix),
+                state=st, params_for=params_for, parameter="f_e", trial_index=b, attempt=0,
+                participant=participant, timings=block_t,
+                io=TrialIO(frame=frame_log.add,
+                           gaze=lambda i, a, smp: gaze_log.extend(gaze_items(i, smp, a)),
+                           event=lambda kind, detail: None))
+            if pub is not None:
+                pub.begin_attempt(b, 0, position=b + 1, total=blocks * len(order),
+                                  practice=False, method="contrast", image="sponza",
+                                  parameter="f_e", start_value=adjuster.value)
+            loop.show_first()
+            events0 = mon.events() if mon is not None else 0
+            load = os.getloadavg()[0]
+            busy0 = _cpu_busy()
+            t0 = time.monotonic()
+            with display_thread_first():
+                loop.run(max_s=seconds)
+            elapsed = time.monotonic() - t0
+            busy1 = _cpu_busy()
+            events = (mon.events() - events0) if mon is not None else 0
+            if pub is not None:
+                pub.end_attempt("done")
+            if mon is not None:
+                mon.close()
+            if pub is not None:
+                gaze_log.tap = frame_log.tap = None
+                pub.stop("between trials")
+            no = [t for t in block_t if t.upload_s is None]
+            timings[cond] += block_t
+            out[cond]["blocks"].append({
+                "frames": len(block_t), "seconds": round(elapsed, 2),
+                "work_p99_ms": _stats_ms([t.work_s for t in no])["p99"],
+                "work_cpu_p99_ms": _stats_ms([t.work_cpu_s for t in no])["p99"],
+                "load_average_1min": round(load, 2),
+                "machine_cpu_busy": round((busy1[0] - busy0[0]) / max(1e-9, busy1[1] - busy0[1]),
+                                          3),
+                "status_writes": pub.writes if pub is not None else 0,
+                "page_events": events,
+                "page_events_per_s": round(events / elapsed, 2) if mon is not None else None,
+            })
+            time.sleep(2.0)  # what the block started or stopped settles
+    finally:
+        flusher.stop()
+        gaze.stop()
+        renderer.close()
+    for cond in order:
+        t = timings[cond]
+        no = [x for x in t if x.upload_s is None]
+        up = [x for x in t if x.upload_s is not None]
+        out[cond].update({
+            "frames": len(t),
+            "work_ms": {"no_upload": _stats_ms([x.work_s for x in no]),
+                        "upload": _stats_ms([x.work_s for x in up])},
+            "work_cpu_ms": {"no_upload": _stats_ms([x.work_cpu_s for x in no]),
+                            "upload": _stats_ms([x.work_cpu_s for x in up])},
+            "gaze_to_flip_call_ms": {"no_upload": _stats_ms([x.gaze_to_flip_call_s
+                                                             for x in no])},
+        })
+    return {"seconds_per_block": seconds, "blocks": blocks, "browser": browser,
+            "conditions": out}
+
+
+def monitor_report(m: dict) -> list[str]:
+    """The section of DISPLAY_LOOP.md on the live view (issue 23)."""
+    c = m["conditions"]
+    lines = [
+        "## With the monitor open (issue 23)", "",
+        f"The same window and loop, CPU backend, f_e steps every 100 ms; {m['blocks']} blocks "
+        f"of {m['seconds_per_block']:g} s per condition, in rotation (off, publisher, "
+        "monitor, off, ...), each a new attempt with the session's own log writing. *off*: no "
+        "status file; *publisher*: the live status file written 4 times a second, as every "
+        "session does (`LivePublisher`, fed by the logs' taps); *monitor*: the same, and "
+        "`fovexp monitor` serving it (its own process, nice +10, as `fovexp run --monitor` "
+        "starts it) with its page open in headless Chromium "
+        + ("on this machine" if m["browser"] else "(not run: no browser here)") +
+        ", receiving its events. Times in ms as p50 / p99 / max (n), all blocks of a "
+        "condition pooled.", "",
+        "| condition | frames | work, no upload | work CPU, no upload | work, upload | "
+        "gaze to flip call, no upload | work p99 per block | machine CPU busy per block | "
+        "page events per s |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for name in ("off", "publisher", "monitor"):
+        r = c[name]
+        per = ", ".join(f"{b['work_p99_ms']:.2f}" for b in r["blocks"])
+        busy = ", ".join(f"{100 * b['machine_cpu_busy']:.0f} %" for b in r["blocks"])
+        ev = ", ".join(f"{b['page_events_per_s']:.1f}" for b in r["blocks"]
+                       if b["page_events_per_s"] is not None) or "-"
+        lines.append(
+            f"| {name} | {r['frames']} | {_fmt(r['work_ms']['no_upload'])} | "
+            f"{_fmt(r['work_cpu_ms']['no_upload'])} | {_fmt(r['work_ms']['upload'])} | "
+            f"{_fmt(r['gaze_to_flip_call_ms']['no_upload'])} | {per} | {busy} | {ev} |")
+    loads = [b["load_average_1min"] for r in c.values() for b in r["blocks"]]
+    off, pub, mon = (c[k]["work_ms"]["no_upload"]["p99"] for k in ("off", "publisher",
+                                                                   "monitor"))
+    spread = [b["work_p99_ms"] for b in c["off"]["blocks"]]
+    lines += [
+        "", f"Load average (1 min) at the blocks' starts: {min(loads):.1f} to {max(loads):.1f} "
+        "(the 2 cores are shared with other engineers' work).", "",
+        f"- The display thread's work p99 (frames without an upload): off {off:.2f} ms, "
+        f"publisher {pub:.2f} ms, monitor {mon:.2f} ms; the off blocks alone range "
+        f"{min(spread):.2f} to {max(spread):.2f} ms.", ""]
+    return lines
+
+
 def measure_uploads(screen, reps: int) -> dict:
     """A 4K half uploaded as 8-bit RGBA (``PsychoScreen.set_test``) and as the float32 array
     ``ImageStim.image`` took before, interleaved; each timed to ``glFinish`` (the driver's copy
@@ -336,11 +582,18 @@ def report(res: dict, m: dict) -> str:
             "for this reason. How the display thread fares beside the compute shaders on a "
             "hardware GPU is not measured (no session so far had one): the same command with "
             "`--backends cpu,gpu` on a rig measures it.", ""]
+    if res.get("monitor"):
+        lines += monitor_report(res["monitor"])
     return "\n".join(lines)
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--monitor-blocks", type=int, default=0, metavar="N",
+                    help="also N blocks per condition with and without the live view "
+                         "(issue 23: off / status file / monitor open in Chromium)")
+    ap.add_argument("--monitor-seconds", type=float, default=12.0,
+                    help="seconds per block of --monitor-blocks")
     ap.add_argument("--seconds", type=float, default=20.0)
     ap.add_argument("--parameters", default="f_e,s_k", help="stepped parameters (f_e, s_k)")
     ap.add_argument("--backends", default="cpu",
@@ -372,11 +625,17 @@ def main(argv: list[str] | None = None) -> int:
                 for b in args.backends.split(",") for p in args.parameters.split(",")]
         with display_thread_first():  # as during a session's trials
             uploads = measure_uploads(screen, args.upload_reps)
+        monitor = None
+        if args.monitor_blocks:
+            from importlib.util import find_spec
+
+            browser = find_spec("selenium") is not None and Path("/usr/bin/chromedriver").exists()
+            monitor = run_monitor_ab(screen, args.monitor_seconds, args.monitor_blocks, browser)
     finally:
         screen.close()
     flags = " ".join(a for a in (argv if argv is not None else sys.argv[1:]))
     res = {"machine": m, "seconds": args.seconds, "runs": runs, "uploads": uploads,
-           "args": flags}
+           "args": flags, "monitor": monitor}
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "display_loop.json").write_text(json.dumps(res, indent=2) + "\n")
     text = report(res, m)

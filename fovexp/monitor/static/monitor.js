@@ -66,6 +66,9 @@ function connect() {
   source = new EventSource(streamUrl());
   source.onmessage = (e) => {
     lastEvent = Date.now();
+    // events received (tests and benchmarks/display_loop.py read it)
+    document.documentElement.dataset.events = String(1 + Number(
+      document.documentElement.dataset.events || 0));
     let data;
     try { data = JSON.parse(e.data); } catch (err) { return; }
     setConn("live", "ok");
