@@ -37,7 +37,9 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
-SPONZA = ROOT.parent / "shared" / "stimuli" / "sponza-4k.jpg"
+#: the shared frame beside the clone (a worktree elsewhere: $FOVEXP_SPONZA)
+SPONZA = Path(os.environ.get("FOVEXP_SPONZA",
+                             ROOT.parent / "shared" / "stimuli" / "sponza-4k.jpg"))
 W, H = 3840, 2160
 REFRESH_HZ = 120.0
 #: targets of issue 9, section 2 (this machine)
@@ -49,7 +51,8 @@ def _frame() -> tuple[np.ndarray, str]:
     """The 4K split screen: Sponza when the shared frame is there, else a generated scene."""
     from fovexp.experiment.stimuli import load_stimulus, split_screen
 
-    path = SPONZA if SPONZA.exists() else ROOT / "stimuli" / "generated" / "scene-00.png"
+    path = (SPONZA if SPONZA.exists()
+            else ROOT / "stimuli" / "generated" / f"{W}x{H}" / "scene-00.png")
     return split_screen(load_stimulus(path, (W, H))), path.name
 
 

@@ -76,6 +76,8 @@ def add_run_parser(subparsers: Any) -> argparse.ArgumentParser:
     m.add_argument("--monitor-host", default=None, metavar="HOST",
                    help="with --monitor: the address to serve, e.g. 0.0.0.0 for the lab's "
                         "network (a token is printed; every request needs it)")
+    m.add_argument("--monitor-port", type=int, default=None, metavar="PORT",
+                   help="with --monitor: the port (default 8765)")
     f = p.add_argument_group(
         "participant form (asked at the console at a participant's first session; every "
         "field optional; never in a dry run)")
@@ -146,7 +148,7 @@ def run_command(args: argparse.Namespace) -> int:
         from .validation import check_participant
 
         check_participant(args.participant)
-        if args.monitor or args.monitor_host:
+        if args.monitor or args.monitor_host or args.monitor_port is not None:
             from fovexp.monitor.cli import require_server
 
             require_server()  # a missing extra stops here, before anything is opened
@@ -205,10 +207,12 @@ def run_command(args: argparse.Namespace) -> int:
         print(f"fovexp run: {protocol.experiment}, participant {args.participant}, session "
               f"{session.session_id}, {len(session.remaining)} of {len(session.trials)} trials "
               f"to run -> {session.folder}", file=sys.stderr)
-        if args.monitor or args.monitor_host:
-            from fovexp.monitor.cli import start_beside
+        if args.monitor or args.monitor_host or args.monitor_port is not None:
+            from fovexp.monitor.cli import DEFAULT_PORT, start_beside
 
-            monitor = start_beside(args.results, args.monitor_host)
+            monitor = start_beside(args.results, args.monitor_host,
+                                   args.monitor_port if args.monitor_port is not None
+                                   else DEFAULT_PORT)
         code = session.run(gaze=gaze)
     except FovexpError as exc:
         print(f"fovexp run: error: {exc}", file=sys.stderr)

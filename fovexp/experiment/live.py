@@ -367,6 +367,8 @@ class LivePublisher:
                 trial = {**(meta_now or {}), "index": current[0], "attempt": current[1],
                          "frames": 0}
         elif a is not None:  # the last attempt, until the next one shows a frame
+            with self._lock:
+                a.outcome = self._meta.get((a.trial_index, a.attempt), {}).get("outcome")
             trial = a.summary()
         hist = self._latency_hist
         n_lat = int(hist.sum())

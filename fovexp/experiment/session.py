@@ -178,6 +178,15 @@ class Session:
         self.refresh_hz: float = float(self.display.refresh_hz)
         self._trial_seconds: list[float] = []  # this run's trial durations (the console's ETA)
         self._operator_notes: list[str] = []  # shown with the instructions (backend, budget)
+        self._seq: TrialSequence | None = None  # the run's (set by _trials)
+        spec = protocol.spec
+        self.live = LivePublisher(self.folder, self.session_id, {
+            "participant": self.participant, "experiment": protocol.experiment,
+            "protocol_path": str(protocol.path), "protocol_title": spec.title,
+            "protocol_sha256": protocol.sha256, "dry_run": opts.dry_run,
+            "radius_deg": spec.fixation.radius_deg,
+            "gaze_timeout_s": spec.fixation.gaze_timeout_s, "break_every": spec.break_every,
+            "n_trials": len(self.trials)}, self.fixation)
 
     def release(self) -> None:
         """Let go of the folder's lock; a folder this run created and wrote nothing to (a
@@ -366,18 +375,11 @@ class Session:
         self.blank_log = BatchLog(self.folder / f"blanking-{sid}.csv", BLANKING_COLUMNS)
 
     def _start_live(self) -> None:
-        """The live status file (:mod:`.live`), fed by the frame and gaze logs' taps."""
-        proto = self.protocol
-        self.live = LivePublisher(self.folder, self.session_id, {
-            "participant": self.participant, "experiment": proto.experiment,
-            "protocol_path": str(proto.path), "protocol_title": proto.spec.title,
-            "protocol_sha256": proto.sha256, "dry_run": self.opts.dry_run,
-            "tracker_name": self.gaze.name,
-            "radius_deg": proto.spec.fixation.radius_deg,
-            "gaze_timeout_s": proto.spec.fixation.gaze_timeout_s,
-            "refresh_hz": self.refresh_hz, "break_every": proto.spec.break_every,
-            "n_trials": len(self.trials), "remaining": len(self.remaining),
-        }, self.fixation).start()
+        """The live status file (:mod:`.live`) from now on, fed by the frame and gaze logs'
+        taps (until then :attr:`live` only keeps what it is told)."""
+        self.live.header.update(tracker_name=self.gaze.name, refresh_hz=self.refresh_hz,
+                                remaining=len(self.remaining))
+        self.live.start()
         self.gaze_log.tap = self.live.gaze
         self.frame_log.tap = self.live.frames
 
@@ -654,7 +656,8 @@ class Session:
         written (the commit point) after it.
         """
         loop, st = self._trial_loop(trial, attempt)
-        position, total = self._seq.position(trial)
+        position, total = (self._seq.position(trial) if self._seq is not None
+                           else (None, None))
         adj = self.protocol.spec.adjust
         self.live.begin_attempt(trial.index, attempt, position=position, total=total,
                                 practice=trial.practice, method=trial.method,

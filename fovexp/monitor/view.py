@@ -121,7 +121,7 @@ class ResultsView:
         self._scan: tuple[float, dict[str, SessionRef]] | None = None
         # key -> (seq, monotonic time it last changed): a runner's silence, on our clock
         self._seen: dict[str, tuple[Any, float]] = {}
-        self._cache: dict[Path, tuple[tuple[int, int], Any]] = {}
+        self._cache: dict[Path, tuple[tuple[int, int, int], Any]] = {}
 
     # -- finding sessions ----------------------------------------------------------------------
     def refs(self) -> dict[str, SessionRef]:
@@ -161,9 +161,9 @@ class ResultsView:
     def _cached(self, path: Path, read: Callable[[Path], Any]) -> Any:
         try:
             st = path.stat()
-            stamp = (st.st_mtime_ns, st.st_size)
+            stamp = (st.st_mtime_ns, st.st_size, st.st_ino)  # a rename gives a new inode
         except OSError:
-            stamp = (-1, -1)
+            stamp = (-1, -1, -1)
         hit = self._cache.get(path)
         if hit is not None and hit[0] == stamp:
             return hit[1]
@@ -176,7 +176,8 @@ class ResultsView:
                             lambda p: _read_json(p, MAX_SESSION_BYTES))
 
     def _live(self, ref: SessionRef) -> LiveRead:
-        return read_live(ref.folder / f"live-{ref.session}.json")
+        read: LiveRead = self._cached(ref.folder / f"live-{ref.session}.json", read_live)
+        return read
 
     def _trials(self, ref: SessionRef) -> tuple[list[dict[str, Any]], list[str]]:
         """This session's rows of ``trials.csv``, and what was skipped (line and why)."""
