@@ -24,11 +24,8 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from fovexp import FovexpError, ViewingGeometry
+from fovexp.results.blanking import BLANKING_RADIUS_DEG, GAZE_TIMEOUT_S, BlankingRule
 
-#: Paper section 5.1: gaze farther than this from the cross blanks the next frame (deg).
-BLANKING_RADIUS_DEG = 1.25
-#: No sample newer than this: gaze "lost", the next frame is black (s).
-GAZE_TIMEOUT_S = 0.05
 #: Tobii Pro Spectrum's rate in the paper (section 5.1), and the simulated sources' (Hz).
 TRACKER_RATE_HZ = 600.0
 #: Seconds of samples a tracker's buffer holds before the oldest are dropped.
@@ -264,35 +261,41 @@ def ray_angles_deg(origins_mm: np.ndarray, a_mm: np.ndarray, b_mm: np.ndarray) -
 class BlankDecision:
     blank: bool
     reason: str  # "" when shown; "outside" / "invalid" / "lost"
+    #: the newest sample's angle from the cross (inf: no sample, or an invalid one)
     eccentricity_deg: float
+    #: when the decision was made, on the gaze source's clock (us): the newest sample's age is
+    #: measured against it (the frame log's ``decide_system_time_us``)
+    decided_us: int = 0
 
 
 class BlankingMonitor:
-    """Decides per frame whether the next frame is black (paper section 5.1).
+    """Decides per frame whether the next frame is black (paper section 5.1), by the one
+    definition of the rule (:class:`fovexp.results.blanking.BlankingRule`).
 
-    The most recent sample decides: farther than ``radius_deg`` from the cross, invalid (no eye
-    valid), or none newer than ``timeout_s`` (lost) -> black; otherwise the stimulus is shown.
+    The most recent sample decides: none, or none newer than ``timeout_s`` at the decision
+    (lost), invalid (no eye valid), or farther than ``radius_deg`` from the cross -> black;
+    otherwise the stimulus is shown.
     """
 
     def __init__(self, fixation: FixationGeometry, radius_deg: float = BLANKING_RADIUS_DEG,
                  timeout_s: float = GAZE_TIMEOUT_S) -> None:
         self.fixation = fixation
+        self.rule = BlankingRule(radius_deg, timeout_s)
         self.radius_deg = radius_deg
-        self.timeout_us = int(timeout_s * 1e6)
+        self.timeout_us = self.rule.timeout_us
         self.last: GazeSample | None = None
 
     def update(self, samples: list[GazeSample], now_us: int) -> BlankDecision:
+        """Take the samples since the last call; decide a frame at ``now_us`` (the source's
+        clock, read after the samples were taken)."""
         if samples:
             self.last = samples[-1]
         s = self.last
-        if s is None or now_us - s.system_time_us > self.timeout_us:
-            return BlankDecision(True, "lost", math.inf)
-        if not s.valid:
-            return BlankDecision(True, "invalid", math.inf)
-        ecc = self.fixation.eccentricity(s.point)
-        if ecc > self.radius_deg:
-            return BlankDecision(True, "outside", ecc)
-        return BlankDecision(False, "", ecc)
+        age = None if s is None else now_us - s.system_time_us
+        valid = s is not None and s.valid
+        ecc = self.fixation.eccentricity(s.point) if valid and s is not None else math.inf
+        reason = self.rule.reason(age, valid, ecc)
+        return BlankDecision(reason != "", reason, ecc, now_us)
 
 
 class SampleBuffer:

@@ -32,7 +32,7 @@ from fovexp.results.format import (
 
 __all__ = ["BLANKING_COLUMNS", "FRAME_COLUMNS", "GAZE_COLUMNS", "TRIAL_COLUMNS", "BatchLog",
            "JsonWriter", "PeriodicFlusher", "TrialLog", "format_line", "format_value",
-           "read_trials", "repair_tail", "write_json_atomic"]
+           "read_trials", "repair_tail", "upgrade_header", "write_json_atomic"]
 
 def read_trials(path: Path) -> tuple[list[dict[str, Any]], int]:
     """Rows of a ``trials.csv`` and the byte length of its valid part
@@ -69,6 +69,35 @@ def _csv_good_length(path: Path) -> int:
     """Length of a batch CSV up to its last complete line (torn tails of gaze/frame logs)."""
     data = path.read_bytes()
     return data.rfind(b"\n") + 1
+
+
+def upgrade_header(path: Path, columns: Sequence[str]) -> bool:
+    """A batch CSV written by an older format version, whose columns are the first of
+    ``columns`` (a newer version only appends columns: docs/LOGS.md, "Format versions"), is
+    rewritten with the current header and its rows padded with empty fields, in one atomic
+    replace; a resumed session then appends rows of the current format to it. Returns whether
+    it was rewritten; raises :class:`FovexpError` naming the file when its header is not an
+    older version of ``columns``."""
+    path = Path(path)
+    with open(path, "rb") as fh:
+        head = fh.readline()
+    header = head.decode("utf-8", "replace").rstrip("\r\n").split(",")
+    cols = list(columns)
+    if header == cols:
+        return False
+    if len(header) >= len(cols) or header != cols[: len(header)]:
+        raise FovexpError(f"{path}: its columns are not those of docs/LOGS.md "
+                          f"({','.join(header)[:80]}): move it aside to resume")
+    pad = b"," * (len(cols) - len(header))
+    data = path.read_bytes()[len(head):]
+    body = b"".join(line + pad + b"\n" for line in data.split(b"\n") if line)
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "wb") as fh:
+        fh.write(format_line(cols).encode() + body)
+        fh.flush()
+        os.fsync(fh.fileno())
+    os.replace(tmp, path)
+    return True
 
 
 class TrialLog:
@@ -122,6 +151,8 @@ class BatchLog:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         if self.path.exists() and self.path.stat().st_size > 0:
             repair_tail(self.path, _csv_good_length(self.path))
+            if self.path.stat().st_size > 0:
+                upgrade_header(self.path, self.columns)
         if not self.path.exists() or self.path.stat().st_size == 0:
             with open(self.path, "w", encoding="utf-8", newline="") as fh:
                 fh.write(format_line(self.columns))

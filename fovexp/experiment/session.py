@@ -42,7 +42,7 @@ import numpy as np
 from fovexp import FovexpError
 
 from .calibration import QUIT_KEYS, QUIT_PROMPT, QUIT_QUESTION, CalibrationTiming
-from .frameloop import TrialIO, TrialLoop, display_thread_first
+from .frameloop import LateLatch, TrialIO, TrialLoop, display_thread_first
 from .gaze import (
     BlankingMonitor,
     FixationGeometry,
@@ -176,6 +176,7 @@ class Session:
         self.tracker: TrackerSetup | None = None
         self.sim: SimulatedParticipant | None = None
         self.refresh_hz: float = float(self.display.refresh_hz)
+        self.latch: LateLatch | None = None  # made with the window (its refresh rate)
         self._trial_seconds: list[float] = []  # this run's trial durations (the console's ETA)
         self._operator_notes: list[str] = []  # shown with the instructions (backend, budget)
         self._seq: TrialSequence | None = None  # the run's (set by _trials)
@@ -311,6 +312,8 @@ class Session:
         self.file.start_writer()
         self.file.update(display_check={**check, "screen": self.opts.screen},
                          display_area=area_info)
+        #: when each frame reads the gaze (one latch for the run: its margin carries over)
+        self.latch = LateLatch(1.0 / self.refresh_hz)
         self._open_logs()
         self._start_live()
         flusher = PeriodicFlusher([self.gaze_log, self.frame_log, self.blank_log]).start()
@@ -325,14 +328,24 @@ class Session:
                                                 self.opts.sim_speed, self.opts.sim_noise_scale)
             self.tracker = self._make_tracker_setup()
             self._display_setup()
+            self._check_keyboard()
             self._check_render_budget()
             self.live.set_state("calibrating")
             self.tracker.setup()
             self.live.tracker_quality(self.info.get("tracker_quality"))
             self._instructions()
             with display_thread_first() as priority:
-                self.file.set_in_run("display_thread", priority, write=False)
-                self._trials()
+                latch = self.latch
+                assert latch is not None
+                self.file.set_in_run("display_thread", {**priority,
+                                                        "late_latch": latch.info()},
+                                     write=False)
+                try:
+                    self._trials()
+                finally:
+                    self.file.set_in_run("display_thread", {**priority,
+                                                            "late_latch": latch.info()},
+                                         write=False)
             state, code = "completed", EXIT_OK
             self._message("Thank you - this part is finished.", ["space", "return"], 3.0)
         except Aborted:
@@ -439,6 +452,21 @@ class Session:
             self._message(checklist_text(), ["c"], None)
             entry = {"confirmed": True, "time": now_iso(), "items": list(DISPLAY_CHECKLIST)}
         self.file.set_in_run("display_setup", entry)
+
+    def _check_keyboard(self) -> None:
+        """Record the window's keyboard (its backend, and whether keys carry the time they went
+        down); warn when they do not: then an answer is the value on screen at the poll that
+        saw Enter, up to a frame later than the press (a dry run's simulated participant
+        answers at the poll anyway)."""
+        info = self.screen.info()
+        self.file.set_in_run("window", info)
+        kb = info.get("keyboard") or {}
+        if kb.get("key_time") != "press" and not self.opts.dry_run:
+            self._operator_note(
+                f"key presses are stamped when polled, not when pressed (keyboard backend "
+                f"{kb.get('backend')!r}): install psychtoolbox's libjack (Debian/Ubuntu: "
+                "apt-get install libjack-jackd2-0) or run an ioHub server",
+                "keyboard_stamps_at_poll", backend=kb.get("backend"))
 
     def _check_render_budget(self) -> None:
         """Warn when the backend cannot show a wheel step within the protocol's budget
@@ -712,6 +740,7 @@ class Session:
             screen=self.screen, gaze=self.gaze, renderer=self.renderer, monitor=monitor,
             state=st, params_for=lambda v: self._params(trial, v), parameter=adj.parameter,
             trial_index=trial.index, attempt=attempt, participant=participant,
+            latch=self.latch,
             io=TrialIO(frame=frame_row,
                        gaze=lambda i, a, samples: self.gaze_log.extend(
                            gaze_items(i, samples, a)),

@@ -80,12 +80,34 @@ GAZE_COLUMNS: tuple[str, ...] = (
 )
 #: ``frames-<session>.csv``: one row per stimulus frame; ``value`` is the adjusted value of the
 #: frame actually on screen; ``gaze_system_time_us`` and ``gaze_ecc_deg`` are the newest gaze
-#: sample the frame's blanking decision used, ``flip_system_time_us`` the flip, both on the
-#: tracker's system clock (their difference is the gaze-to-flip latency).
+#: sample the frame's blanking decision used, ``flip_system_time_us`` the flip and
+#: ``decide_system_time_us`` the decision, all on the tracker's system clock (flip minus
+#: sample is the gaze-to-flip latency, decision minus sample the sample's age the blanking
+#: rule limits, flip minus decision the frame's draw latency).
 FRAME_COLUMNS: tuple[str, ...] = (
     "trial_index", "attempt", "frame", "flip_time_s", "interval_s", "dropped", "blanked", "value",
-    "gaze_system_time_us", "gaze_ecc_deg", "flip_system_time_us",
+    "gaze_system_time_us", "gaze_ecc_deg", "flip_system_time_us", "decide_system_time_us",
 )
+#: The frame log's format versions (docs/LOGS.md, "Format versions"), each by its columns: a
+#: reader tells them apart by the header, and a newer version only appends columns, so an older
+#: log reads with the new columns empty. 1: issue 9 (to ``flip_system_time_us``); 2: issue 18
+#: (``decide_system_time_us``).
+FRAME_LOG_VERSIONS: dict[int, tuple[str, ...]] = {1: FRAME_COLUMNS[:11], 2: FRAME_COLUMNS}
+FRAME_LOG_VERSION = max(FRAME_LOG_VERSIONS)
+
+
+def frame_log_version(header: Sequence[str]) -> int | None:
+    """The frame-log version whose columns ``header`` has (a log written before version 1
+    lacks the latency columns: 0); None when it is none of them."""
+    cols = tuple(header)
+    for version, columns in sorted(FRAME_LOG_VERSIONS.items(), reverse=True):
+        if cols == columns:
+            return version
+    if cols == FRAME_COLUMNS[:8]:
+        return 0
+    return None
+
+
 #: ``blanking-<session>.csv``: one row per blanking episode.
 BLANKING_COLUMNS: tuple[str, ...] = (
     "trial_index", "attempt", "start_s", "end_s", "frames", "reason",

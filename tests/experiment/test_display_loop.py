@@ -17,7 +17,13 @@ from fovexp.experiment.gaze import FixationGeometry
 from fovexp.experiment.logs import read_trials
 from fovexp.experiment.protocol import load_protocol
 from fovexp.experiment.session import Session, SessionOptions
-from fovexp.results.frames import gaze_to_flip_ms, read_frame_log, unblanked_violations
+from fovexp.results.blanking import BlankingRule
+from fovexp.results.frames import (
+    decision_age_us,
+    gaze_to_flip_ms,
+    read_frame_log,
+    unblanked_violations,
+)
 
 from experiment_helpers import REPO, ScriptedGaze, xvfb_display  # noqa: F401
 
@@ -40,9 +46,9 @@ def recording_screen(shown: list[tuple[float, int]]):
             self._mask = np.ones((H, W), bool)
             self._mask[H // 2 - arm:H // 2 + arm, W // 2 - arm:W // 2 + arm] = False
 
-        def flip(self) -> float:
+        def flip(self):
             t = super().flip()
-            shown.append((t, int(self.last_frame[self._mask].max())))
+            shown.append((t.flip_s, int(self.last_frame[self._mask].max())))
             return t
 
     return Recording
@@ -122,8 +128,7 @@ def test_blanking_rule_holds_in_the_frame_log(tmp_path: Path, xvfb_display) -> N
     s.opts.sim_speed = 2.0
     assert s.run(gaze=GappyGaze(path)) == 0
     frames = read_frame_log(s.folder / f"frames-{s.session_id}.csv")
-    period_s = 1 / 60  # the dry run's paced rate
-    bad = unblanked_violations(frames, 1.25, 0.05, 2 * period_s)
+    bad = unblanked_violations(frames, BlankingRule(1.25, 0.05))
     assert bad.empty, bad.to_string()
     age_ms = gaze_to_flip_ms(frames)
     blanked = frames["blanked"] == 1
@@ -134,9 +139,8 @@ def test_blanking_rule_holds_in_the_frame_log(tmp_path: Path, xvfb_display) -> N
     invalid = frames["gaze_ecc_deg"].isna() & frames["gaze_system_time_us"].notna()
     assert invalid.any() and blanked[invalid].all()
     # the stream paused: frames decided when their newest sample was older than the timeout
-    # (a frame is decided after the previous flip) are black
-    prev_flip = frames.groupby(["trial_index", "attempt"])["flip_system_time_us"].shift(1)
-    stale = (frames["gaze_system_time_us"] < prev_flip - 50_000).fillna(False)
+    # are black
+    stale = (decision_age_us(frames) > 50_000).fillna(False)
     assert stale.any() and blanked[stale].all()
     # inside, near the radius: shown
     near = (frames["gaze_ecc_deg"] > 1.0) & (frames["gaze_ecc_deg"] <= 1.25) & (age_ms < 40)

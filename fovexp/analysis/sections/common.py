@@ -19,7 +19,8 @@ UNITS: dict[str, str] = {
     "s_f": "dimensionless", "s_f_sem": "dimensionless", "s_k_sem": "dimensionless",
     "slope": "s_k per unit s_f", "intercept": "dimensionless", "r2": "dimensionless",
     "sr_ratio": "dimensionless", "reduction_pct": "%", "median_ms": "ms", "p95_ms": "ms",
-    "max_ms": "ms", "dropped_pct": "%", "with_gaze": "frames", "rule_violations": "frames",
+    "max_ms": "ms", "draw_median_ms": "ms", "draw_p95_ms": "ms", "dropped_pct": "%",
+    "with_gaze": "frames", "rule_violations": "frames",
     "n_trials": "trials", "n_levels": "s_f levels", "t": "dimensionless",
     "d_z": "dimensionless", "df": "degrees of freedom",
 }

@@ -19,10 +19,11 @@ def latency_section(ana: Analysis) -> list[str]:
     parts = ["## Gaze-to-flip latency and blanking (section 5.1)\n",
              "Per session, from its frame log: the time from the newest gaze sample a frame's "
              "blanking decision used to the frame's flip, on the tracker's clock (median, 95th "
-             "percentile, maximum), the dropped frames, and the frames drawn with the stimulus "
-             "although the newest sample was invalid, outside the blanking radius, or older "
-             "than the gaze timeout when the frame was decided (after the previous flip; "
-             "`rule_violations`: 0 in a valid session).\n"]
+             "percentile, maximum); the frame's own draw latency, from its decision to its flip "
+             "(`draw_median_ms`, `draw_p95_ms`); the dropped frames; and the frames drawn with "
+             "the stimulus although, when the frame was decided, the newest sample was older "
+             "than the gaze timeout, invalid, or outside the blanking radius "
+             "(`rule_violations`, checked exactly for every frame: 0 in a valid session).\n"]
     if len(table):
         parts.append(md_table(table, 2, units={"n": "participants"}))
         if ana.figures and lat:
