@@ -270,7 +270,12 @@ def run_monitor_ab(screen, seconds: float, blocks: int, browser: bool, seed: int
     import tempfile
 
     from fovexp import load_display, make_params
-    from fovexp.experiment.frameloop import TrialIO, TrialLoop, display_thread_first
+    from fovexp.experiment.frameloop import (
+        LateLatch,
+        TrialIO,
+        TrialLoop,
+        display_thread_first,
+    )
     from fovexp.experiment.gaze import BlankingMonitor, FixationGeometry, SimulatedGaze
     from fovexp.experiment.live import LivePublisher
     from fovexp.experiment.logs import (
@@ -303,6 +308,7 @@ def run_monitor_ab(screen, seconds: float, blocks: int, browser: bool, seed: int
     header = {"participant": "BENCH", "experiment": "calibration-fe", "dry_run": True,
               "tracker_name": "simulated", "radius_deg": 1.25, "protocol_title": "benchmark",
               "n_trials": blocks * 3}
+    latch = LateLatch(1.0 / REFRESH_HZ)  # as a session: one for the run, late latching on
     order = ["off", "publisher", "monitor"]
     out: dict[str, dict] = {c: {"blocks": []} for c in order}
     timings: dict[str, list] = {c: [] for c in order}
@@ -338,7 +344,7 @@ def run_monitor_ab(screen, seconds: float, blocks: int, browser: bool, seed: int
             loop = TrialLoop(
                 screen=screen, gaze=gaze, renderer=renderer, monitor=BlankingMonitor(fix),
                 state=st, params_for=params_for, parameter="f_e", trial_index=b, attempt=0,
-                participant=participant, timings=block_t,
+                participant=participant, timings=block_t, latch=latch,
                 io=TrialIO(frame=frame_log.add,
                            gaze=lambda i, a, smp: gaze_log.extend(gaze_items(i, smp, a)),
                            event=lambda kind, detail: None))
@@ -401,9 +407,15 @@ def run_monitor_ab(screen, seconds: float, blocks: int, browser: bool, seed: int
 def monitor_report(m: dict) -> list[str]:
     """The section of DISPLAY_LOOP.md on the live view (issue 23)."""
     c = m["conditions"]
+    mm = m.get("machine", {})
     lines = [
         "## With the monitor open (issue 23)", "",
-        f"The same window and loop, CPU backend, f_e steps every 100 ms; {m['blocks']} blocks "
+        f"Machine: {mm.get('cpu', '?')}, {mm.get('cores', '?')} cores; {mm.get('renderer', '?')}; "
+        f"{mm.get('display', '?')}; load average {mm.get('load_average', '?')} at the start; "
+        f"{mm.get('date', '?')}. Command: `xvfb-run -a -s \"-screen 0 3840x2160x24\" "
+        f".venv/bin/python benchmarks/display_loop.py {m.get('args', '')}`.", "",
+        f"The same window and loop as the session runs it (late latching on: one `LateLatch` "
+        f"for the run), CPU backend, f_e steps every 100 ms; {m['blocks']} blocks "
         f"of {m['seconds_per_block']:g} s per condition, in rotation (off, publisher, "
         "monitor, off, ...), each a new attempt with the session's own log writing. *off*: no "
         "status file; *publisher*: the live status file written 4 times a second, as every "
@@ -592,16 +604,19 @@ def report(res: dict, m: dict) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--monitor-blocks", type=int, default=0, metavar="N",
-                    help="also N blocks per condition with and without the live view "
-                         "(issue 23: off / status file / monitor open in Chromium)")
-    ap.add_argument("--monitor-seconds", type=float, default=12.0,
-                    help="seconds per block of --monitor-blocks")
     ap.add_argument("--seconds", type=float, default=20.0)
     ap.add_argument("--parameters", default="f_e,s_k", help="stepped parameters (f_e, s_k)")
     ap.add_argument("--backends", default="cpu",
                     help="cpu and/or gpu (the GPU backend writing the window's textures)")
     ap.add_argument("--upload-reps", type=int, default=30)
+    ap.add_argument("--monitor-blocks", type=int, default=0, metavar="N",
+                    help="also N blocks per condition with and without the live view "
+                         "(issue 23: off / status file / monitor open in Chromium)")
+    ap.add_argument("--monitor-seconds", type=float, default=12.0,
+                    help="seconds per block of --monitor-blocks")
+    ap.add_argument("--monitor-only", action="store_true",
+                    help="only the --monitor-blocks comparison; the other runs are kept from "
+                         "display_loop.json")
     ap.add_argument("--out", type=Path, default=HERE)
     ap.add_argument("--report-only", action="store_true",
                     help="rewrite DISPLAY_LOOP.md from display_loop.json (no measurement)")
@@ -616,6 +631,7 @@ def main(argv: list[str] | None = None) -> int:
     from fovexp.experiment.frameloop import display_thread_first
     from fovexp.experiment.window import PsychoScreen
 
+    flags = " ".join(a for a in (argv if argv is not None else sys.argv[1:]))
     screen = PsychoScreen((W, H), fullscreen=False, cross_px=28, refresh_hz=REFRESH_HZ,
                           pace_hz=REFRESH_HZ)
     try:
@@ -624,24 +640,27 @@ def main(argv: list[str] | None = None) -> int:
         m = {**machine(), "renderer": gl.gl_info.get_renderer(),
              "display": "Xvfb 3840x2160x24",
              "load_average": " ".join(f"{v:.1f}" for v in os.getloadavg())}
-        runs = [run_loop(screen, b, p, args.seconds)
-                for b in args.backends.split(",") for p in args.parameters.split(",")]
-        with display_thread_first():  # as during a session's trials
-            uploads = measure_uploads(screen, args.upload_reps)
-        monitor = None
+        if args.monitor_only:
+            res = json.loads((args.out / "display_loop.json").read_text())
+        else:
+            runs = [run_loop(screen, b, p, args.seconds)
+                    for b in args.backends.split(",") for p in args.parameters.split(",")]
+            with display_thread_first():  # as during a session's trials
+                uploads = measure_uploads(screen, args.upload_reps)
+            res = {"machine": m, "seconds": args.seconds, "runs": runs, "uploads": uploads,
+                   "args": flags}
         if args.monitor_blocks:
             from importlib.util import find_spec
 
             browser = find_spec("selenium") is not None and Path("/usr/bin/chromedriver").exists()
-            monitor = run_monitor_ab(screen, args.monitor_seconds, args.monitor_blocks, browser)
+            res["monitor"] = {**run_monitor_ab(screen, args.monitor_seconds,
+                                               args.monitor_blocks, browser),
+                              "machine": m, "args": flags}
     finally:
         screen.close()
-    flags = " ".join(a for a in (argv if argv is not None else sys.argv[1:]))
-    res = {"machine": m, "seconds": args.seconds, "runs": runs, "uploads": uploads,
-           "args": flags, "monitor": monitor}
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "display_loop.json").write_text(json.dumps(res, indent=2) + "\n")
-    text = report(res, m)
+    text = report(res, res["machine"])
     (args.out / "DISPLAY_LOOP.md").write_text(text)
     print(text)
     return 0
