@@ -116,10 +116,11 @@ def test_gaze_is_kept_as_angles_from_the_cross(tmp_path: Path, fixation) -> None
     # on-screen direction (x right, y down)
     for dx, dy in ((1.0, 0.0), (0.0, -2.0), (5.0, 3.0), (-12.0, 7.0)):
         point = fixation.offset_to_norm(dx, dy)
-        ox, oy = pub._offset_deg(point)
+        ((ox, oy),) = pub._offsets_deg([point])
         assert math.hypot(ox, oy) == pytest.approx(fixation.eccentricity(point), rel=1e-12)
         assert math.atan2(oy, ox) == pytest.approx(math.atan2(dy, dx), abs=0.02)
-    assert pub._offset_deg(None) == (None, None) and pub._offset_deg((1.2, 0.5)) == (None, None)
+    assert pub._offsets_deg([None, (1.2, 0.5), (0.5, 0.5)]) == [(None, None), (None, None),
+                                                               (0.0, 0.0)]
     assert np.nanmax(np.hypot(x, y)) == pytest.approx(1.0, abs=0.03)  # a 1 deg circle
     assert g["samples_last_s"] == len(items)  # both batches arrived within the last second
 
