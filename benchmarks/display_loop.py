@@ -506,7 +506,7 @@ def monitor_report(m: dict) -> list[str]:
         if v:
             lo, hi = v["p99_diff_ci95_ms"]
             lines.append(f"| {name} | {v['p99_diff_ms']:+.2f} ms ({lo:+.2f} to {hi:+.2f}) | "
-                         f"{v['median_diff_ms']:+.3f} ms | {v['mann_whitney_p']:.2f} |")
+                         f"{v['median_diff_ms']:+.3f} ms | {v['mann_whitney_p']:.2g} |")
     cpu = [x for b in c["publisher"]["blocks"] + c["monitor"]["blocks"]
            if (x := b.get("publish_cpu_ms"))]
     tap = m.get("tap_ns_per_frame", {})
@@ -528,7 +528,16 @@ def monitor_report(m: dict) -> list[str]:
         "(the 2 cores are shared with other engineers' work).", "",
         f"- The display thread's work p99 (frames without an upload): off {off:.2f} ms, "
         f"publisher {pub:.2f} ms, monitor {mon:.2f} ms; the off blocks alone range "
-        f"{min(spread):.2f} to {max(spread):.2f} ms.", ""]
+        f"{min(spread):.2f} to {max(spread):.2f} ms."]
+    for name in ("publisher", "monitor"):
+        v = c[name].get("vs_off") or {}
+        if v:
+            lo, hi = v["p99_diff_ci95_ms"]
+            verdict = ("equal to off within this run's resolution (the interval holds 0)"
+                       if lo <= 0 <= hi else "NOT equal to off (the interval excludes 0)")
+            lines.append(f"- {name}: the p99's difference {v['p99_diff_ms']:+.2f} ms, 95 % "
+                         f"interval {lo:+.2f} to {hi:+.2f} ms: {verdict}.")
+    lines.append("")
     return lines
 
 
