@@ -1,7 +1,8 @@
 """``fovexp`` command line: ``enhance`` and ``compile`` (this module), ``run`` (experiment
-runner), ``analyze`` (analysis), ``monitor`` (the live view of running sessions) and ``bench``
-(run time against error, :mod:`fovexp.bench`). Bad input prints one ``fovexp: error: ...``
-line and exits with 2.
+runner), ``init`` (a study folder, :mod:`fovexp.experiment.study`), ``analyze`` (analysis),
+``monitor`` (the live view of running sessions), ``docs`` (the documentation site,
+:mod:`fovexp.docsite`) and ``bench`` (run time against error, :mod:`fovexp.bench`).
+Bad input prints one ``fovexp: error: ...`` line and exits with 2.
 
 A command's module, and what it imports, is loaded only when that command runs (or its
 ``--help`` is asked for): ``fovexp enhance`` loads neither the runner nor the analysis (nor
@@ -36,6 +37,10 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
                 "turn trial logs into the paper's results (Table 2, validation tests)"),
     "monitor": ("fovexp.monitor.cli", "add_monitor_parser",
                 "watch running sessions in a browser (read-only)"),
+    "init": ("fovexp.experiment.study", "add_init_parser",
+             "make a study folder: copies of the shipped protocols, stimuli/, results/"),
+    "docs": ("fovexp.docsite", "add_docs_parser",
+             "the documentation: print where the built site is, or open it"),
     "compile": ("fovexp.cli", "add_compile_parser",
                 "compile the Numba kernels ahead of the first run (once after installing)"),
     "bench": ("fovexp.bench", "add_bench_parser",

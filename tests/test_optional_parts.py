@@ -36,8 +36,35 @@ def test_no_moderngl_names_the_gpu_extra(monkeypatch):
     _without(monkeypatch, "moderngl")
     with pytest.raises(FovexpError, match=r"pip install 'fovexp\[gpu\]'"):
         make_enhancer(load_display("lg-oled55cx"), backend="gpu")
-    # auto falls back to the CPU without a word
-    assert make_enhancer(load_display("lg-oled55cx"), backend="auto").backend == "cpu"
+    # auto falls back to the CPU, and says why in words a lab can act on (the runner says it
+    # once: "enhancer on the CPU: ..."), never about GL contexts
+    auto = make_enhancer(load_display("lg-oled55cx"), backend="auto")
+    assert auto.backend == "cpu"
+    assert auto.fallback_reason == ("the GPU extra is not installed (a rig needs it: pip "
+                                    "install 'fovexp[gpu]')")
+
+
+def test_no_moderngl_the_runner_says_only_that_the_cpu_is_used(monkeypatch):
+    """The render thread, given the window's GL context to share, does not try it without
+    moderngl: its one note is the fallback's, nothing about a GL context (issue 21)."""
+    from fovexp import load_display
+    from fovexp.experiment.render import TestRenderer
+
+    class Share:  # the window's side: never made current without moderngl
+        def make_current(self):
+            raise AssertionError("no GL context to share without moderngl")
+
+        def release_current(self):
+            pass
+
+    _without(monkeypatch, "moderngl")
+    r = TestRenderer(load_display("lg-oled55cx"), backend="auto", gl_share=Share())
+    try:
+        info = r.info()
+    finally:
+        r.close()
+    assert info["backend"] == "cpu" and info["notes"] == []
+    assert "fovexp[gpu]" in info["fallback"] and "GL context" not in info["fallback"]
 
 
 def test_no_tobii_sdk_names_the_tracker_extra(monkeypatch):

@@ -8,7 +8,8 @@ visible. Reported here:
 * the paired t-test ``ours`` vs ``contrast``, paired by participant x scene, overall and per scene
   (pairs = participants), with t, df, p, Cohen's d_z and the 95 % CI of the mean difference; and,
   as a check that does not treat a participant's scenes as independent, the same test on each
-  participant's mean over scenes;
+  participant's mean over scenes. With one participant there is no test (its statistics are
+  left out, and :attr:`ValidationResult.no_test` says why);
 * the estimated sampling-rate reduction of ours over contrast, 1 - SR_ours / SR_contrast with
   SR_ours / SR_contrast = blur_rate_contrast / blur_rate_ours (section 6.3), from the mean
   blur-rates per scene and overall.
@@ -27,6 +28,8 @@ from .stats import paired_ttest, sampling_rate_ratio
 
 TEST_COLUMNS = ["scope", "n", "mean_ours", "mean_contrast", "mean_diff", "sd_diff", "t", "df",
                 "p", "d_z", "ci_low", "ci_high"]
+#: the columns of a test's statistics (the others describe its pairs)
+TEST_STATISTICS = ["sd_diff", "t", "df", "p", "d_z", "ci_low", "ci_high"]
 
 
 @dataclass
@@ -39,6 +42,8 @@ class ValidationResult:
     tests: pd.DataFrame  # TEST_COLUMNS; scope = "all scenes", "participant means", or a scene
     sampling: pd.DataFrame  # scope, blur_rate_contrast, blur_rate_ours, sr_ratio, reduction_pct
     notes: list[str] = field(default_factory=list)
+    #: why no paired test was computed at all (fewer than two participants), else None
+    no_test: str | None = None
 
 
 def _test_row(scope: str, ours: pd.Series, contrast: pd.Series) -> dict:
@@ -65,6 +70,7 @@ def validate(trials: pd.DataFrame, experiment: str = "validation") -> Validation
     cell = sel.groupby(["participant", "image", "method"])["final_value"].mean().unstack("method")
     tests: list[dict] = []
     sampling: list[dict] = []
+    no_test: str | None = None
     if {"ours", "contrast"} <= set(cell.columns):
         pairs = cell[["ours", "contrast"]]
         lone = pairs.isna().any(axis=1)
@@ -79,6 +85,10 @@ def validate(trials: pd.DataFrame, experiment: str = "validation") -> Validation
         tests.append(_test_row("participant means", per_part["ours"], per_part["contrast"]))
         for scene, grp in pairs.groupby(level="image", sort=True):
             tests.append(_test_row(str(scene), grp["ours"], grp["contrast"]))
+        if len(per_part) < 2:
+            no_test = one_participant_reason(str(per_part.index[0]))
+            for row in tests:  # the means stay; no statistic of a single participant
+                row.update(dict.fromkeys(TEST_STATISTICS, float("nan")))
         sampling.append(_sampling_row("all scenes", float(pairs["contrast"].mean()),
                                       float(pairs["ours"].mean())))
         means = summary.pivot(index="image", columns="method", values="mean")
@@ -92,5 +102,13 @@ def validate(trials: pd.DataFrame, experiment: str = "validation") -> Validation
         tests=pd.DataFrame(tests, columns=TEST_COLUMNS),
         sampling=pd.DataFrame(sampling, columns=["scope", "blur_rate_contrast", "blur_rate_ours",
                                                  "sr_ratio", "reduction_pct"]),
-        notes=notes,
+        notes=notes, no_test=no_test,
     )
+
+
+def one_participant_reason(participant: str) -> str:
+    """Why there is no paired test with one participant, in words for the report."""
+    return (f"No paired t-test: ours and contrast are compared within each participant, and the "
+            f"test asks whether that difference holds across participants, which needs at least "
+            f"two; these trials are from one participant ({participant}). The means above "
+            f"describe that participant only.")

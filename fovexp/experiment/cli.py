@@ -52,10 +52,13 @@ def add_run_parser(subparsers: Any) -> argparse.ArgumentParser:
                         "default, as in fovexp analyze)")
     p.add_argument("--window", type=_size, default=None, metavar="WxH",
                    help="window size instead of the display profile's (dry run: 480x270); a "
-                        "real session needs its images at exactly this size")
+                        "real session needs its images at exactly this size, and so does a "
+                        "dry run at the display's size (a rehearsal); a smaller dry run "
+                        "scales them")
     p.add_argument("--stimuli", type=Path, default=None, metavar="DIR",
-                   help="stimulus folder (default: the protocol's, $FOVEXP_STIMULI, ./stimuli, "
-                        "or the user data folder; see fovexp stimuli --help)")
+                   help="stimulus folder (default: the protocol's, the study folder's, "
+                        "$FOVEXP_STIMULI, ./stimuli, or the user data folder; see fovexp "
+                        "stimuli --help)")
     p.add_argument("--windowed", action="store_true", help="not full screen (pilots)")
     p.add_argument("--backend", choices=BACKENDS, default="auto",
                    help="enhancer backend: cpu, gpu (OpenGL 4.5 compute shaders), or auto: "
@@ -65,7 +68,9 @@ def add_run_parser(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument("--skip-display-check", action="store_true",
                    help="do not stop when the refresh rate or window size differ from the profile")
     p.add_argument("--limit-trials", type=int, default=None, metavar="N",
-                   help="only the first N main trials of the randomised order (tests, pilots)")
+                   help="only the first N main trials of the randomised order, each scene's "
+                   "methods together so that they still pair (N rounded up to whole scenes; "
+                   "tests, pilots)")
     p.add_argument("--practice", type=int, default=None, metavar="N",
                    help="practice trials (default: the protocol's)")
     m = p.add_argument_group("the operator's live view (docs/EXPERIMENT.md)")
@@ -174,6 +179,10 @@ def run_command(args: argparse.Namespace) -> int:
         # Every image's sha256 and size, for the frames this run shows, before any window.
         frame_size = args.window or (DRY_RUN_SIZE if args.dry_run else protocol.native_size)
         images = protocol.prepare_images(frame_size, args.dry_run)
+        if args.windowed or args.dry_run:  # a full-screen window is the display check's
+            from .xscreen import check_window_fits, x_screen_size
+
+            check_window_fits(frame_size, x_screen_size())
         scaled = sorted({(v.size, v.frame_size) for v in images.values() if v.scaled})
         if scaled:
             n = sum(v.scaled for v in images.values())

@@ -22,8 +22,8 @@ DEFAULT_DISPLAY = "lg-oled55cx"
 
 
 def _folder_help() -> str:
-    return ("stimulus folder (default: $FOVEXP_STIMULI, ./stimuli if there is one, else the "
-            "user data folder)")
+    return ("stimulus folder (default: the stimuli/ of the study folder (fovexp init) you are "
+            "in, $FOVEXP_STIMULI, ./stimuli if there is one, else the user data folder)")
 
 
 def add_stimuli_parser(subparsers: Any) -> argparse.ArgumentParser:
@@ -84,7 +84,8 @@ def add_stimuli_parser(subparsers: Any) -> argparse.ArgumentParser:
     c.add_argument("--display", default=None, metavar="PROFILE",
                    help="check for this display profile instead of the protocol's")
     c.add_argument("--dry-run", action="store_true",
-                   help="check for a dry run (scaling allowed) instead of a real session")
+                   help="check for a dry run instead of a real session (scaling allowed, "
+                   "except at the display's own size: a rehearsal)")
     c.add_argument("--window", default=None, metavar="WxH",
                    help="the window size, as fovexp run --window")
     c.add_argument("--stimuli", type=Path, default=None, metavar="DIR",
@@ -276,7 +277,7 @@ def _check_one(name: str, args: argparse.Namespace) -> int:
     from fovexp import find_protocol, load_display
 
     from .protocol import protocol_display, protocol_stimuli, read_protocol
-    from .stimuli import DRY_RUN_SIZE, parse_size, size_text
+    from .stimuli import DRY_RUN_SIZE, may_scale, parse_size, size_text
 
     path = find_protocol(name)
     _, spec = read_protocol(path)
@@ -288,8 +289,10 @@ def _check_one(name: str, args: argparse.Namespace) -> int:
     frame = parse_size(args.window) if args.window else (
         DRY_RUN_SIZE if args.dry_run else native)
     stim = protocol_stimuli(path, spec, args.stimuli)
-    rows = stim.check_all(spec.images, frame, args.dry_run)
-    mode = "a dry run" if args.dry_run else "a real session"
+    scale = may_scale(args.dry_run, frame, native)
+    rows = stim.check_all(spec.images, frame, scale)
+    mode = ("a real session" if not args.dry_run else "a dry run" if scale else
+            "a dry run at the display's size (a rehearsal: nothing scaled)")
     print(f"protocol {path}")
     print(f"stimulus folder {stim.describe()}")
     print(f"display {display.name} ({size_text(native)}); {mode} shows {size_text(frame)}")
