@@ -528,7 +528,13 @@ def monitor_report(m: dict) -> list[str]:
         "(the 2 cores are shared with other engineers' work).", "",
         f"- The display thread's work p99 (frames without an upload): off {off:.2f} ms, "
         f"publisher {pub:.2f} ms, monitor {mon:.2f} ms; the off blocks alone range "
-        f"{min(spread):.2f} to {max(spread):.2f} ms."]
+        f"{min(spread):.2f} to {max(spread):.2f} ms.",
+        "- Its CPU time over the work and the drawing (`work_cpu_s`: what it did, without "
+        "the waiting a loaded machine adds): p99 " + ", ".join(
+            f"{k} {c[k]['work_cpu_ms']['no_upload']['p99']:.2f} ms"
+            for k in ("off", "publisher", "monitor")) + "; medians of the wall time: "
+        + ", ".join(f"{k} {c[k]['work_ms']['no_upload']['p50']:.2f} ms"
+                    for k in ("off", "publisher", "monitor")) + "."]
     for name in ("publisher", "monitor"):
         v = c[name].get("vs_off") or {}
         if v:
