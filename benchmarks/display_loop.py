@@ -37,7 +37,9 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
-SPONZA = ROOT.parent / "shared" / "stimuli" / "sponza-4k.jpg"
+#: the shared frame beside the clone (a worktree elsewhere: $FOVEXP_SPONZA)
+SPONZA = Path(os.environ.get("FOVEXP_SPONZA",
+                             ROOT.parent / "shared" / "stimuli" / "sponza-4k.jpg"))
 W, H = 3840, 2160
 REFRESH_HZ = 120.0
 #: targets of issue 9, section 2 (this machine)
@@ -49,7 +51,8 @@ def _frame() -> tuple[np.ndarray, str]:
     """The 4K split screen: Sponza when the shared frame is there, else a generated scene."""
     from fovexp.experiment.stimuli import load_stimulus, split_screen
 
-    path = SPONZA if SPONZA.exists() else ROOT / "stimuli" / "generated" / "scene-00.png"
+    path = (SPONZA if SPONZA.exists()
+            else ROOT / "stimuli" / "generated" / f"{W}x{H}" / "scene-00.png")
     return split_screen(load_stimulus(path, (W, H))), path.name
 
 
@@ -190,6 +193,358 @@ def run_loop(screen, backend: str, parameter: str, seconds: float, seed: int = 1
         "gaze_to_flip_ms": {"p50": _pct(latency, 50), "p95": _pct(latency, 95),
                             "max": max(latency) if latency else float("nan")},
     }
+
+
+class _Monitor:
+    """``fovexp monitor`` on a results folder, as ``fovexp run --monitor`` starts it (its own
+    process, nice +10), with its page open in headless Chromium on this machine (when
+    Chromium, its driver and Selenium are installed): the operator's live view, open."""
+
+    def __init__(self, results: Path, key: str, browser: bool) -> None:
+        import re
+        import subprocess
+
+        from fovexp.monitor.cli import MONITOR_NICE
+
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "fovexp", "monitor", str(results), "--port", "0"],
+            stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True)
+        try:
+            os.setpriority(os.PRIO_PROCESS, self.proc.pid,
+                           os.getpriority(os.PRIO_PROCESS, 0) + MONITOR_NICE)
+        except OSError:
+            pass
+        line = self.proc.stderr.readline()
+        m = re.search(r"(http://\S+)", line)
+        if m is None:
+            self.proc.kill()
+            raise RuntimeError(f"fovexp monitor did not start: {line}")
+        self.url = f"{m.group(1)}?key={key}"
+        self.driver = None
+        if browser:
+            os.environ["SE_OFFLINE"] = "true"
+            from selenium import webdriver
+            from selenium.webdriver.chrome.options import Options
+            from selenium.webdriver.chrome.service import Service
+
+            opts = Options()
+            for arg in ("--headless=new", "--no-sandbox", "--disable-dev-shm-usage",
+                        "--window-size=1400,1000"):
+                opts.add_argument(arg)
+            self.driver = webdriver.Chrome(
+                service=Service(executable_path="/usr/bin/chromedriver"), options=opts)
+            self.driver.get(self.url)
+            t_end = time.monotonic() + 30
+            while self.events() < 2 and time.monotonic() < t_end:
+                time.sleep(0.2)
+
+    def events(self) -> int:
+        """Server-sent events the page has received (``monitor.js`` counts them)."""
+        if self.driver is None:
+            return 0
+        return int(self.driver.execute_script(
+            "return Number(document.documentElement.dataset.events || 0)"))
+
+    def close(self) -> None:
+        if self.driver is not None:
+            self.driver.quit()
+        self.proc.terminate()
+        self.proc.wait(timeout=10)
+
+
+def _cpu_busy() -> tuple[float, float]:
+    """The machine's (busy, total) CPU time so far, from /proc/stat (all processes)."""
+    fields = [float(v) for v in Path("/proc/stat").read_text().split("\n")[0].split()[1:]]
+    idle = fields[3] + fields[4]
+    return sum(fields) - idle, sum(fields)
+
+
+def run_monitor_ab(screen, seconds: float, blocks: int, browser: bool, seed: int = 1) -> dict:
+    """The display loop with and without the operator's live view, in the same run and window
+    (issue 23): blocks of ``seconds`` in rotation, each a new attempt of the session's frame
+    loop with the session's own log writing (the gaze and frame logs in batches by their
+    flusher thread): ``off`` (no status file), ``publisher`` (the live status file written 4
+    times a second, as every session does: :class:`fovexp.experiment.live.LivePublisher` fed
+    by the logs' taps), ``monitor`` (the same, and ``fovexp monitor`` serving it with its page
+    open in Chromium on this machine). Each block's display-thread work per frame is kept."""
+    import tempfile
+
+    from fovexp import load_display, make_params
+    from fovexp.experiment.frameloop import (
+        LateLatch,
+        TrialIO,
+        TrialLoop,
+        display_thread_first,
+    )
+    from fovexp.experiment.gaze import BlankingMonitor, FixationGeometry, SimulatedGaze
+    from fovexp.experiment.live import LivePublisher
+    from fovexp.experiment.logs import (
+        FRAME_COLUMNS,
+        GAZE_COLUMNS,
+        BatchLog,
+        PeriodicFlusher,
+    )
+    from fovexp.experiment.render import TestRenderer
+    from fovexp.experiment.rows import gaze_items, gaze_row
+    from fovexp.experiment.trial import TrialState, ValueAdjuster, Wheel
+
+    display = load_display("lg-oled55cx")
+    fix = FixationGeometry(display)
+    frame, _ = _frame()
+    screen.set_reference(frame[:, : W // 2])
+    renderer = TestRenderer(display, backend="cpu")
+    renderer.set_image(frame[:, W // 2:], (W, H))
+    lo, hi, step = 0.0, 0.4, 0.02
+    gaze = ThreadedSimulatedGaze(SimulatedGaze(fix, seed=seed))
+    gaze.start()
+    tmp = Path(tempfile.mkdtemp(prefix="fovexp-display-loop-"))
+    sid = time.strftime("%Y%m%d-%H%M%S")
+    folder = tmp / "results" / "calibration-fe" / "BENCH"
+    folder.mkdir(parents=True)
+    gaze_log = BatchLog(folder / f"gaze-{sid}.csv", GAZE_COLUMNS,
+                        formatter=lambda item: gaze_row(fix, item))
+    frame_log = BatchLog(folder / f"frames-{sid}.csv", FRAME_COLUMNS)
+    flusher = PeriodicFlusher([gaze_log, frame_log]).start()
+    header = {"participant": "BENCH", "experiment": "calibration-fe", "dry_run": True,
+              "tracker_name": "simulated", "radius_deg": 1.25, "protocol_title": "benchmark",
+              "n_trials": blocks * 3}
+    latch = LateLatch(1.0 / REFRESH_HZ)  # as a session: one for the run, late latching on
+    order = ["off", "publisher", "monitor"]
+    out: dict[str, dict] = {c: {"blocks": []} for c in order}
+    timings: dict[str, list] = {c: [] for c in order}
+    try:
+        for b in range(blocks * len(order)):
+            cond = order[b % len(order)]
+            pub = mon = None
+            if cond != "off":
+                pub = LivePublisher(folder, sid, header, fix).start()
+                gaze_log.tap, frame_log.tap = pub.gaze, pub.frames
+                pub.tracker_quality([])
+            if cond == "monitor":
+                mon = _Monitor(tmp / "results", f"calibration-fe/BENCH/{sid}", browser)
+                time.sleep(2.0)  # its start-up is over
+            adjuster = ValueAdjuster(lo, hi, step, step / 4, (lo + hi) / 2)
+            st = TrialState(adjuster, REFRESH_HZ)
+            ticks = {"next": 0.1, "dir": 1}
+
+            def participant(t: float, value: float, judgeable: bool, ticks: dict = ticks,
+                            adjuster: ValueAdjuster = adjuster) -> list:
+                if t < ticks["next"]:
+                    return []
+                ticks["next"] += 0.1
+                if not lo < adjuster.value + ticks["dir"] * step < hi:
+                    ticks["dir"] *= -1
+                return [Wheel(ticks["dir"])]
+
+            def params_for(v: float):
+                return make_params(method="contrast", blur_rate=0.34, f_e=v, impulses=12,
+                                   seed=seed)
+
+            block_t: list = []
+            loop = TrialLoop(
+                screen=screen, gaze=gaze, renderer=renderer, monitor=BlankingMonitor(fix),
+                state=st, params_for=params_for, parameter="f_e", trial_index=b, attempt=0,
+                participant=participant, timings=block_t, latch=latch,
+                io=TrialIO(frame=frame_log.add,
+                           gaze=lambda i, a, smp: gaze_log.extend(gaze_items(i, smp, a)),
+                           event=lambda kind, detail: None))
+            if pub is not None:
+                pub.begin_attempt(b, 0, position=b + 1, total=blocks * len(order),
+                                  practice=False, method="contrast", image="sponza",
+                                  parameter="f_e", start_value=adjuster.value)
+            loop.show_first()
+            events0 = mon.events() if mon is not None else 0
+            load = os.getloadavg()[0]
+            busy0 = _cpu_busy()
+            t0 = time.monotonic()
+            with display_thread_first():
+                loop.run(max_s=seconds)
+            elapsed = time.monotonic() - t0
+            busy1 = _cpu_busy()
+            events = (mon.events() - events0) if mon is not None else 0
+            if pub is not None:
+                pub.end_attempt("done")
+            if mon is not None:
+                mon.close()
+            if pub is not None:
+                gaze_log.tap = frame_log.tap = None
+                pub.stop("between trials")
+            no = [t for t in block_t if t.upload_s is None]
+            timings[cond] += block_t
+            out[cond]["blocks"].append({
+                "frames": len(block_t), "seconds": round(elapsed, 2),
+                "work_p99_ms": _stats_ms([t.work_s for t in no])["p99"],
+                "work_cpu_p99_ms": _stats_ms([t.work_cpu_s for t in no])["p99"],
+                "load_average_1min": round(load, 2),
+                "machine_cpu_busy": round((busy1[0] - busy0[0]) / max(1e-9, busy1[1] - busy0[1]),
+                                          3),
+                "status_writes": pub.writes if pub is not None else 0,
+                "publish_cpu_ms": (_stats_ms(list(pub.publish_cpu_s)) if pub is not None
+                                   else None),
+                "page_events": events,
+                "page_events_per_s": round(events / elapsed, 2) if mon is not None else None,
+            })
+            time.sleep(2.0)  # what the block started or stopped settles
+    finally:
+        flusher.stop()
+        gaze.stop()
+        renderer.close()
+    for cond in order:
+        t = timings[cond]
+        no = [x for x in t if x.upload_s is None]
+        up = [x for x in t if x.upload_s is not None]
+        out[cond].update({
+            "frames": len(t),
+            "work_ms": {"no_upload": _stats_ms([x.work_s for x in no]),
+                        "upload": _stats_ms([x.work_s for x in up])},
+            "work_cpu_ms": {"no_upload": _stats_ms([x.work_cpu_s for x in no]),
+                            "upload": _stats_ms([x.work_cpu_s for x in up])},
+            "gaze_to_flip_call_ms": {"no_upload": _stats_ms([x.gaze_to_flip_call_s
+                                                             for x in no])},
+        })
+    off = [x.work_s for x in timings["off"] if x.upload_s is None]
+    for cond in ("publisher", "monitor"):
+        on = [x.work_s for x in timings[cond] if x.upload_s is None]
+        out[cond]["vs_off"] = _compare(off, on)
+    return {"seconds_per_block": seconds, "blocks": blocks, "browser": browser,
+            "conditions": out, "tap_ns_per_frame": _tap_cost(fix)}
+
+
+def _compare(off_s: list[float], on_s: list[float], n_boot: int = 4000,
+             seed: int = 0) -> dict:
+    """The display thread's work p99 with the live view (``on_s``) minus without
+    (``off_s``): the difference and its 95 % bootstrap interval (both samples resampled), and
+    the Mann-Whitney U test's p-value of the whole distributions."""
+    from scipy.stats import mannwhitneyu
+
+    rng = np.random.default_rng(seed)
+    a, b = 1e3 * np.asarray(off_s), 1e3 * np.asarray(on_s)
+    if a.size < 10 or b.size < 10:
+        return {}
+    diffs = [np.percentile(rng.choice(b, b.size), 99) - np.percentile(rng.choice(a, a.size), 99)
+             for _ in range(n_boot)]
+    lo, hi = np.percentile(diffs, [2.5, 97.5])
+    return {"p99_diff_ms": float(np.percentile(b, 99) - np.percentile(a, 99)),
+            "p99_diff_ci95_ms": [float(lo), float(hi)],
+            "median_diff_ms": float(np.median(b) - np.median(a)),
+            "mann_whitney_p": float(mannwhitneyu(a, b).pvalue)}
+
+
+def _tap_cost(fix, n: int = 100_000) -> dict:
+    """What the live view adds to the display thread per frame: one frame row and one batch of
+    gaze items handed to the publisher's queues (ns per call; the queues drained between
+    batches, as the publisher thread does)."""
+    import tempfile
+
+    from fovexp.experiment.gaze import GazeSample
+    from fovexp.experiment.live import LivePublisher
+    from fovexp.experiment.logs import FRAME_COLUMNS
+
+    pub = LivePublisher(Path(tempfile.mkdtemp()), "tap", {}, fix)
+    row = tuple(range(len(FRAME_COLUMNS)))
+    items = [(0, 0, GazeSample(i, i, 0.5, 0.5, True, 0.5, 0.5, True)) for i in range(5)]
+    rows = (row,)
+    out = {}
+    for name, call, arg in (("frame_row", pub.frames, rows), ("gaze_batch_of_5", pub.gaze,
+                                                             items)):
+        best = float("inf")
+        for _ in range(5):
+            t0 = time.perf_counter_ns()
+            for _ in range(n):
+                call(arg)
+            best = min(best, (time.perf_counter_ns() - t0) / n)
+            pub._frames_in.clear()
+            pub._gaze_in.clear()
+        out[name] = round(best, 1)
+    return out
+
+
+def monitor_report(m: dict) -> list[str]:
+    """The section of DISPLAY_LOOP.md on the live view (issue 23)."""
+    c = m["conditions"]
+    mm = m.get("machine", {})
+    lines = [
+        "## With the monitor open (issue 23)", "",
+        f"Machine: {mm.get('cpu', '?')}, {mm.get('cores', '?')} cores; {mm.get('renderer', '?')}; "
+        f"{mm.get('display', '?')}; load average {mm.get('load_average', '?')} at the start; "
+        f"{mm.get('date', '?')}. Command: `xvfb-run -a -s \"-screen 0 3840x2160x24\" "
+        f".venv/bin/python benchmarks/display_loop.py {m.get('args', '')}`.", "",
+        f"The same window and loop as the session runs it (late latching on: one `LateLatch` "
+        f"for the run), CPU backend, f_e steps every 100 ms; {m['blocks']} blocks "
+        f"of {m['seconds_per_block']:g} s per condition, in rotation (off, publisher, "
+        "monitor, off, ...), each a new attempt with the session's own log writing. *off*: no "
+        "status file; *publisher*: the live status file written 4 times a second, as every "
+        "session does (`LivePublisher`, fed by the logs' taps); *monitor*: the same, and "
+        "`fovexp monitor` serving it (its own process, nice +10, as `fovexp run --monitor` "
+        "starts it) with its page open in headless Chromium "
+        + ("on this machine" if m["browser"] else "(not run: no browser here)") +
+        ", receiving its events. Times in ms as p50 / p99 / max (n), all blocks of a "
+        "condition pooled.", "",
+        "| condition | frames | work, no upload | work CPU, no upload | work, upload | "
+        "gaze to flip call, no upload | work p99 per block | machine CPU busy per block | "
+        "page events per s |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for name in ("off", "publisher", "monitor"):
+        r = c[name]
+        per = ", ".join(f"{b['work_p99_ms']:.2f}" for b in r["blocks"])
+        busy = ", ".join(f"{100 * b['machine_cpu_busy']:.0f} %" for b in r["blocks"])
+        ev = ", ".join(f"{b['page_events_per_s']:.1f}" for b in r["blocks"]
+                       if b["page_events_per_s"] is not None) or "-"
+        lines.append(
+            f"| {name} | {r['frames']} | {_fmt(r['work_ms']['no_upload'])} | "
+            f"{_fmt(r['work_cpu_ms']['no_upload'])} | {_fmt(r['work_ms']['upload'])} | "
+            f"{_fmt(r['gaze_to_flip_call_ms']['no_upload'])} | {per} | {busy} | {ev} |")
+    lines += ["", "The live view against off, the display thread's work on frames without an "
+              "upload: the p99's difference with its 95 % bootstrap interval (both samples "
+              "resampled), the medians' difference, and the Mann-Whitney U test's p-value of "
+              "the two distributions.", "",
+              "| condition | p99 difference (95 % interval) | median difference | "
+              "Mann-Whitney p |", "|---|---|---|---|"]
+    for name in ("publisher", "monitor"):
+        v = c[name].get("vs_off") or {}
+        if v:
+            lo, hi = v["p99_diff_ci95_ms"]
+            lines.append(f"| {name} | {v['p99_diff_ms']:+.2f} ms ({lo:+.2f} to {hi:+.2f}) | "
+                         f"{v['median_diff_ms']:+.3f} ms | {v['mann_whitney_p']:.2g} |")
+    cpu = [x for b in c["publisher"]["blocks"] + c["monitor"]["blocks"]
+           if (x := b.get("publish_cpu_ms"))]
+    tap = m.get("tap_ns_per_frame", {})
+    if cpu and tap:
+        lines += ["", f"What the display thread does for it: hand one frame row "
+                  f"({tap['frame_row']:.0f} ns) and each batch of gaze samples "
+                  f"({tap['gaze_batch_of_5']:.0f} ns for 5) to the publisher's queues. The "
+                  "publisher's own thread spends, per write, "
+                  f"{max(x['p50'] for x in cpu):.2f} ms of CPU at the median (the largest "
+                  f"block median) and {max(x['max'] for x in cpu):.2f} ms at most, every "
+                  "0.25 s, at nice +10, in slices the interpreter's 0.5 ms switch interval "
+                  "bounds for the display thread."]
+    loads = [b["load_average_1min"] for r in c.values() for b in r["blocks"]]
+    off, pub, mon = (c[k]["work_ms"]["no_upload"]["p99"] for k in ("off", "publisher",
+                                                                   "monitor"))
+    spread = [b["work_p99_ms"] for b in c["off"]["blocks"]]
+    lines += [
+        "", f"Load average (1 min) at the blocks' starts: {min(loads):.1f} to {max(loads):.1f} "
+        "(the 2 cores are shared with other engineers' work).", "",
+        f"- The display thread's work p99 (frames without an upload): off {off:.2f} ms, "
+        f"publisher {pub:.2f} ms, monitor {mon:.2f} ms; the off blocks alone range "
+        f"{min(spread):.2f} to {max(spread):.2f} ms.",
+        "- Its CPU time over the work and the drawing (`work_cpu_s`: what it did, without "
+        "the waiting a loaded machine adds): p99 " + ", ".join(
+            f"{k} {c[k]['work_cpu_ms']['no_upload']['p99']:.2f} ms"
+            for k in ("off", "publisher", "monitor")) + "; medians of the wall time: "
+        + ", ".join(f"{k} {c[k]['work_ms']['no_upload']['p50']:.2f} ms"
+                    for k in ("off", "publisher", "monitor")) + "."]
+    for name in ("publisher", "monitor"):
+        v = c[name].get("vs_off") or {}
+        if v:
+            lo, hi = v["p99_diff_ci95_ms"]
+            verdict = ("equal to off within this run's resolution (the interval holds 0)"
+                       if lo <= 0 <= hi else "NOT equal to off (the interval excludes 0)")
+            lines.append(f"- {name}: the p99's difference {v['p99_diff_ms']:+.2f} ms, 95 % "
+                         f"interval {lo:+.2f} to {hi:+.2f} ms: {verdict}.")
+    lines.append("")
+    return lines
 
 
 def measure_uploads(screen, reps: int) -> dict:
@@ -336,6 +691,8 @@ def report(res: dict, m: dict) -> str:
             "for this reason. How the display thread fares beside the compute shaders on a "
             "hardware GPU is not measured (no session so far had one): the same command with "
             "`--backends cpu,gpu` on a rig measures it.", ""]
+    if res.get("monitor"):
+        lines += monitor_report(res["monitor"])
     return "\n".join(lines)
 
 
@@ -346,6 +703,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--backends", default="cpu",
                     help="cpu and/or gpu (the GPU backend writing the window's textures)")
     ap.add_argument("--upload-reps", type=int, default=30)
+    ap.add_argument("--monitor-blocks", type=int, default=0, metavar="N",
+                    help="also N blocks per condition with and without the live view "
+                         "(issue 23: off / status file / monitor open in Chromium)")
+    ap.add_argument("--monitor-seconds", type=float, default=12.0,
+                    help="seconds per block of --monitor-blocks")
+    ap.add_argument("--monitor-only", action="store_true",
+                    help="only the --monitor-blocks comparison; the other runs are kept from "
+                         "display_loop.json")
     ap.add_argument("--out", type=Path, default=HERE)
     ap.add_argument("--report-only", action="store_true",
                     help="rewrite DISPLAY_LOOP.md from display_loop.json (no measurement)")
@@ -360,6 +725,7 @@ def main(argv: list[str] | None = None) -> int:
     from fovexp.experiment.frameloop import display_thread_first
     from fovexp.experiment.window import PsychoScreen
 
+    flags = " ".join(a for a in (argv if argv is not None else sys.argv[1:]))
     screen = PsychoScreen((W, H), fullscreen=False, cross_px=28, refresh_hz=REFRESH_HZ,
                           pace_hz=REFRESH_HZ)
     try:
@@ -368,18 +734,27 @@ def main(argv: list[str] | None = None) -> int:
         m = {**machine(), "renderer": gl.gl_info.get_renderer(),
              "display": "Xvfb 3840x2160x24",
              "load_average": " ".join(f"{v:.1f}" for v in os.getloadavg())}
-        runs = [run_loop(screen, b, p, args.seconds)
-                for b in args.backends.split(",") for p in args.parameters.split(",")]
-        with display_thread_first():  # as during a session's trials
-            uploads = measure_uploads(screen, args.upload_reps)
+        if args.monitor_only:
+            res = json.loads((args.out / "display_loop.json").read_text())
+        else:
+            runs = [run_loop(screen, b, p, args.seconds)
+                    for b in args.backends.split(",") for p in args.parameters.split(",")]
+            with display_thread_first():  # as during a session's trials
+                uploads = measure_uploads(screen, args.upload_reps)
+            res = {"machine": m, "seconds": args.seconds, "runs": runs, "uploads": uploads,
+                   "args": flags}
+        if args.monitor_blocks:
+            from importlib.util import find_spec
+
+            browser = find_spec("selenium") is not None and Path("/usr/bin/chromedriver").exists()
+            res["monitor"] = {**run_monitor_ab(screen, args.monitor_seconds,
+                                               args.monitor_blocks, browser),
+                              "machine": m, "args": flags}
     finally:
         screen.close()
-    flags = " ".join(a for a in (argv if argv is not None else sys.argv[1:]))
-    res = {"machine": m, "seconds": args.seconds, "runs": runs, "uploads": uploads,
-           "args": flags}
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "display_loop.json").write_text(json.dumps(res, indent=2) + "\n")
-    text = report(res, m)
+    text = report(res, res["machine"])
     (args.out / "DISPLAY_LOOP.md").write_text(text)
     print(text)
     return 0

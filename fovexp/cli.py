@@ -1,7 +1,7 @@
 """``fovexp`` command line: ``enhance`` and ``compile`` (this module), ``run`` (experiment
 runner), ``init`` (a study folder, :mod:`fovexp.experiment.study`), ``analyze`` (analysis),
-``docs`` (the documentation site, :mod:`fovexp.docsite`) and ``bench`` (run time against
-error, :mod:`fovexp.bench`).
+``monitor`` (the live view of running sessions), ``docs`` (the documentation site,
+:mod:`fovexp.docsite`) and ``bench`` (run time against error, :mod:`fovexp.bench`).
 Bad input prints one ``fovexp: error: ...`` line and exits with 2.
 
 A command's module, and what it imports, is loaded only when that command runs (or its
@@ -35,6 +35,8 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
                 "generate scenes, add a lab's frames, check a protocol's images"),
     "analyze": ("fovexp.analysis.cli", "add_analyze_parser",
                 "turn trial logs into the paper's results (Table 2, validation tests)"),
+    "monitor": ("fovexp.monitor.cli", "add_monitor_parser",
+                "watch running sessions in a browser (read-only)"),
     "init": ("fovexp.experiment.study", "add_init_parser",
              "make a study folder: copies of the shipped protocols, stimuli/, results/"),
     "docs": ("fovexp.docsite", "add_docs_parser",

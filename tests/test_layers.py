@@ -128,24 +128,46 @@ def test_runner_and_analysis_do_not_import_each_other(graph):
     assert _edges(graph, "fovexp.results", "fovexp.analysis") == []
 
 
+def test_the_monitor_reads_files_only(graph):
+    """``fovexp monitor`` shares nothing with a session but the files on disk: it imports
+    neither the runner nor the analysis (nor, through them, PsychoPy or moderngl); the runner
+    reaches it only from its command line (``fovexp run --monitor`` starts it as a process)."""
+    assert _edges(graph, "fovexp.monitor", "fovexp.experiment") == []
+    assert _edges(graph, "fovexp.monitor", "fovexp.analysis") == []
+    assert _edges(graph, "fovexp.monitor", "fovexp.gpu") == []
+    assert _edges(graph, "fovexp.experiment", "fovexp.monitor") in (
+        [], [("fovexp.experiment.cli", "fovexp.monitor.cli")])
+    assert _edges(graph, "fovexp.results", "fovexp.monitor") == []
+    for path in (PACKAGE / "monitor").rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            names = ([a.name for a in node.names] if isinstance(node, ast.Import)
+                     else [node.module or ""] if isinstance(node, ast.ImportFrom) else [])
+            assert not any(n.split(".")[0] in ("psychopy", "moderngl", "pyglet")
+                           for n in names), path
+
+
 def test_runner_does_not_import_the_cli(graph):
     assert _edges(graph, "fovexp.experiment", "fovexp.cli") == []
 
 
-@pytest.mark.parametrize("part", ["fovexp.experiment", "fovexp.analysis", "fovexp.results"])
+@pytest.mark.parametrize("part", ["fovexp.experiment", "fovexp.analysis", "fovexp.results",
+                                  "fovexp.monitor"])
 def test_runner_and_analysis_use_the_public_api(graph, part):
     """Of the enhancer they import only the package's public names (``from fovexp import``,
     docs/API.md), the shared logs layer ``fovexp.results``, and their own modules."""
     allowed = ("fovexp", "fovexp.results", part)
+    # ``fovexp run --monitor`` starts ``fovexp monitor`` beside the session
+    beside = ("fovexp.experiment.cli", "fovexp.monitor.cli")
     bad = [(a, b) for a, b in _edges(graph, part, "fovexp")
-           if not (b == "fovexp" or any(b == p or b.startswith(p + ".") for p in allowed[1:]))]
+           if not (b == "fovexp" or any(b == p or b.startswith(p + ".") for p in allowed[1:]))
+           and (a, b) != beside]
     assert bad == []
 
 
 def test_the_engine_does_not_import_the_runner_or_the_analysis(graph):
     engine = [m for m in graph if not m.startswith(("fovexp.experiment", "fovexp.analysis",
-                                                    "fovexp.results", "fovexp.cli",
-                                                    "fovexp.__main__", "fovexp.bench",
+                                                    "fovexp.results", "fovexp.monitor",
+                                                    "fovexp.cli", "fovexp.__main__", "fovexp.bench",
                                                     "fovexp.evaluation", "fovexp.rig",
                                                     # compiles every kernel, the evaluation's too
                                                     "fovexp.warmup"))]

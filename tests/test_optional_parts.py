@@ -73,3 +73,29 @@ def test_no_tobii_sdk_names_the_tracker_extra(monkeypatch):
     _without(monkeypatch, "tobii_research")
     with pytest.raises(FovexpError, match=r"pip install 'fovexp\[tracker\]'"):
         import_tobii()
+
+
+def test_no_web_server_names_the_monitor_extra(monkeypatch):
+    """``fovexp monitor`` and ``fovexp run --monitor`` without starlette or uvicorn."""
+    from fovexp.monitor.cli import require_server
+
+    for name in ("starlette", "uvicorn"):
+        with monkeypatch.context() as m:
+            _without(m, name)
+            with pytest.raises(FovexpError) as exc:
+                require_server()
+            msg = str(exc.value)
+            assert "pip install 'fovexp[monitor]'" in msg and name in msg and "\n" not in msg
+
+
+def test_run_with_the_monitor_but_no_web_server_opens_nothing(monkeypatch, tmp_path, capsys):
+    from fovexp.cli import build_parser
+
+    _without(monkeypatch, "uvicorn")
+    args = build_parser().parse_args(["run", "calibration-fe", "--participant", "M01",
+                                      "--dry-run", "--results", str(tmp_path / "results"),
+                                      "--monitor"])
+    assert args.func(args) == 2
+    err = capsys.readouterr().err
+    assert "pip install 'fovexp[monitor]'" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "results").exists()  # nothing written, no window

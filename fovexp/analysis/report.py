@@ -1,5 +1,5 @@
-"""``fovexp analyze``: trial logs -> tables, figures, statistics and a Markdown report
-(paper sections 5.3, 6.1 and 6.3).
+"""``fovexp analyze``: trial logs -> tables, figures, statistics and a Markdown report, also as
+an HTML page (paper sections 5.3, 6.1 and 6.3).
 
 The report says at its top when its data come from dry runs (simulated participants) or
 include mouse-gaze pilots. Every table column with a unit names it in its header; f_e, s_k and
@@ -8,6 +8,7 @@ s_f are dimensionless; every mean comes with its SEM across participants and n.
 Output folder layout::
 
     report.md                      everything below, gathered, with the exclusions
+    report.html                    the same as a page (readable offline; the figures' PNGs)
     table2.yaml                    the lab's Table 2 as a ParameterTable (the enhancer reads it)
     tables/table2.{csv,md,tex}
     tables/calibration-fe.csv, calibration-sk.csv, calibration-sk-lines.csv, calibration-sf.csv
@@ -30,6 +31,7 @@ from fovexp import FovexpError
 from fovexp.results.format import PILOT_TRACKER, SIMULATED_TRACKER
 from fovexp.results.loading import TrialLimits, load_results, rules
 
+from .html import write_report_html
 from .sections import SECTIONS
 from .sections.calibration import CALIBRATION_EXPERIMENTS
 from .sections.common import md_table
@@ -82,6 +84,7 @@ def run_analysis(
     text = _report_md(ana, sections, results)
     ana.report.write_text(text)
     ana.files.append(ana.report)
+    ana.files.append(write_report_html(text, ana.out / "report.html"))  # the same, as a page
     return ana
 
 

@@ -79,6 +79,16 @@ def add_run_parser(subparsers: Any) -> argparse.ArgumentParser:
                    "tests, pilots)")
     p.add_argument("--practice", type=int, default=None, metavar="N",
                    help="practice trials (default: the protocol's)")
+    m = p.add_argument_group("the operator's live view (docs/EXPERIMENT.md)")
+    m.add_argument("--monitor", action="store_true",
+                   help="also serve fovexp monitor's page for the results root while the run "
+                        "lasts (http://127.0.0.1:8765/; a process of its own, at a lower "
+                        "priority; needs fovexp[monitor])")
+    m.add_argument("--monitor-host", default=None, metavar="HOST",
+                   help="with --monitor: the address to serve, e.g. 0.0.0.0 for the lab's "
+                        "network (a token is printed; every request needs it)")
+    m.add_argument("--monitor-port", type=int, default=None, metavar="PORT",
+                   help="with --monitor: the port (default 8765)")
     f = p.add_argument_group(
         "participant form (asked at the console at a participant's first session; every "
         "field optional; never in a dry run)")
@@ -141,7 +151,7 @@ def run_command(args: argparse.Namespace) -> int:
     """Validate everything, then run the session; errors print one line and return 2."""
     from .session import EXIT_ERROR, Session, SessionOptions
 
-    session = None
+    session = monitor = None
     try:
         from .participant import SimTruth
         from .protocol import load_protocol
@@ -149,6 +159,10 @@ def run_command(args: argparse.Namespace) -> int:
         from .validation import check_participant
 
         check_participant(args.participant)
+        if args.monitor or args.monitor_host or args.monitor_port is not None:
+            from fovexp.monitor.cli import require_server
+
+            require_server()  # a missing extra stops here, before anything is opened
         if args.limit_trials is not None and args.limit_trials < 1:
             raise FovexpError("--limit-trials must be at least 1")
         if args.practice is not None and args.practice < 0:
@@ -212,6 +226,12 @@ def run_command(args: argparse.Namespace) -> int:
         print(f"fovexp run: {protocol.experiment}, participant {args.participant}, session "
               f"{session.session_id}, {len(session.remaining)} of {len(session.trials)} trials "
               f"to run -> {session.folder}", file=sys.stderr)
+        if args.monitor or args.monitor_host or args.monitor_port is not None:
+            from fovexp.monitor.cli import DEFAULT_PORT, start_beside
+
+            monitor = start_beside(args.results, args.monitor_host,
+                                   args.monitor_port if args.monitor_port is not None
+                                   else DEFAULT_PORT)
         code = session.run(gaze=gaze)
     except FovexpError as exc:
         print(f"fovexp run: error: {exc}", file=sys.stderr)
@@ -222,6 +242,10 @@ def run_command(args: argparse.Namespace) -> int:
     finally:
         if session is not None:  # a session that never started leaves no empty folder
             session.release()
+        if monitor is not None:
+            from fovexp.monitor.cli import stop_beside
+
+            stop_beside(monitor)
     messages = {0: "finished", 3: "aborted by the operator; continue with --resume",
                 130: "interrupted; continue with --resume"}
     print(f"fovexp run: session {session.session_id} {messages.get(code, code)}", file=sys.stderr)

@@ -134,8 +134,11 @@ class BatchLog:
     ``add`` only appends to a list under a lock; ``flush`` writes what has accumulated. On
     resume an existing file's torn tail is cut off first. ``formatter`` turns what was added
     into a row when it is written, on the flushing thread (the gaze log's eccentricities are
-    computed there, not in the frame loop).
+    computed there, not in the frame loop). ``tap``, when set, is also handed what is added, as
+    it is added (the live status file's publisher: :mod:`.live`); it must only queue it.
     """
+
+    tap: Callable[[Iterable[Any]], None] | None = None
 
     def __init__(self, path: Path, columns: Sequence[str],
                  formatter: Callable[[Any], Sequence[Any]] | None = None) -> None:
@@ -157,8 +160,13 @@ class BatchLog:
     def add(self, row: Sequence[Any]) -> None:
         with self._lock:
             self._pending.append(row)
+        if self.tap is not None:
+            self.tap((row,))
 
     def extend(self, rows: Iterable[Sequence[Any]]) -> None:
+        if self.tap is not None:
+            rows = rows if isinstance(rows, list) else list(rows)
+            self.tap(rows)
         with self._lock:
             self._pending.extend(rows)
 

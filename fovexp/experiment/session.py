@@ -15,7 +15,9 @@
   whenever the gaze leaves the 1.25 deg window around the cross, or is invalid or lost, the
   next frame is black);
 - :mod:`.rows`: the trial, gaze and blanking logs' rows;
-- :mod:`.operator`: the operator's console line and checklist.
+- :mod:`.operator`: the operator's console line and checklist;
+- :mod:`.live`: the live status file ``fovexp monitor`` reads (its own thread; the display
+  thread only queues the rows it gives the frame and gaze logs).
 
 The window is a :class:`~fovexp.experiment.interfaces.Screen` (``window.PsychoScreen``), the
 gaze a :class:`~fovexp.experiment.interfaces.GazeSource`. Between trials the screen shows the
@@ -51,6 +53,7 @@ from .gaze import (
     SimulatedGaze,
 )
 from .interfaces import GazeSource, Renderer, Screen, ScreenFactory
+from .live import LivePublisher
 from .lock import LOCK_FILE, FolderLock
 from .logs import (
     BLANKING_COLUMNS,
@@ -182,6 +185,15 @@ class Session:
         self.latch: LateLatch | None = None  # made with the window (its refresh rate)
         self._trial_seconds: list[float] = []  # this run's trial durations (the console's ETA)
         self._operator_notes: list[str] = []  # shown with the instructions (backend, budget)
+        self._seq: TrialSequence | None = None  # the run's (set by _trials)
+        spec = protocol.spec
+        self.live = LivePublisher(self.folder, self.session_id, {
+            "participant": self.participant, "experiment": protocol.experiment,
+            "protocol_path": str(protocol.path), "protocol_title": spec.title,
+            "protocol_sha256": protocol.sha256, "dry_run": opts.dry_run,
+            "radius_deg": spec.fixation.radius_deg,
+            "gaze_timeout_s": spec.fixation.gaze_timeout_s, "break_every": spec.break_every,
+            "n_trials": len(self.trials)}, self.fixation)
 
     def release(self) -> None:
         """Let go of the folder's lock; a folder this run created and wrote nothing to (a
@@ -331,6 +343,7 @@ class Session:
         #: when each frame reads the gaze (one latch for the run: its margin carries over)
         self.latch = LateLatch(1.0 / self.refresh_hz)
         self._open_logs()
+        self._start_live()
         flusher = PeriodicFlusher([self.gaze_log, self.frame_log, self.blank_log]).start()
         old_handlers = self._install_signals()
         state, code, failure = "interrupted", EXIT_INTERRUPTED, None
@@ -346,7 +359,9 @@ class Session:
             self._check_keyboard()
             self._check_rig()
             self._check_render_budget()
+            self.live.set_state("calibrating")
             self.tracker.setup()
+            self.live.tracker_quality(self.info.get("tracker_quality"))
             self._instructions()
             with display_thread_first() as priority:
                 latch = self.latch
@@ -401,6 +416,15 @@ class Session:
         self.frame_log = BatchLog(self.folder / f"frames-{sid}.csv", FRAME_COLUMNS)
         self.blank_log = BatchLog(self.folder / f"blanking-{sid}.csv", BLANKING_COLUMNS)
 
+    def _start_live(self) -> None:
+        """The live status file (:mod:`.live`) from now on, fed by the frame and gaze logs'
+        taps (until then :attr:`live` only keeps what it is told)."""
+        self.live.header.update(tracker_name=self.gaze.name, refresh_hz=self.refresh_hz,
+                                remaining=len(self.remaining))
+        self.live.start()
+        self.gaze_log.tap = self.live.gaze
+        self.frame_log.tap = self.live.frames
+
     def _start_renderer(self) -> None:
         from .render import TestRenderer
 
@@ -440,6 +464,7 @@ class Session:
         done = {int(r["trial_index"]) for r in self.trial_log.rows
                 if r["session"] == self.session_id}
         complete = state == "completed" and len(done) == len(self.trials)
+        self.live.stop(state if complete or state != "completed" else "incomplete")
         extra: dict[str, Any] = {"failure": failure} if failure is not None else {}
         measured = getattr(self.gaze, "measured", None)  # the sampling rate over the run
         if measured is not None and "tracker" in self.info:
@@ -566,13 +591,15 @@ class Session:
         for sig, h in old.items():
             signal.signal(sig, h)
 
-    def _message(self, text: str, keys: list[str], timeout_s: float | None = None) -> str | None:
+    def _message(self, text: str, keys: list[str], timeout_s: float | None = None,
+                 state: str = "message") -> str | None:
         """A message screen; the gaze stream keeps going into the gaze log meanwhile (a long
         break would otherwise overflow the tracker's buffer). Escape or Q (where Q is not one of
         the message's own keys) asks to quit (:meth:`confirm_quit`); going back shows the
         message again."""
         if self.opts.dry_run:
             timeout_s = self.opts.dry_message_s
+        self.live.set_state(state, text)
         quit_keys = [k for k in QUIT_KEYS if k not in keys]
         while True:
             key = self.screen.message(text, [*keys, *quit_keys], timeout_s, self._drain_gaze)
@@ -605,8 +632,8 @@ class Session:
     def _trials(self) -> None:
         """The run's trials in order (:class:`.sequence.TrialSequence`: announcements and
         breaks); each until an attempt is confirmed; after each, the tracker's checks."""
-        seq = TrialSequence(self.trials, self.remaining, self.done,
-                            self.protocol.spec.break_every)
+        seq = self._seq = TrialSequence(self.trials, self.remaining, self.done,
+                                        self.protocol.spec.break_every)
         for trial in self.remaining:
             for text in seq.before(trial):
                 self._message(text, ["space"])
@@ -618,9 +645,11 @@ class Session:
             # breaks at the same places of the plan whatever runs it took (resume)
             pause = seq.after(trial)
             if pause is not None:
-                self._message(pause, ["space"])
+                self._message(pause, ["space"], state="break")
             # drift check / recalibration (D, C, every N)
+            self.live.set_state("between trials")
             self.tracker.between_trials(trial, more_trials=left > 0)
+            self.live.tracker_quality(self.info.get("tracker_quality"))
 
     def _attempts_until_done(self, trial: Trial) -> None:
         """Attempts at ``trial`` until one is confirmed: a pause or a lost tracker restarts it
@@ -635,6 +664,7 @@ class Session:
                 return
             if outcome == "pause":
                 self.file.event("paused", trial_index=trial.index)
+                self.live.set_state("paused")
                 # Waits for the operator even in a dry run (no auto-continue).
                 key = self.screen.message(
                     "Paused.\n\nSpace: continue (this trial starts again)\n"
@@ -650,15 +680,18 @@ class Session:
         """trial i/N, blanked %, dropped frames, gaze-to-flip latency, ETA (docs/EXPERIMENT.md)."""
         st = self._last_state
         position, total = seq.position(trial)
+        eta = eta_s(self._trial_seconds, left)
+        self.live.set_eta(eta)
         self._say(trial_line(position=position, total=total, practice=trial.practice,
                              blanked_fraction=st.blanking.fraction, dropped=st.timer.dropped,
                              frames=st.n_frames,
                              latency_ms=np.array(self._last_latency_ms, dtype=float),
-                             eta_s=eta_s(self._trial_seconds, left)))
+                             eta_s=eta))
 
     def _wait_reconnect(self, trial: Trial) -> None:
         """Tracker lost mid-session: screen blanked, a message, wait; Q quits (saved)."""
         self.file.event("tracker_disconnected", trial_index=trial.index)
+        self.live.set_state("disconnected")
         text = ("The eye tracker connection was lost. The trial will start again when it is "
                 "back.\n\nQ: quit (progress is saved; continue later with --resume)")
         while not self.gaze.connected:
@@ -671,6 +704,7 @@ class Session:
             if key is not None:
                 self.confirm_quit(trial.index)
         self.file.event("tracker_reconnected", trial_index=trial.index)
+        self.live.event("tracker_reconnected")
 
     def _params(self, trial: Trial, value: float) -> EnhanceParams:
         return self.protocol.make_params(trial, value, self.seed)
@@ -692,12 +726,21 @@ class Session:
         written (the commit point) after it.
         """
         loop, st = self._trial_loop(trial, attempt)
+        position, total = (self._seq.position(trial) if self._seq is not None
+                           else (None, None))
+        adj = self.protocol.spec.adjust
+        self.live.begin_attempt(trial.index, attempt, position=position, total=total,
+                                practice=trial.practice, method=trial.method,
+                                image=trial.image, parameter=adj.parameter,
+                                blur_rate=trial.blur_rate, start_value=trial.start_value)
+        outcome = "error"
         try:
             loop.show_first()
             outcome = loop.run()
         finally:
             st.finish(time.monotonic())  # when the loop could not flip its closing frame
             self.blank_log.extend(blanking_rows(trial.index, attempt, st.blanking.episodes))
+            self.live.end_attempt(outcome)
         if outcome != "done":
             return outcome
         # Side logs first (synced), then the trial row: the row is the commit point.
@@ -744,7 +787,8 @@ class Session:
             io=TrialIO(frame=frame_row,
                        gaze=lambda i, a, samples: self.gaze_log.extend(
                            gaze_items(i, samples, a)),
-                       event=lambda kind, detail: self.file.event(kind, **detail)))
+                       event=lambda kind, detail: (self.file.event(kind, **detail),
+                                                   self.live.event(kind, detail))))
         self._last_state, self._last_latency_ms = st, latency_ms
         return loop, st
 

@@ -188,9 +188,11 @@ class TrialsFile:
     #: documented columns missing from the header (then no row is read)
     missing: list[str] = field(default_factory=list)
     extra: list[str] = field(default_factory=list)
+    #: rows left out by a lenient read (``strict=False``): (line, problem)
+    skipped: list[tuple[int, str]] = field(default_factory=list)
 
 
-def read_trials_file(path: str | Path) -> TrialsFile:
+def read_trials_file(path: str | Path, strict: bool = True) -> TrialsFile:
     """Read a ``trials.csv``: typed rows, a torn last row dropped with a warning naming the file.
 
     The last row counts as torn (an interrupted write: the runner writes each row in one
@@ -198,6 +200,9 @@ def read_trials_file(path: str | Path) -> TrialsFile:
     count or an unparsable value. Any other bad row raises :class:`FovexpError` naming the file
     and line: the file is damaged and nothing is guessed. A header lacking a documented column
     gives ``missing`` and no rows. Blank lines are skipped.
+
+    ``strict=False`` (a live view of a file being written, ``fovexp monitor``) raises and warns
+    for nothing: every bad row, the last or another, is left out and listed in ``skipped``.
     """
     path = Path(path)
     try:
@@ -222,6 +227,8 @@ def read_trials_file(path: str | Path) -> TrialsFile:
     try:
         head_text = decode(raw_lines[0].removeprefix(b"\xef\xbb\xbf"), 1)
     except ValueError as exc:
+        if not strict:
+            return TrialsFile(path, [], skipped=[(1, f"header: {exc}")])
         raise FovexpError(f"{path}: line 1: {exc}") from None
     header = [h.strip() for h in next(csv.reader([head_text]), [])]
     out = TrialsFile(path, header)
@@ -230,7 +237,8 @@ def read_trials_file(path: str | Path) -> TrialsFile:
     if out.missing:
         if len(raw_lines) == 1 and not tail_complete:
             out.torn, out.torn_line = "torn header", 1
-            warnings.warn(f"{path}: line 1: torn header dropped", stacklevel=2)
+            if strict:
+                warnings.warn(f"{path}: line 1: torn header dropped", stacklevel=2)
             out.missing = []
         return out
     index = {c: header.index(c) for c in TRIAL_COLUMNS}
@@ -262,6 +270,9 @@ def read_trials_file(path: str | Path) -> TrialsFile:
                     problem = f"column {col}: {value.strip()!r} {exc}"
                     break
         if problem is not None:
+            if not strict:
+                out.skipped.append((i, problem))
+                continue
             if last:
                 out.torn, out.torn_line = problem, i
                 warnings.warn(f"{path}: line {i}: torn last row dropped ({problem})",

@@ -1,7 +1,8 @@
 """The thresholds of the exclusion rules on a trial's frames (R11-R13 of
 :mod:`fovexp.results.loading`), apart so that the command line states them without loading
 pandas, and the latency budget R13's default comes from (docs/ANALYSIS.md, "R13's
-threshold").
+threshold"). The analysis applies them to the logs of finished trials; ``fovexp monitor`` to the
+trial on screen (the same predicates, :meth:`TrialLimits.exceeded`).
 
 The blanking of paper section 5.1 has to put a black frame on the screen before the eye can
 look at the stimulus it hides: before a saccade that leaves the 1.25 deg window lands, give or
@@ -13,7 +14,13 @@ display is the budget, and the frame log measures the part the computer and trac
 
 from __future__ import annotations
 
+import argparse
+import math
 from dataclasses import dataclass
+from typing import Any
+
+#: the names of rules R11-R13, as the report and the monitor show them
+R11, R12, R13 = "R11 blanking", "R12 dropped frames", "R13 latency"
 
 #: The main sequence's duration (Carpenter 1988, "Movements of the Eyes", after Bahill, Clark
 #: and Stark 1975): a saccade of A deg lasts about ``SACCADE_MS_PER_DEG * A +
@@ -97,10 +104,59 @@ class TrialLimits:
     def rules(self) -> dict[str, str]:
         """R11-R13 as the report states them, with these thresholds."""
         return {
-            "R11 blanking": f"a participant's trial blanked for more than "
+            R11: f"a participant's trial blanked for more than "
             f"{self.max_blanked_fraction:.0%} of its frames: excluded",
-            "R12 dropped frames": f"a participant's trial with more than "
+            R12: f"a participant's trial with more than "
             f"{self.max_dropped_fraction:.0%} of its frames dropped (frame log): excluded",
-            "R13 latency": f"a participant's trial whose gaze-to-flip latency's 95th percentile "
+            R13: f"a participant's trial whose gaze-to-flip latency's 95th percentile "
             f"exceeds {self.max_latency_p95_ms:g} ms (frame log): excluded",
         }
+
+    # The rules' predicates, for a number or element-wise for an array or a Series; a missing
+    # figure (NaN) breaks none.
+    def blanked_excluded(self, blanked_fraction: Any) -> Any:
+        """R11: blanked for more than :attr:`max_blanked_fraction` of the trial's time."""
+        return blanked_fraction > self.max_blanked_fraction
+
+    def dropped_excluded(self, dropped_fraction: Any) -> Any:
+        """R12: more than :attr:`max_dropped_fraction` of the trial's frames dropped."""
+        return dropped_fraction > self.max_dropped_fraction
+
+    def latency_excluded(self, latency_p95_ms: Any) -> Any:
+        """R13: the gaze-to-flip latency's 95th percentile above :attr:`max_latency_p95_ms`."""
+        return latency_p95_ms > self.max_latency_p95_ms
+
+    def exceeded(self, *, blanked_fraction: float = math.nan,
+                 dropped_fraction: float = math.nan,
+                 latency_p95_ms: float = math.nan) -> dict[str, bool]:
+        """Which of R11-R13 one trial's figures break (rule name -> bool)."""
+        return {R11: bool(self.blanked_excluded(blanked_fraction)),
+                R12: bool(self.dropped_excluded(dropped_fraction)),
+                R13: bool(self.latency_excluded(latency_p95_ms))}
+
+    def as_dict(self) -> dict[str, float]:
+        return {"max_blanked_fraction": self.max_blanked_fraction,
+                "max_dropped_fraction": self.max_dropped_fraction,
+                "max_latency_p95_ms": self.max_latency_p95_ms}
+
+
+def add_limit_options(p: argparse.ArgumentParser) -> None:
+    """The ``--max-blanked``, ``--max-dropped`` and ``--max-latency-ms`` options (``fovexp
+    analyze`` and ``fovexp monitor``: one definition, the same defaults)."""
+    d = TrialLimits()
+    p.add_argument("--max-blanked", type=float, default=d.max_blanked_fraction, metavar="F",
+                   help="rule R11: the largest blanked fraction of a trial's frames "
+                        f"(default {d.max_blanked_fraction:g})")
+    p.add_argument("--max-dropped", type=float, default=d.max_dropped_fraction, metavar="F",
+                   help="rule R12: the largest fraction of a trial's frames dropped "
+                        f"(default {d.max_dropped_fraction:g})")
+    p.add_argument("--max-latency-ms", type=float, default=d.max_latency_p95_ms, metavar="MS",
+                   help="rule R13: the largest 95th percentile of a trial's gaze-to-flip "
+                        f"latency (default {d.max_latency_p95_ms:g} ms)")
+
+
+def limits_from_args(args: Any) -> TrialLimits:
+    """The limits :func:`add_limit_options` parsed."""
+    return TrialLimits(max_blanked_fraction=args.max_blanked,
+                       max_dropped_fraction=args.max_dropped,
+                       max_latency_p95_ms=args.max_latency_ms)
