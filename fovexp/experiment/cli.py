@@ -16,7 +16,8 @@ from fovexp import BACKENDS, FovexpError, find_protocol
 from fovexp.results.format import SIMULATED_TRACKER, TRACKERS
 
 
-def _size(text: str) -> tuple[int, int]:
+def window_size(text: str) -> tuple[int, int]:
+    """``--window WxH`` (the runner's and the rig check's): an even width, sides 16..16384."""
     try:
         w, h = (int(v) for v in text.lower().split("x"))
     except ValueError:
@@ -56,7 +57,7 @@ def add_run_parser(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument("--include-pilots", action="store_true",
                    help="let the dependencies' mouse-gaze pilot sessions count (left out by "
                         "default, as in fovexp analyze)")
-    p.add_argument("--window", type=_size, default=None, metavar="WxH",
+    p.add_argument("--window", type=window_size, default=None, metavar="WxH",
                    help="window size instead of the display profile's (dry run: 480x270); a "
                         "real session needs its images at exactly this size, and so does a "
                         "dry run at the display's size (a rehearsal); a smaller dry run "

@@ -13,17 +13,8 @@ from typing import Any
 from fovexp import BACKENDS, FovexpError
 from fovexp.results.format import TRACKERS
 
+from ..experiment.cli import window_size
 from .checks import MIN_REFRESH_S
-
-
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not WIDTHxHEIGHT") from None
-    if not (16 <= w <= 16384 and 16 <= h <= 16384) or w % 2:
-        raise argparse.ArgumentTypeError(f"{text!r}: need an even width and sizes of 16..16384")
-    return w, h
 
 
 def add_rig_parser(subparsers: Any) -> argparse.ArgumentParser:
@@ -58,7 +49,7 @@ def add_rig_parser(subparsers: Any) -> argparse.ArgumentParser:
     c.add_argument("--backend", choices=BACKENDS, default="auto",
                    help="the enhancer's backend to load the display with (default auto)")
     c.add_argument("--screen", type=int, default=0, metavar="N", help="the monitor (default 0)")
-    c.add_argument("--window", type=_size, default=None, metavar="WxH",
+    c.add_argument("--window", type=window_size, default=None, metavar="WxH",
                    help="window size instead of the display profile's")
     c.add_argument("--photodiode", action="store_true",
                    help="a corner patch on a known frame pattern, its flips logged, for a "
