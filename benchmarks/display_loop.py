@@ -435,15 +435,31 @@ def _reading(res: dict) -> list[str]:
     lines = [
         "Reading these figures:", "",
         "- Where the gain comes from here: the frame is drawn before the latch, so llvmpipe's "
-        "rasterising (*drawing (prepare)* below: tens to hundreds of ms at 4K on two shared "
-        "cores) lies before the gaze is read, and only the swap's copy into Xvfb after it (the "
-        "*draw* column). On a rig a GPU draws the two halves in about a millisecond and the "
-        "flip returns at the vertical blank; the gain is then the period the sample waited: "
+        "rasterising (*drawing (prepare)* below, on the CPU) lies before the gaze is read, and "
+        "only the swap's copy into Xvfb after it (the *draw* column). On a rig a GPU draws the "
+        "two halves in about a millisecond and the flip returns at the vertical blank; the "
+        "gain is then the period the sample waited: "
         "read right after the previous blank it is about 8.3 ms old at the next, read the "
         "margin before it (1.5 x a draw of about a ms) a few ms. That is a prediction for a "
         "rig, shown on a virtual clock (tests/experiment/test_frameloop.py), not a measurement "
         "here.",
     ]
+    changes = [q["late_change_pct"] for q in latch_pairs(res)]
+    if changes and min(late) <= 0.9:
+        lo, hi = min(changes), max(changes)
+        if hi <= 0:
+            verdict = "fell in every pair"
+        elif lo > 0:
+            verdict = "ROSE in every pair"
+        else:
+            verdict = ("changed both ways between the pairs: at this load the difference is "
+                       "within the measurement's noise, and only a quieter machine can bound "
+                       "it more tightly")
+        lines.append(
+            f"- Late flips with the latch against without: from {lo:+.1f} to {hi:+.1f} points "
+            f"over the pairs; they {verdict}. Reading the gaze later leaves a frame less slack "
+            "for a draw far slower than the last second's (then it shows a period late); the "
+            "margin (1.5 x the longest recent draw) is what bounds that.")
     if late and min(late) > 0.9:
         lines.append(
             "- Every flip is late here in both modes (Xvfb cannot draw this window at 120 Hz on "
