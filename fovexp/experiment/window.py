@@ -25,7 +25,7 @@ frame waited only for the vertical blank: right after ``prepare`` (with vsync), 
 swap's copy into the X server (paced: that copy is the software display's own work).
 
 Keys come from PsychoPy's ``Keyboard`` where its backend stamps the press ('ptb', which needs
-psychtoolbox and libjack, or 'iohub' when an ioHub server runs): each key carries the time it
+psychtoolbox and libjack; else 'iohub' when an ioHub server runs): each key carries the time it
 went down, so the answer is the value on screen at the press, not at the poll that saw it
 (../docs/EXPERIMENT.md). Without either, keys come from PsychoPy's event module and are stamped
 at the poll (``info()["keyboard"]["key_time"] == "poll"``; the session warns). PsychoPy keeps
@@ -288,9 +288,10 @@ class PsychoScreen:
 
     @staticmethod
     def _open_keyboard() -> tuple[Any, str]:
-        """PsychoPy's ``Keyboard`` with a backend that stamps the press: 'iohub' when an ioHub
-        server already runs (an ioHub gaze source; start it with
-        ``Keyboard=dict(use_keymap='psychopy')`` for PsychoPy's key names), else 'ptb'. Returns
+        """PsychoPy's ``Keyboard`` with a backend that stamps the press: 'ptb' where
+        psychtoolbox loads (it reads the keyboards itself, beside an ioHub server if one
+        runs), else 'iohub' when an ioHub server already runs (an ioHub gaze source; started
+        with ``Keyboard=dict(use_keymap='psychopy')`` its key names are PsychoPy's). Returns
         (None, 'event') when neither is to be had (psychtoolbox not importable: libjack
         missing); PsychoPy picks its keyboard backend once per process."""
         import sys
@@ -298,10 +299,10 @@ class PsychoScreen:
         from psychopy.hardware import keyboard
 
         iohub = sys.modules.get("psychopy.iohub.client")
-        if iohub is not None and iohub.ioHubConnection.getActiveConnection() is not None:
-            want = "iohub"
-        elif keyboard.havePTB:
+        if keyboard.havePTB:
             want = "ptb"
+        elif iohub is not None and iohub.ioHubConnection.getActiveConnection() is not None:
+            want = "iohub"
         else:
             return None, "event"
         kb = keyboard.Keyboard(backend=want)
