@@ -54,7 +54,7 @@ def _sampling_row(scope: str, contrast: float, ours: float) -> dict:
             "sr_ratio": ratio, "reduction_pct": 100.0 * (1.0 - ratio)}
 
 
-#: the two methods the paired test and the sampling-rate estimate compare (section 6.1)
+#: the two methods the paired test (section 6.1) and the sampling-rate estimate (6.3) compare
 COMPARED = ("ours", "contrast")
 
 
