@@ -59,7 +59,9 @@ class GazeSource(Protocol):
     def now_us(self) -> int:
         """The source's clock now (us): the time a frame's blanking decision is made at."""
     def poll(self) -> list[GazeSample]:
-        """The samples that arrived since the last call, oldest first; never waits."""
+        """The samples that arrived since the last call, oldest first; never waits (the frame
+        loop calls it twice a frame when it late-latches: once to guess the frame, once to
+        decide it)."""
     def poll_events(self) -> list[SourceEvent]: ...
     @property
     def connected(self) -> bool: ...

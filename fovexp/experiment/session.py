@@ -44,6 +44,7 @@ from fovexp.results.format import SIMULATED_TRACKER
 from fovexp.results.rigcheck import session_rig_record
 
 from .calibration import QUIT_KEYS, QUIT_PROMPT, QUIT_QUESTION, CalibrationTiming
+from .diskspace import check_space, disk_full_message, estimate_log_bytes, is_disk_full
 from .frameloop import LateLatch, TrialIO, TrialLoop, display_thread_first
 from .gaze import (
     BlankingMonitor,
@@ -322,6 +323,7 @@ class Session:
                 self.finish_without_trials()
             return EXIT_OK
         try:
+            space = self._check_space()
             self.gaze = gaze if gaze is not None else self.make_gaze()
             # the tracker's display area against the profile: before any window opens
             self.area, area_info = display_area(self.gaze, self.display,
@@ -336,15 +338,29 @@ class Session:
         attach = getattr(self.gaze, "attach", None)  # a source that needs the window's place
         if attach is not None:
             attach(self.screen)
-        self._start_info()
-        self.file.start_writer()
-        self.file.update(display_check={**check, "screen": self.opts.screen},
-                         display_area=area_info)
+        try:
+            self._start_info()
+            self.file.start_writer()
+            self.file.set_in_run("results_disk", space, write=False)
+            self.file.update(display_check={**check, "screen": self.opts.screen},
+                             display_area=area_info)
+            self._open_logs()
+        except BaseException as exc:
+            self.file.stop_writer()
+            for closer in (self.gaze.stop, self.screen.close):
+                try:
+                    closer()
+                except Exception:  # the error to report is the one above
+                    pass
+            self.release()
+            if is_disk_full(exc):
+                raise FovexpError(self._disk_full_message()) from None
+            raise
         #: when each frame reads the gaze (one latch for the run: its margin carries over)
         self.latch = LateLatch(1.0 / self.refresh_hz)
-        self._open_logs()
         self._start_live()
         flusher = PeriodicFlusher([self.gaze_log, self.frame_log, self.blank_log]).start()
+        self._flusher = flusher
         old_handlers = self._install_signals()
         state, code, failure = "interrupted", EXIT_INTERRUPTED, None
         try:
@@ -385,6 +401,9 @@ class Session:
             state, failure = "failed", str(exc)
             raise
         except Exception as exc:  # a bug: recorded with its traceback, reported in one line
+            if is_disk_full(exc):  # not a bug: one line, what to do
+                state, failure = "failed", self._disk_full_message()
+                raise FovexpError(failure) from None
             import traceback
 
             state, failure = "failed", f"{type(exc).__name__}: {exc}"
@@ -454,6 +473,8 @@ class Session:
             except Exception:  # closing after an error must not hide the error
                 pass
         flusher.stop()
+        # the last rows (the closing screens' samples) not written: said, never silent
+        late = flusher.error if failure is None else None
         for closer in (getattr(self.renderer, "close", None),
                        getattr(self.screen, "close", None)):
             if closer is not None:
@@ -469,11 +490,55 @@ class Session:
         measured = getattr(self.gaze, "measured", None)  # the sampling rate over the run
         if measured is not None and "tracker" in self.info:
             extra["tracker"] = {**self.info["tracker"], "measured": measured()}
+        if late is not None:
+            extra["log_error"] = f"{late.filename}: {late.strerror}"
         self.file.stop_writer()  # the events it had still to write are in the final write
-        self.file.update(state=state if not (state == "completed" and not complete)
-                         else "incomplete", completed=complete, ended=now_iso(),
-                         n_completed=len(done), events=self.info.get("events", []), **extra)
-        self.release()
+        try:
+            self.file.update(state=state if not (state == "completed" and not complete)
+                             else "incomplete", completed=complete, ended=now_iso(),
+                             n_completed=len(done), events=self.info.get("events", []),
+                             **extra)
+        except OSError as exc:
+            # a full disk keeps the session file as last written (valid JSON, "running": it
+            # resumes); the run's own error, if any, is the one to report
+            if not is_disk_full(exc):
+                raise
+            if failure is None:
+                raise FovexpError(self._disk_full_message()) from None
+        finally:
+            self.release()
+        if late is not None:
+            raise FovexpError(self._disk_full_message() if is_disk_full(late) else
+                              f"cannot write {late.filename}: {late.strerror}")
+
+    # -- the results disk ----------------------------------------------------------------------
+    def _check_space(self) -> dict[str, Any]:
+        """Before anything is written: the results disk's free space against this run's
+        estimated logs (:mod:`.diskspace`); refuses with both figures when they cannot fit."""
+        estimate = estimate_log_bytes(len(self.remaining),
+                                      self.protocol.spec.tracker.sampling_hz,
+                                      float(self.display.refresh_hz))
+        return check_space(self.folder, estimate)
+
+    def _resume_command(self) -> str:
+        """The command that continues this session."""
+        opts = self.opts
+        parts = ["fovexp run", str(self.protocol.path), "--participant", self.participant]
+        if Path(opts.results_root) != Path("results"):
+            parts += ["--results", str(opts.results_root)]
+        if opts.dry_run:
+            parts.append("--dry-run")
+        return " ".join(parts + ["--resume"])
+
+    def _disk_full_message(self) -> str:
+        return disk_full_message(Path(self.opts.results_root), self._resume_command())
+
+    def _raise_log_error(self) -> None:
+        """A log the flusher thread could not write (a full disk) stops the session here,
+        between trials, with that error."""
+        flusher = getattr(self, "_flusher", None)
+        if flusher is not None and flusher.error is not None:
+            raise flusher.error
 
     def _display_setup(self) -> None:
         """The operator confirms the display checklist (docs/EXPERIMENT.md) with C; recorded
@@ -635,6 +700,7 @@ class Session:
         seq = self._seq = TrialSequence(self.trials, self.remaining, self.done,
                                         self.protocol.spec.break_every)
         for trial in self.remaining:
+            self._raise_log_error()
             for text in seq.before(trial):
                 self._message(text, ["space"])
             t0 = time.monotonic()

@@ -41,12 +41,18 @@ def live_path(folder: str | Path, session: str) -> Path:
 
 
 def write_live(path: str | Path, data: dict[str, Any]) -> None:
-    """Write the status file whole (a temporary file renamed over it; no fsync)."""
+    """Write the status file whole (a temporary file renamed over it; no fsync). A failed
+    write (a full disk) leaves no temporary file behind; a folder that is gone is not made
+    again."""
     path = Path(path)
     tmp = path.with_name(f".{path.name}.tmp")
-    with open(tmp, "w", encoding="utf-8") as fh:
-        fh.write(json.dumps(data, separators=(",", ":"), allow_nan=False, default=str))
-    os.replace(tmp, path)
+    try:
+        with open(tmp, "w", encoding="utf-8") as fh:
+            fh.write(json.dumps(data, separators=(",", ":"), allow_nan=False, default=str))
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
 
 
 @dataclass(frozen=True)
