@@ -164,8 +164,9 @@ def run_block(screen, backend: str, parameter: str, seconds: float, frame_file: 
     trial to trial) or not (None). Returns the block's raw figures (:func:`summarize`)."""
     from fovexp import load_display, make_params
     from fovexp.experiment.frameloop import TrialIO, TrialLoop, display_thread_first
-    from fovexp.experiment.gaze import BlankingMonitor, FixationGeometry, SimulatedGaze
+    from fovexp.experiment.gaze import BlankingMonitor, FixationGeometry
     from fovexp.experiment.render import TestRenderer
+    from fovexp.experiment.trackers.simulated import SimulatedGaze
     from fovexp.experiment.trial import TrialState, ValueAdjuster, Wheel
 
     load = load_average()
@@ -359,7 +360,7 @@ def run_monitor_ab(screen, seconds: float, blocks: int, browser: bool, seed: int
         TrialLoop,
         display_thread_first,
     )
-    from fovexp.experiment.gaze import BlankingMonitor, FixationGeometry, SimulatedGaze
+    from fovexp.experiment.gaze import BlankingMonitor, FixationGeometry
     from fovexp.experiment.live import LivePublisher
     from fovexp.experiment.logs import (
         FRAME_COLUMNS,
@@ -369,6 +370,7 @@ def run_monitor_ab(screen, seconds: float, blocks: int, browser: bool, seed: int
     )
     from fovexp.experiment.render import TestRenderer
     from fovexp.experiment.rows import gaze_items, gaze_row
+    from fovexp.experiment.trackers.simulated import SimulatedGaze
     from fovexp.experiment.trial import TrialState, ValueAdjuster, Wheel
 
     display = load_display("lg-oled55cx")

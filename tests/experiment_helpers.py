@@ -15,8 +15,9 @@ from pathlib import Path
 
 import pytest
 
-from fovexp.experiment.gaze import ClockedGaze, GazeSample, monotonic_us
+from fovexp.experiment.gaze import GazeSample, monotonic_us
 from fovexp.experiment.interfaces import FlipTimes
+from fovexp.experiment.trackers.simulated import ClockedGaze
 from fovexp.experiment.trial import Key
 
 REPO = Path(__file__).resolve().parent.parent

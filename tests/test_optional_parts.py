@@ -68,7 +68,7 @@ def test_no_moderngl_the_runner_says_only_that_the_cpu_is_used(monkeypatch):
 
 
 def test_no_tobii_sdk_names_the_tracker_extra(monkeypatch):
-    from fovexp.experiment.tobii import import_tobii
+    from fovexp.experiment.trackers.tobii import import_tobii
 
     _without(monkeypatch, "tobii_research")
     with pytest.raises(FovexpError, match=r"pip install 'fovexp\[tracker\]'"):

@@ -28,7 +28,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from .gaze import DisplayArea, GazeSample, SimulatedGaze, Vec3
+from .gaze import DisplayArea, GazeSample, Vec3
 from .quality import (
     CENTRE,
     EYES,
@@ -39,6 +39,7 @@ from .quality import (
     drift_result,
     validation_result,
 )
+from .trackers.simulated import SimulatedGaze
 
 #: Keys the calibration screens read (PsychoPy names).
 CAL_KEYS = ["space", "return", "num_enter", "q", "y", "n", "escape", "r", "v", "s", "t", "c",

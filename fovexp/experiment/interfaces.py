@@ -1,6 +1,7 @@
 """What the session and the frame loop need from their window, gaze source and renderer, as
-protocols (structural types): the real ones (``window.PsychoScreen``, ``tobii.TobiiGaze``,
-``gaze.SimulatedGaze`` / ``gaze.MouseGaze``, ``render.TestRenderer``) and the window-free
+protocols (structural types): the real ones (``window.PsychoScreen``; the sources of
+:mod:`fovexp.experiment.trackers`: ``TobiiGaze``, ``IoHubGaze``, ``SimulatedGaze``,
+``MouseGaze``; ``render.TestRenderer``) and the window-free
 stand-ins of the tests all satisfy them, so everything but the window itself runs without one.
 
 Clocks. Every time a :class:`Screen` returns (flips, key presses) is on ``time.monotonic``'s
@@ -19,7 +20,9 @@ next vertical blank and returns :class:`FlipTimes`.
 
 Optional capabilities are read with ``getattr`` where they are used: a gaze source's
 ``validated`` (False: not calibrated, the mouse), ``calibration()`` (a real tracker's),
-``look_at`` (simulated eyes follow the targets), ``display_area()`` (a tracker's own);
+``look_at`` (simulated eyes follow the targets), ``display_area()`` (a tracker's own),
+``attach(screen)`` (a source that needs the window: the mouse's pointer, ioHub's window
+rectangle);
 a screen's ``gl_share()`` (the window's GL context, for the GPU backend).
 """
 

@@ -46,13 +46,7 @@ from fovexp.results.rigcheck import session_rig_record
 from .calibration import QUIT_KEYS, QUIT_PROMPT, QUIT_QUESTION, CalibrationTiming
 from .diskspace import check_space, disk_full_message, estimate_log_bytes, is_disk_full
 from .frameloop import LateLatch, TrialIO, TrialLoop, display_thread_first
-from .gaze import (
-    BlankingMonitor,
-    FixationGeometry,
-    MouseGaze,
-    SimGazeParams,
-    SimulatedGaze,
-)
+from .gaze import BlankingMonitor, FixationGeometry
 from .interfaces import GazeSource, Renderer, Screen, ScreenFactory
 from .live import LivePublisher
 from .lock import LOCK_FILE, FolderLock
@@ -88,6 +82,8 @@ from .tracker_setup import (
     display_area,
     window_ppd,
 )
+from .trackers import iohub_config_path, make_gaze_source
+from .trackers.simulated import SimGazeParams
 from .trial import Key, TrialState, ValueAdjuster
 from .validation import check_participant
 
@@ -260,41 +256,20 @@ class Session:
 
     # -- gaze ----------------------------------------------------------------------------------
     def make_gaze(self) -> GazeSource:
-        """The gaze source; ``--tracker tobii`` fails here, before a window opens."""
-        kind = self.opts.tracker
-        if kind == "tobii":
-            from .tobii import TobiiGaze
-
-            return TobiiGaze(self.protocol.spec.tracker.sampling_hz, self.opts.tracker_address)
-        if kind == "simulated":
-            n_runs = len(self.info.get("runs", [])) if self.info else 0
-            params = self.opts.sim_gaze or SimGazeParams(
-                rate_hz=self.protocol.spec.tracker.sampling_hz)
-            # A resumed run gets fresh gaze noise (different seed) but stays reproducible.
-            return SimulatedGaze(self.fixation, seed=self._sim_seed() + 7919 * n_runs,
-                                 params=params)
-        if kind == "mouse":
-            return MouseGaze()
-        if kind == "iohub":
-            from .trackers.families import load_iohub_config
-            from .trackers.iohub import IoHubGaze
-
-            # a dry run's MouseGaze: the pointer goes to the calibration targets by itself
-            return IoHubGaze(load_iohub_config(self.iohub_config_path()), self.display,
-                             self.opts.screen, pointer=self.opts.dry_run)
-        raise FovexpError(f"--tracker {kind!r}: choose tobii, simulated, mouse or iohub")
+        """The gaze source (:func:`fovexp.experiment.trackers.make_gaze_source`); ``--tracker
+        tobii`` or ``iohub`` fails here, before a window opens. A resumed run's simulated eyes
+        get fresh noise (another seed) but stay reproducible."""
+        n_runs = len(self.info.get("runs", [])) if self.info else 0
+        return make_gaze_source(
+            self.opts.tracker, protocol=self.protocol, display=self.display,
+            fixation=self.fixation, dry_run=self.opts.dry_run, screen=self.opts.screen,
+            tracker_address=self.opts.tracker_address, tracker_config=self.opts.tracker_config,
+            sim_seed=self._sim_seed() + 7919 * n_runs, sim_params=self.opts.sim_gaze)
 
     def iohub_config_path(self) -> Path:
-        """``--tracker-config``, else the protocol's ``tracker.iohub_config`` (relative to the
-        protocol file)."""
-        if self.opts.tracker_config is not None:
-            return Path(self.opts.tracker_config)
-        name = self.protocol.spec.tracker.iohub_config
-        if name is None:
-            raise FovexpError("--tracker iohub needs an ioHub configuration: --tracker-config "
-                              "FILE (the YAML PsychoPy Builder or ioHub uses), or "
-                              "tracker.iohub_config in the protocol")
-        return Path(self.protocol.path).parent / name
+        """The ioHub configuration this session's ``--tracker iohub`` reads
+        (:func:`fovexp.experiment.trackers.iohub_config_path`)."""
+        return iohub_config_path(self.protocol, self.opts.tracker_config)
 
     def _gaze_row(self, item: GazeItem) -> tuple[Any, ...]:
         """A gaze log row (made on the log's flusher thread)."""
@@ -333,9 +308,8 @@ class Session:
         except BaseException:
             self.release()
             raise
-        if isinstance(self.gaze, MouseGaze):
-            self.gaze.position = self.screen.mouse_position
-        attach = getattr(self.gaze, "attach", None)  # a source that needs the window's place
+        # a source that needs the window: its place on the screen, or its pointer
+        attach = getattr(self.gaze, "attach", None)
         if attach is not None:
             attach(self.screen)
         try:

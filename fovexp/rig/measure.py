@@ -63,32 +63,6 @@ class Measured:
     photodiode_rows: list[tuple[Any, ...]] = field(default_factory=list)
 
 
-def _gaze_source(kind: str, opts: RigOptions, protocol: Any, display: Any, fixation: Any) -> Any:
-    """The session's gaze sources (``fovexp.experiment``), chosen as ``fovexp run`` does."""
-    from fovexp.experiment.gaze import MouseGaze, SimGazeParams, SimulatedGaze
-
-    if kind == "simulated":
-        return SimulatedGaze(fixation, seed=1,
-                             params=SimGazeParams(rate_hz=protocol.spec.tracker.sampling_hz))
-    if kind == "mouse":
-        return MouseGaze()
-    if kind == "tobii":
-        from fovexp.experiment.tobii import TobiiGaze
-
-        return TobiiGaze(protocol.spec.tracker.sampling_hz, opts.tracker_address)
-    if kind == "iohub":
-        from fovexp.experiment.trackers.families import load_iohub_config
-        from fovexp.experiment.trackers.iohub import IoHubGaze
-
-        path = opts.tracker_config
-        if path is None and protocol.spec.tracker.iohub_config:
-            path = Path(protocol.path).parent / protocol.spec.tracker.iohub_config
-        if path is None:
-            raise FovexpError("--tracker iohub needs --tracker-config FILE")
-        return IoHubGaze(load_iohub_config(path), display, opts.screen, pointer=opts.dry_run)
-    raise FovexpError(f"--tracker {kind!r}: choose tobii, simulated, mouse or iohub")
-
-
 def _pct(v: list[float], q: float) -> float:
     return float(np.percentile(v, q)) if v else math.nan
 
@@ -101,6 +75,7 @@ def run_measurements(opts: RigOptions) -> Measured:
     from fovexp.experiment.render import TestRenderer
     from fovexp.experiment.render_budget import step_values, time_renders
     from fovexp.experiment.stimuli import DRY_RUN_SIZE, load_stimulus, split_screen
+    from fovexp.experiment.trackers import make_gaze_source
     from fovexp.experiment.trackers.iohub import RateMeter
     from fovexp.experiment.trial import TrialState, ValueAdjuster, Wheel
     from fovexp.experiment.window import PsychoScreen
@@ -132,10 +107,13 @@ def run_measurements(opts: RigOptions) -> Measured:
     kind = opts.tracker or ("simulated" if opts.dry_run else "tobii")
     error = ""
     try:
-        gaze = _gaze_source(kind, opts, protocol, display, fixation)
+        gaze = make_gaze_source(kind, protocol=protocol, display=display, fixation=fixation,
+                                dry_run=opts.dry_run, screen=opts.screen,
+                                tracker_address=opts.tracker_address,
+                                tracker_config=opts.tracker_config)
         found = True
     except FovexpError as exc:
-        from fovexp.experiment.gaze import SimulatedGaze
+        from fovexp.experiment.trackers.simulated import SimulatedGaze
 
         error, found = str(exc), False
         say(f"fovexp rig check: tracker: {exc}; the display and GPU are checked with "
@@ -149,10 +127,6 @@ def run_measurements(opts: RigOptions) -> Measured:
                           dry_run=opts.dry_run, refresh_hz=display.refresh_hz, screen=opts.screen)
     renderer = None
     try:
-        from fovexp.experiment.gaze import MouseGaze
-
-        if isinstance(gaze, MouseGaze):
-            gaze.position = screen.mouse_position
         attach = getattr(gaze, "attach", None)
         if attach is not None:
             attach(screen)

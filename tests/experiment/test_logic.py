@@ -13,15 +13,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from fovexp import FovexpError, load_display
-from fovexp.experiment.gaze import (
-    BlankingMonitor,
-    FixationGeometry,
-    GazeSample,
-    SimGazeParams,
-    SimulatedGaze,
-)
+from fovexp.experiment.gaze import BlankingMonitor, FixationGeometry, GazeSample
 from fovexp.experiment.logs import TRIAL_COLUMNS, BatchLog, TrialLog, read_trials
 from fovexp.experiment.participant import SimTruth, SimulatedParticipant
+from fovexp.experiment.trackers.simulated import SimGazeParams, SimulatedGaze
 from fovexp.experiment.trial import (
     BlankingLog,
     FrameTimer,

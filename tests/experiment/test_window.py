@@ -15,15 +15,11 @@ import numpy as np
 import pytest
 
 from fovexp import load_display
-from fovexp.experiment.gaze import (
-    BlankingMonitor,
-    FixationGeometry,
-    SimGazeParams,
-    SimulatedGaze,
-)
+from fovexp.experiment.gaze import BlankingMonitor, FixationGeometry
 from fovexp.experiment.logs import read_trials
 from fovexp.experiment.protocol import load_protocol
 from fovexp.experiment.session import Session, SessionOptions
+from fovexp.experiment.trackers.simulated import SimGazeParams, SimulatedGaze
 from fovexp.experiment.trial import Key, Wheel
 
 from experiment_helpers import (  # noqa: F401
