@@ -14,6 +14,19 @@ from .pipeline import Enhancer
 
 #: Backends :func:`make_enhancer` accepts.
 BACKENDS: tuple[str, ...] = ("auto", "cpu", "gpu")
+#: Why ``auto`` took the CPU where the GPU extra (moderngl) is not installed: the runner says
+#: it once ("enhancer on the CPU: ..."), in words a lab can act on (a rig needs the GPU backend
+#: for its frame budget: a 4K wheel step takes about 0.4 s on the CPU).
+NO_GPU_EXTRA = "the GPU extra is not installed (a rig needs it: pip install 'fovexp[gpu]')"
+
+
+def gpu_extra_installed() -> bool:
+    """Whether moderngl, the GPU backend's one extra package (``fovexp[gpu]``), imports."""
+    try:
+        import moderngl  # noqa: F401
+    except ImportError:
+        return False
+    return True
 
 
 def _cpu(display: Display, preset: str, geometry: GeometryModel | None,
@@ -64,6 +77,8 @@ def make_enhancer(
     if backend == "auto" and get_preset(preset).name != "paper":
         return _cpu(display, preset, geometry, table, options,
                     f"the {preset!r} preset runs on the CPU backend only")
+    if backend == "auto" and not gpu_extra_installed():
+        return _cpu(display, preset, geometry, table, options, NO_GPU_EXTRA)
     from .gpu import GpuEnhancer, create_context, is_software, release_context, renderer_name
 
     unsupported = GpuEnhancer.unsupported(options or EngineOptions())

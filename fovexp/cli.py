@@ -1,5 +1,7 @@
 """``fovexp`` command line: ``enhance`` and ``compile`` (this module), ``run`` (experiment
-runner), ``analyze`` (analysis) and ``bench`` (run time against error, :mod:`fovexp.bench`).
+runner), ``init`` (a study folder, :mod:`fovexp.experiment.study`), ``analyze`` (analysis),
+``monitor`` (the live view of running sessions), ``docs`` (the documentation site,
+:mod:`fovexp.docsite`) and ``bench`` (run time against error, :mod:`fovexp.bench`).
 Bad input prints one ``fovexp: error: ...`` line and exits with 2.
 
 A command's module, and what it imports, is loaded only when that command runs (or its
@@ -33,10 +35,22 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
                 "generate scenes, add a lab's frames, check a protocol's images"),
     "analyze": ("fovexp.analysis.cli", "add_analyze_parser",
                 "turn trial logs into the paper's results (Table 2, validation tests)"),
+    "monitor": ("fovexp.monitor.cli", "add_monitor_parser",
+                "watch running sessions in a browser (read-only)"),
+    "init": ("fovexp.experiment.study", "add_init_parser",
+             "make a study folder: copies of the shipped protocols, stimuli/, results/"),
+    "docs": ("fovexp.docsite", "add_docs_parser",
+             "the documentation: print where the built site is, or open it"),
     "compile": ("fovexp.cli", "add_compile_parser",
                 "compile the Numba kernels ahead of the first run (once after installing)"),
     "bench": ("fovexp.bench", "add_bench_parser",
               "measure run time against error of the engine's options, and against size"),
+    "evaluate": ("fovexp.evaluation.cli", "add_evaluate_parser",
+                 "the paper's analyses of outputs: spectra, FovVDP, temporal, JPEG (section 6)"),
+    "stereo": ("fovexp.evaluation.cli", "add_stereo_parser",
+               "enhance a stereo pair: noise for one eye, warped to the other (section 6.4)"),
+    "rig": ("fovexp.rig.cli", "add_rig_parser",
+            "measure the rig before the first participant: display, GPU, tracker"),
 }
 
 

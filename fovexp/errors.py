@@ -3,7 +3,29 @@
 from __future__ import annotations
 
 import difflib
+from collections.abc import Iterable
 from typing import Any
+
+
+def closest(word: str, candidates: Iterable[str], n: int = 1) -> list[str]:
+    """The ``n`` candidates most like ``word`` (difflib's ratio, at least 0.6), best first:
+    what a misspelt key or id was probably meant to be.
+
+    >>> closest("seeed", ["seed", "repetitions"])
+    ['seed']
+    >>> closest("lab-1", ["lab-01", "lab-02", "scene-01"], n=3)
+    ['lab-01', 'lab-02']
+    """
+    return difflib.get_close_matches(word, list(candidates), n=n)
+
+
+def did_you_mean(word: str, candidates: Iterable[str], n: int = 1) -> str:
+    """`` (did you mean 'x'?)`` (or ``'x' or 'y'``) for the closest candidates, else ``""``:
+    appended to the one-line error about ``word``."""
+    close = closest(word, candidates, n)
+    if not close:
+        return ""
+    return " (did you mean " + " or ".join(repr(c) for c in close) + "?)"
 
 
 class FovexpError(ValueError):
@@ -26,9 +48,7 @@ def validation_error(what: str, exc: Any) -> FovexpError:
         parent = err["loc"][:-1]
         missing = [str(e["loc"][-1]) for e in errs
                    if e["type"] == "missing" and e["loc"][:-1] == parent]
-        close = difflib.get_close_matches(str(err["loc"][-1]), missing, n=1)
-        if close:
-            msg += f" (did you mean {close[0]!r}?)"
+        msg += did_you_mean(str(err["loc"][-1]), missing)
     where = ".".join(str(p) for p in err["loc"])
     if not where:  # a check across fields names its keys in its own message
         return FovexpError(f"{what}: {msg}")

@@ -237,6 +237,26 @@ class EnhanceResult:
         self._check_fresh()
         return self._enhancer.linear(name)
 
+    def with_noise(self, noise: np.ndarray) -> np.ndarray:
+        """The displayed frame with ``noise`` in place of this result's own noise layer: the
+        linear contrast-enhanced image plus ``noise`` (linear luminance, (H, W), as
+        ``map("noise")``) on every channel, clipped and encoded (section 4.5's composition),
+        with the input's alpha channel back. Stereo (section 6.4) shows one eye's noise
+        warped to the other eye this way. The method must be ``contrast`` or ``ours``."""
+        self._check_fresh()
+        enh = self._enhancer
+        if self.params.method == "foveated":
+            raise FovexpError("with_noise needs the contrast or ours method (foveated has no "
+                              "contrast-enhanced image to add noise to)")
+        lin = enh.linear("contrast")
+        layer = np.asarray(noise)
+        if layer.shape != lin.shape[:2]:
+            raise FovexpError(f"noise has shape {layer.shape}, the image {lin.shape[:2]}")
+        if not np.isfinite(layer).all():
+            raise FovexpError("noise must be finite (no NaN or Inf)")
+        return with_alpha(colour.encode(lin, enh._gamma(), enh.preset.transfer, layer),
+                          enh._alpha)
+
     def _check_fresh(self) -> None:
         if self._version != self._enhancer._version:
             raise FovexpError("this result is stale: the enhancer has processed another frame")

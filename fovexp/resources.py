@@ -21,7 +21,7 @@ def shipped(package: str) -> Path:
 
 
 def shipped_protocols() -> Path:
-    """The paper's four protocols (``calibration-fe.yaml`` ...)."""
+    """The paper's protocols (``calibration-fe.yaml`` ..., ``validation-12.yaml``)."""
     return shipped("fovexp.protocols")
 
 

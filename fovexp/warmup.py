@@ -43,7 +43,8 @@ def _exercise() -> None:
     """Every path of the CPU enhancer that reaches a kernel, on small frames: foveation
     (simulated, given as a blur-rate or a sigma map), contrast, noise, every map, both presets
     and the viewing-geometry models, colour and grey, full screen and a viewport, a frame with
-    flat regions (skipping), and the engine options' float64 and variant paths."""
+    flat regions (skipping), the engine options' float64 and variant paths, and the stereo
+    warp of ``fovexp stereo``."""
     from .foveation import foveate_exact
     from .geometry import load_display
     from .params import EngineOptions, EnhanceParams
@@ -89,6 +90,10 @@ def _exercise() -> None:
         for img, vp in ((frame, viewport), (mixed, None)):
             enh.set_image(img, viewport=vp)
             enh.enhance((0.5, 0.5), EnhanceParams(impulses=4))
+
+    # fovexp stereo's warp (section 6.4), a kernel of the evaluation package
+    from .evaluation.stereo import forward_warp
+    forward_warp(np.zeros((4, 8), np.float32), np.ones((4, 8)))
 
 
 def kernels() -> dict[str, object]:

@@ -15,7 +15,10 @@ from pathlib import Path
 
 import pytest
 
-from fovexp.experiment.gaze import ClockedGaze, GazeSample, monotonic_us
+from fovexp.experiment.gaze import GazeSample, monotonic_us
+from fovexp.experiment.interfaces import FlipTimes
+from fovexp.experiment.trackers.simulated import ClockedGaze
+from fovexp.experiment.trial import Key
 
 REPO = Path(__file__).resolve().parent.parent
 PYTHON = sys.executable
@@ -69,6 +72,20 @@ def xvfb_display():
             yield display
         finally:
             del os.environ["DISPLAY"]
+
+
+def x_key(screen, name: str) -> float:
+    """Press and release key ``name`` (xdotool's name: ``Return``, ``Escape``) through the X
+    server, as a keyboard delivers it, with the window of ``screen`` (a PsychoScreen) focused;
+    returns ``time.monotonic()`` just before it was sent. Skips without xdotool."""
+    exe = shutil.which("xdotool")
+    if exe is None:
+        pytest.skip("xdotool is not installed (apt-get install xdotool)")
+    wid = str(screen.win.winHandle._window)
+    subprocess.run([exe, "windowfocus", "--sync", wid], check=True, timeout=10)
+    t = time.monotonic()
+    subprocess.run([exe, "key", name], check=True, timeout=10)
+    return t
 
 
 def make_workspace(root: Path) -> Path:
@@ -209,18 +226,27 @@ class StubScreen:
     def prepare(self, blank: bool) -> None:
         self._blank = blank
 
-    def flip(self) -> float:
+    def flip(self) -> FlipTimes:
+        ready = time.monotonic()
         time.sleep(1 / 240)
         self.frames.append((self._blank, self.test))
-        return time.monotonic()
+        return FlipTimes(time.monotonic(), ready)
 
-    def draw(self, blank: bool) -> float:
+    def draw(self, blank: bool) -> FlipTimes:
         self.prepare(blank)
         return self.flip()
 
+    def info(self):
+        return {"keyboard": {"backend": "stub", "key_time": "press"}, "pace_hz": None,
+                "refresh_hz": self.refresh_hz}
+
     def poll_input(self):
+        """The scripted events of this poll; a key is stamped as pressed now (the stub's
+        keyboard stamps the press, as the window's does)."""
         self.polls += 1
-        return list(self.inputs.get(self.polls, []))
+        now = time.monotonic()
+        return [Key(e.name, now) if isinstance(e, Key) and e.t_s is None else e
+                for e in self.inputs.get(self.polls, [])]
 
     def mouse_position(self):
         return None

@@ -8,7 +8,8 @@ import importlib
 import pytest
 
 #: The modules of the public names (fovexp/__init__.py) whose docstrings carry examples.
-MODULES = ("params", "geometry", "io", "pipeline", "backends", "resources")
+MODULES = ("params", "geometry", "io", "pipeline", "backends", "resources", "errors",
+           "sequence")
 
 
 @pytest.mark.parametrize("name", MODULES)

@@ -128,27 +128,84 @@ def test_runner_and_analysis_do_not_import_each_other(graph):
     assert _edges(graph, "fovexp.results", "fovexp.analysis") == []
 
 
+def test_the_monitor_reads_files_only(graph):
+    """``fovexp monitor`` shares nothing with a session but the files on disk: it imports
+    neither the runner nor the analysis (nor, through them, PsychoPy or moderngl); the runner
+    reaches it only from its command line (``fovexp run --monitor`` starts it as a process)."""
+    assert _edges(graph, "fovexp.monitor", "fovexp.experiment") == []
+    assert _edges(graph, "fovexp.monitor", "fovexp.analysis") == []
+    assert _edges(graph, "fovexp.monitor", "fovexp.gpu") == []
+    assert _edges(graph, "fovexp.experiment", "fovexp.monitor") in (
+        [], [("fovexp.experiment.cli", "fovexp.monitor.cli")])
+    assert _edges(graph, "fovexp.results", "fovexp.monitor") == []
+    for path in (PACKAGE / "monitor").rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            names = ([a.name for a in node.names] if isinstance(node, ast.Import)
+                     else [node.module or ""] if isinstance(node, ast.ImportFrom) else [])
+            assert not any(n.split(".")[0] in ("psychopy", "moderngl", "pyglet")
+                           for n in names), path
+
+
 def test_runner_does_not_import_the_cli(graph):
     assert _edges(graph, "fovexp.experiment", "fovexp.cli") == []
 
 
-@pytest.mark.parametrize("part", ["fovexp.experiment", "fovexp.analysis", "fovexp.results"])
+@pytest.mark.parametrize("part", ["fovexp.experiment", "fovexp.analysis", "fovexp.results",
+                                  "fovexp.monitor"])
 def test_runner_and_analysis_use_the_public_api(graph, part):
     """Of the enhancer they import only the package's public names (``from fovexp import``,
     docs/API.md), the shared logs layer ``fovexp.results``, and their own modules."""
     allowed = ("fovexp", "fovexp.results", part)
+    # ``fovexp run --monitor`` starts ``fovexp monitor`` beside the session
+    beside = ("fovexp.experiment.cli", "fovexp.monitor.cli")
     bad = [(a, b) for a, b in _edges(graph, part, "fovexp")
-           if not (b == "fovexp" or any(b == p or b.startswith(p + ".") for p in allowed[1:]))]
+           if not (b == "fovexp" or any(b == p or b.startswith(p + ".") for p in allowed[1:]))
+           and (a, b) != beside]
     assert bad == []
 
 
 def test_the_engine_does_not_import_the_runner_or_the_analysis(graph):
     engine = [m for m in graph if not m.startswith(("fovexp.experiment", "fovexp.analysis",
-                                                    "fovexp.results", "fovexp.cli",
-                                                    "fovexp.__main__", "fovexp.bench"))]
+                                                    "fovexp.results", "fovexp.monitor",
+                                                    "fovexp.cli", "fovexp.__main__", "fovexp.bench",
+                                                    "fovexp.evaluation", "fovexp.rig",
+                                                    # compiles every kernel, the evaluation's too
+                                                    "fovexp.warmup"))]
     bad = [(a, b) for a in engine for b in graph[a]
-           if b.startswith(("fovexp.experiment", "fovexp.analysis", "fovexp.results"))]
+           if b.startswith(("fovexp.experiment", "fovexp.analysis", "fovexp.results",
+                            "fovexp.evaluation"))]
     assert bad == []
+
+
+def test_the_evaluation_uses_the_public_api(graph):
+    """``fovexp.evaluation`` (the paper's analyses of outputs and stereo, section 6) imports of
+    the enhancer only its public names; besides its own modules it reads trial logs through
+    ``fovexp.results``, takes the t-test and the validation summary from ``fovexp.analysis``
+    and the gaze argument's parser from ``fovexp.cli``; it never imports the runner."""
+    assert _edges(graph, "fovexp.evaluation", "fovexp.experiment") == []
+    allowed = ("fovexp.evaluation", "fovexp.results", "fovexp.analysis.stats",
+               "fovexp.analysis.validation", "fovexp.cli")
+    bad = [(a, b) for a, b in _edges(graph, "fovexp.evaluation", "fovexp")
+           if not (b == "fovexp" or any(b == p or b.startswith(p + ".") for p in allowed))]
+    assert bad == []
+    # and nothing below it imports it (only the command line registers it, by name; fovexp
+    # compile runs its kernel)
+    users = [a for a, deps in graph.items() for b in deps
+             if b.startswith("fovexp.evaluation")
+             and not a.startswith(("fovexp.evaluation", "fovexp.warmup"))]
+    assert users == []
+
+
+def test_the_rig_check_sits_on_the_runner(graph):
+    """``fovexp.rig`` measures with the session's own parts (``fovexp.experiment``), the logs
+    layer and the enhancer's public API; nothing below it imports it (a session reads its
+    reports through ``fovexp.results``)."""
+    allowed = ("fovexp.results", "fovexp.experiment", "fovexp.rig")
+    bad = [(a, b) for a, b in _edges(graph, "fovexp.rig", "fovexp")
+           if not (b == "fovexp" or any(b == p or b.startswith(p + ".") for p in allowed))]
+    assert bad == []
+    for part in ("fovexp.experiment", "fovexp.results", "fovexp.analysis"):
+        assert _edges(graph, part, "fovexp.rig") == []
 
 
 def test_every_subpackage_is_in_the_wheel():

@@ -10,7 +10,7 @@ import warnings
 from pathlib import Path
 
 from fovexp import FovexpError
-from fovexp.results.limits import TrialLimits
+from fovexp.results.limits import add_limit_options, limits_from_args
 
 
 def _configure(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
@@ -26,16 +26,7 @@ def _configure(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     p.add_argument("--protocol", action="append", default=[], metavar="EXPERIMENT=SHA256",
                    help="keep this protocol version (hash or prefix) of an experiment instead "
                         "of the majority one (rule R9); repeatable")
-    d = TrialLimits()
-    p.add_argument("--max-blanked", type=float, default=d.max_blanked_fraction, metavar="F",
-                   help="rule R11: the largest blanked fraction of a trial's frames "
-                        f"(default {d.max_blanked_fraction:g})")
-    p.add_argument("--max-dropped", type=float, default=d.max_dropped_fraction, metavar="F",
-                   help="rule R12: the largest fraction of a trial's frames dropped "
-                        f"(default {d.max_dropped_fraction:g})")
-    p.add_argument("--max-latency-ms", type=float, default=d.max_latency_p95_ms, metavar="MS",
-                   help="rule R13: the largest 95th percentile of a trial's gaze-to-flip "
-                        f"latency (default {d.max_latency_p95_ms:g} ms)")
+    add_limit_options(p)
     p.add_argument("--no-figures", action="store_true", help="skip the PNG/PDF figures")
     p.add_argument("--table-out", type=Path, default=None,
                    help="also write the calibrated Table 2 (ParameterTable YAML) here")
@@ -66,9 +57,7 @@ def analyze_command(args: argparse.Namespace) -> int:
             protocol[exp] = sha
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            limits = TrialLimits(max_blanked_fraction=args.max_blanked,
-                                 max_dropped_fraction=args.max_dropped,
-                                 max_latency_p95_ms=args.max_latency_ms)
+            limits = limits_from_args(args)
             ana = analyze(args.results, args.out, include_incomplete=args.include_incomplete,
                           include_pilots=args.include_pilots, protocol=protocol,
                           limits=limits, figures=not args.no_figures)

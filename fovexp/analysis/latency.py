@@ -3,9 +3,11 @@
 Paper section 5.1 hides the stimulus "whenever participants' gaze position moved outside a
 small circular region with radius 1.25 deg"; how late a frame can react to the gaze is the
 time from the newest gaze sample its decision used to its flip. Every frame log names both on
-the tracker's clock (:mod:`fovexp.results.frames`), so each session included in the analysis
-gets the latency's distribution (median, 95th percentile, maximum), its dropped frames, and a
-count of frames drawn with the stimulus against the rule (0 in a valid session).
+the tracker's clock, and the decision too (:mod:`fovexp.results.frames`), so each session
+included in the analysis gets the latency's distribution (median, 95th percentile, maximum),
+the frames' own draw latency (decision to flip), its dropped frames, and a count of frames
+drawn with the stimulus against the rule (:class:`fovexp.results.blanking.BlankingRule`,
+checked exactly: 0 in a valid session).
 """
 
 from __future__ import annotations
@@ -17,52 +19,40 @@ import numpy as np
 import pandas as pd
 import yaml
 
+from fovexp.results.blanking import BLANKING_RADIUS_DEG, GAZE_TIMEOUT_S, BlankingRule
 from fovexp.results.frames import (
     gaze_to_flip_ms,
     latency_summary,
     read_frame_log,
     unblanked_violations,
+    unchecked_ages,
 )
 from fovexp.results.loading import Dataset
 
-#: Paper section 5.1: the blanking radius, and the runner's default gaze timeout (s), used
-#: where a session file does not give the protocol's.
-DEFAULT_RADIUS_DEG = 1.25
-DEFAULT_GAZE_TIMEOUT_S = 0.05
-#: An attempt's first frame (no previous flip in the log) may show a sample older than the
-#: gaze timeout by up to this many refresh periods: the drawing and the wait for the blank.
-FIRST_FRAME_PERIODS = 2.0
-
 COLUMNS = ("experiment", "participant", "session", "tracker", "frames", "with_gaze",
-           "median_ms", "p95_ms", "max_ms", "dropped_pct", "rule_violations")
+           "median_ms", "p95_ms", "max_ms", "draw_median_ms", "draw_p95_ms", "dropped_pct",
+           "rule_violations")
 
 
-def _session_settings(folder: Path, session: str) -> tuple[float, float, float]:
-    """Blanking radius (deg), gaze timeout (s) and refresh rate (Hz) of a session, from its
-    session file (the protocol copy, the display check); defaults where it lacks them."""
-    radius, timeout, hz = DEFAULT_RADIUS_DEG, DEFAULT_GAZE_TIMEOUT_S, 60.0
+def _session_rule(folder: Path, session: str) -> BlankingRule:
+    """The blanking rule of a session: the radius and gaze timeout of its protocol copy in the
+    session file; the rule's defaults where it lacks them."""
+    radius, timeout = BLANKING_RADIUS_DEG, GAZE_TIMEOUT_S
     try:
         info = json.loads((folder / f"session-{session}.json").read_text())
-    except (OSError, ValueError):
-        return radius, timeout, hz
-    try:
         fix = (yaml.safe_load(info.get("protocol") or "") or {}).get("fixation") or {}
         radius = float(fix.get("radius_deg", radius))
         timeout = float(fix.get("gaze_timeout_s", timeout))
-    except (yaml.YAMLError, AttributeError, TypeError, ValueError):
+    except (OSError, ValueError, yaml.YAMLError, AttributeError, TypeError):
         pass
-    check = info.get("display_check") or {}
-    for key in ("refresh_hz", "measured_refresh_hz", "profile_refresh_hz"):
-        if isinstance(check.get(key), (int, float)) and check[key] > 0:
-            hz = float(check[key])
-            break
-    return radius, timeout, hz
+    return BlankingRule(radius, timeout)
 
 
 def session_latency(data: Dataset) -> tuple[pd.DataFrame, dict[str, np.ndarray], list[str]]:
     """Per session included in ``data``: the latency summary (:data:`COLUMNS`), the per-frame
-    latencies (ms) by session, and notes (sessions without a frame log, or one written before
-    it named the gaze sample)."""
+    latencies (ms) by session, and notes (sessions without a frame log, one written before it
+    named the gaze sample, or before it named the decision: then the first frames' sample age
+    cannot be checked)."""
     rows, lat, notes = [], {}, []
     t = data.trials
     if t.empty:
@@ -80,13 +70,19 @@ def session_latency(data: Dataset) -> tuple[pd.DataFrame, dict[str, np.ndarray],
             notes.append(f"{exp}/{pid}: session {sid}: the frame log names no gaze samples "
                          "(written before the latency columns)")
             continue
-        radius, timeout, hz = _session_settings(folder, sid)
-        bad = unblanked_violations(frames, radius, timeout, FIRST_FRAME_PERIODS / hz)
+        bad = unblanked_violations(frames, _session_rule(folder, sid))
+        unchecked = unchecked_ages(frames)
+        if unchecked:
+            notes.append(f"{exp}/{pid}: session {sid}: the frame log is older than the "
+                         f"decision's time (docs/LOGS.md, format version 1): {unchecked} "
+                         "first frame(s) of attempts could not be checked for their sample's "
+                         "age, the other frames only against the previous flip")
         rows.append({"experiment": exp, "participant": pid, "session": sid,
                      "tracker": ", ".join(sorted(set(grp["tracker"].astype(str)))),
                      "frames": summary["frames"], "with_gaze": summary["with_gaze"],
                      "median_ms": summary["median_ms"], "p95_ms": summary["p95_ms"],
-                     "max_ms": summary["max_ms"],
+                     "max_ms": summary["max_ms"], "draw_median_ms": summary["draw_median_ms"],
+                     "draw_p95_ms": summary["draw_p95_ms"],
                      "dropped_pct": 100 * summary["dropped_fraction"],
                      "rule_violations": len(bad)})
         lat[f"{exp}/{pid}/{sid}"] = gaze_to_flip_ms(frames).dropna().to_numpy()

@@ -44,6 +44,8 @@ def paired_ttest(a: Sequence[float] | np.ndarray, b: Sequence[float] | np.ndarra
     """Paired t-test of ``a`` vs ``b`` (paper section 6.1: ours vs contrast, "t-test").
 
     Uses :func:`scipy.stats.ttest_rel`; needs at least two pairs, else the statistics are NaN.
+    Pairs that all differ by the same amount (to rounding) give an infinite t and d_z (NaN
+    when that amount is 0), no p, and a CI of that one value.
     """
     a = np.asarray(a, dtype=float)
     b = np.asarray(b, dtype=float)
@@ -57,15 +59,18 @@ def paired_ttest(a: Sequence[float] | np.ndarray, b: Sequence[float] | np.ndarra
         m = float(d.mean()) if n else nan
         return PairedTTest(n, float(a.mean()) if n else nan, float(b.mean()) if n else nan,
                            m, nan, nan, max(n - 1, 0), nan, nan, nan, nan)
-    res = stats.ttest_rel(a, b)
     sd = float(d.std(ddof=1))
-    ci = res.confidence_interval(confidence_level=confidence)
     mean_d = float(d.mean())
-    if sd == 0.0:
-        # Every pair differs by the same amount: t is infinite or undefined, so is d_z.
-        d_z = math.copysign(math.inf, mean_d) if mean_d else nan
-    else:
-        d_z = mean_d / sd
+    # Every pair differs by the same amount, to rounding (0.4 - 0.3 and 0.3 - 0.2 differ in
+    # their last bits): t is infinite or undefined, and so is d_z; no p, a CI of one point.
+    scale = float(np.max(np.abs(np.concatenate([a, b])))) if n else 0.0
+    if sd <= 64 * np.finfo(float).eps * scale:
+        inf = math.copysign(math.inf, mean_d) if mean_d else nan
+        return PairedTTest(n, float(a.mean()), float(b.mean()), mean_d, 0.0, inf, n - 1, nan,
+                           inf, mean_d, mean_d)
+    res = stats.ttest_rel(a, b)
+    ci = res.confidence_interval(confidence_level=confidence)
+    d_z = mean_d / sd
     return PairedTTest(
         n=n, mean_a=float(a.mean()), mean_b=float(b.mean()), mean_diff=mean_d, sd_diff=sd,
         t=float(res.statistic), df=int(res.df), p=float(res.pvalue), d_z=float(d_z),

@@ -28,9 +28,10 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from .gaze import DisplayArea, GazeSample, SimulatedGaze, Vec3
+from .gaze import DisplayArea, GazeSample, Vec3
 from .quality import (
     CENTRE,
+    EYES,
     DriftResult,
     QualityLimits,
     TargetData,
@@ -38,6 +39,7 @@ from .quality import (
     drift_result,
     validation_result,
 )
+from .trackers.simulated import SimulatedGaze
 
 #: Keys the calibration screens read (PsychoPy names).
 CAL_KEYS = ["space", "return", "num_enter", "q", "y", "n", "escape", "r", "v", "s", "t", "c",
@@ -349,8 +351,10 @@ class _Base:
     def __init__(self, area: DisplayArea, distance_mm: float, rate_hz: float,
                  size_px: tuple[int, int], ppd_px: float, timing: CalibrationTiming,
                  look_at: Callable[[tuple[float, float] | None], None] | None,
-                 auto: bool) -> None:
+                 auto: bool, eyes: Sequence[str] = EYES) -> None:
         self.area, self.distance_mm, self.rate_hz = area, float(distance_mm), float(rate_hz)
+        #: the eyes the tracker records (a monocular tracker's other eye is not judged)
+        self.eyes = tuple(eyes)
         self.size_px, self.ppd_px = size_px, float(ppd_px)
         self.timing = timing
         self.look_at = look_at or (lambda target: None)
@@ -447,10 +451,15 @@ class CalibrationFlow(_Base):
                  look_at: Callable[[tuple[float, float] | None], None] | None = None,
                  on_record: Callable[[dict[str, Any], bool], None] | None = None,
                  auto: bool = False, seed: int = 0, now_iso: Callable[[], str] | None = None,
-                 start_with_head_box: bool = True) -> None:
+                 start_with_head_box: bool = True, eyes: Sequence[str] = EYES) -> None:
         super().__init__(area, distance_mm, rate_hz, size_px, ppd_px,
-                         timing or CalibrationTiming(), look_at, auto)
+                         timing or CalibrationTiming(), look_at, auto, eyes)
         self.backend = backend
+        #: a tracker with a set-up of its own (an ioHub tracker's ``runSetupProcedure``): it
+        #: replaces the head box and the calibration targets; this says what it is
+        self.own_procedure: str | None = getattr(backend, "own_procedure", None)
+        if self.own_procedure:
+            cal_points, start_with_head_box = [], False
         self.cal_points = [tuple(map(float, p)) for p in cal_points]
         self.val_points = [tuple(map(float, p)) for p in val_points]
         self.limits = limits
@@ -537,6 +546,11 @@ class CalibrationFlow(_Base):
                 return
 
     def _calibrate(self, indices: list[int], then_validate: bool = True) -> None:
+        if self.own_procedure:  # the tracker's own set-up, on the worker thread
+            self._kind, self._then_validate = "calibrate", then_validate
+            self._job = self._submit(self._own_job)
+            self._set("compute")
+            return
         order = list(indices)
         self.rng.shuffle(order)  # as Titta: a random order, so the next point is not expected
         self._start_targets("calibrate", order)
@@ -623,6 +637,12 @@ class CalibrationFlow(_Base):
         self._collected.add(idx)
         return ok
 
+    def _own_job(self) -> CalibrationOutcome:
+        if not self._begun:
+            self.backend.begin()
+            self._begun = True
+        return self.backend.compute()
+
     def _targets_done(self) -> None:
         self.look_at(None)
         if self._kind == "calibrate":
@@ -680,7 +700,8 @@ class CalibrationFlow(_Base):
 
     def _finish_validation(self) -> None:
         data = [self._val_data[i] for i in range(len(self.val_points)) if i in self._val_data]
-        self.result = validation_result(self.area, self.distance_mm, data, self.limits)
+        self.result = validation_result(self.area, self.distance_mm, data, self.limits,
+                                        self.eyes)
         self._n_results += 1
         self.failure = None if self.result.passed else (
             f"eye-tracker validation failed: {self.result.failure}")
@@ -765,6 +786,9 @@ class CalibrationFlow(_Base):
         if self.phase == "targets":
             return self.anim.view(self.now)
         if self.phase == "compute":
+            if self.own_procedure:
+                return TextView(f"Calibrating: {self.own_procedure} ...",
+                                "fovexp's validation follows")
             return TextView("Computing the calibration ...")
         if self.phase == "cal_failed":
             return TextView(f"{self.failure}.",
@@ -849,9 +873,9 @@ class DriftCheck(_Base):
                  size_px: tuple[int, int], ppd_px: float, limit_deg: float,
                  max_data_loss: float, timing: CalibrationTiming | None = None,
                  look_at: Callable[[tuple[float, float] | None], None] | None = None,
-                 auto: bool = False) -> None:
+                 auto: bool = False, eyes: Sequence[str] = EYES) -> None:
         super().__init__(area, distance_mm, rate_hz, size_px, ppd_px,
-                         timing or CalibrationTiming(), look_at, auto)
+                         timing or CalibrationTiming(), look_at, auto, eyes)
         self.limit_deg, self.max_data_loss = float(limit_deg), float(max_data_loss)
         self.result: DriftResult | None = None
         self.results: list[DriftResult] = []
@@ -895,7 +919,7 @@ class DriftCheck(_Base):
                 self.look_at(None)
                 self.result = drift_result(self.area, self.distance_mm,
                                            self._take_window(CENTRE), self.limit_deg,
-                                           self.max_data_loss)
+                                           self.max_data_loss, self.eyes)
                 self.results.append(self.result)
                 if self.result.passed:
                     self.outcome = "ok"

@@ -16,7 +16,8 @@ from fovexp import BACKENDS, FovexpError, find_protocol
 from fovexp.results.format import SIMULATED_TRACKER, TRACKERS
 
 
-def _size(text: str) -> tuple[int, int]:
+def window_size(text: str) -> tuple[int, int]:
+    """``--window WxH`` (the runner's and the rig check's): an even width, sides 16..16384."""
     try:
         w, h = (int(v) for v in text.lower().split("x"))
     except ValueError:
@@ -32,10 +33,16 @@ def add_run_parser(subparsers: Any) -> argparse.ArgumentParser:
         "run", help="run an experiment protocol with a participant",
         description="Run one of the paper's adjustment experiments (protocols/*.yaml).")
     p.add_argument("protocol", help="protocol YAML, or the name of one in ./protocols or shipped "
-                   "with fovexp (calibration-fe, calibration-sk, calibration-sf, validation)")
+                   "with fovexp (calibration-fe, calibration-sk, calibration-sf, validation, "
+                   "validation-12)")
     p.add_argument("--participant", required=True, help="participant ID ([A-Za-z0-9_-]{1,32})")
     p.add_argument("--tracker", choices=TRACKERS, default=None,
-                   help="gaze source (default: tobii; simulated with --dry-run)")
+                   help="gaze source (default: tobii; simulated with --dry-run); iohub: any "
+                        "eye tracker PsychoPy's ioHub reaches (EyeLink, Tobii, Gazepoint, Pupil "
+                        "Labs, EyeLogic, MouseGaze), configured by --tracker-config")
+    p.add_argument("--tracker-config", type=Path, default=None, metavar="FILE",
+                   help="--tracker iohub: the ioHub configuration, the YAML PsychoPy Builder "
+                        "or ioHub uses (default: the protocol's tracker.iohub_config)")
     p.add_argument("--tracker-address", default=None,
                    help="Tobii tracker address or serial number (default: the first found)")
     p.add_argument("--dry-run", action="store_true",
@@ -50,12 +57,15 @@ def add_run_parser(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument("--include-pilots", action="store_true",
                    help="let the dependencies' mouse-gaze pilot sessions count (left out by "
                         "default, as in fovexp analyze)")
-    p.add_argument("--window", type=_size, default=None, metavar="WxH",
+    p.add_argument("--window", type=window_size, default=None, metavar="WxH",
                    help="window size instead of the display profile's (dry run: 480x270); a "
-                        "real session needs its images at exactly this size")
+                        "real session needs its images at exactly this size, and so does a "
+                        "dry run at the display's size (a rehearsal); a smaller dry run "
+                        "scales them")
     p.add_argument("--stimuli", type=Path, default=None, metavar="DIR",
-                   help="stimulus folder (default: the protocol's, $FOVEXP_STIMULI, ./stimuli, "
-                        "or the user data folder; see fovexp stimuli --help)")
+                   help="stimulus folder (default: the protocol's, the study folder's, "
+                        "$FOVEXP_STIMULI, ./stimuli, or the user data folder; see fovexp "
+                        "stimuli --help)")
     p.add_argument("--windowed", action="store_true", help="not full screen (pilots)")
     p.add_argument("--backend", choices=BACKENDS, default="auto",
                    help="enhancer backend: cpu, gpu (OpenGL 4.5 compute shaders), or auto: "
@@ -65,9 +75,21 @@ def add_run_parser(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument("--skip-display-check", action="store_true",
                    help="do not stop when the refresh rate or window size differ from the profile")
     p.add_argument("--limit-trials", type=int, default=None, metavar="N",
-                   help="only the first N main trials of the randomised order (tests, pilots)")
+                   help="only the first N main trials of the randomised order, each scene's "
+                   "methods together so that they still pair (N rounded up to whole scenes; "
+                   "tests, pilots)")
     p.add_argument("--practice", type=int, default=None, metavar="N",
                    help="practice trials (default: the protocol's)")
+    m = p.add_argument_group("the operator's live view (docs/EXPERIMENT.md)")
+    m.add_argument("--monitor", action="store_true",
+                   help="also serve fovexp monitor's page for the results root while the run "
+                        "lasts (http://127.0.0.1:8765/; a process of its own, at a lower "
+                        "priority; needs fovexp[monitor])")
+    m.add_argument("--monitor-host", default=None, metavar="HOST",
+                   help="with --monitor: the address to serve, e.g. 0.0.0.0 for the lab's "
+                        "network (a token is printed; every request needs it)")
+    m.add_argument("--monitor-port", type=int, default=None, metavar="PORT",
+                   help="with --monitor: the port (default 8765)")
     f = p.add_argument_group(
         "participant form (asked at the console at a participant's first session; every "
         "field optional; never in a dry run)")
@@ -130,7 +152,7 @@ def run_command(args: argparse.Namespace) -> int:
     """Validate everything, then run the session; errors print one line and return 2."""
     from .session import EXIT_ERROR, Session, SessionOptions
 
-    session = None
+    session = monitor = None
     try:
         from .participant import SimTruth
         from .protocol import load_protocol
@@ -138,6 +160,10 @@ def run_command(args: argparse.Namespace) -> int:
         from .validation import check_participant
 
         check_participant(args.participant)
+        if args.monitor or args.monitor_host or args.monitor_port is not None:
+            from fovexp.monitor.cli import require_server
+
+            require_server()  # a missing extra stops here, before anything is opened
         if args.limit_trials is not None and args.limit_trials < 1:
             raise FovexpError("--limit-trials must be at least 1")
         if args.practice is not None and args.practice < 0:
@@ -147,6 +173,8 @@ def run_command(args: argparse.Namespace) -> int:
         if args.resume and args.new_session:
             raise FovexpError("--resume and --new-session exclude each other")
         tracker = args.tracker or (SIMULATED_TRACKER if args.dry_run else "tobii")
+        if args.tracker_config is not None and tracker != "iohub":
+            raise FovexpError("--tracker-config is for --tracker iohub")
         if args.screen < 0:
             raise FovexpError("--screen must be 0 or more")
         from .operator import parse_form
@@ -155,11 +183,16 @@ def run_command(args: argparse.Namespace) -> int:
         truth = SimTruth.load(args.sim_truth) if args.sim_truth else SimTruth()
         # dependencies come from the same results root; a participant's never from dry runs
         protocol = load_protocol(find_protocol(args.protocol), results_root=args.results,
-                                 real_only=tracker != SIMULATED_TRACKER, stimuli=args.stimuli,
+                                 real_only=not args.dry_run and tracker != SIMULATED_TRACKER,
+                                 stimuli=args.stimuli,
                                  include_pilots=args.include_pilots)
         # Every image's sha256 and size, for the frames this run shows, before any window.
         frame_size = args.window or (DRY_RUN_SIZE if args.dry_run else protocol.native_size)
         images = protocol.prepare_images(frame_size, args.dry_run)
+        if args.windowed or args.dry_run:  # a full-screen window is the display check's
+            from .xscreen import check_window_fits, x_screen_size
+
+            check_window_fits(frame_size, x_screen_size())
         scaled = sorted({(v.size, v.frame_size) for v in images.values() if v.scaled})
         if scaled:
             n = sum(v.scaled for v in images.values())
@@ -174,6 +207,7 @@ def run_command(args: argparse.Namespace) -> int:
             window_size=args.window or (DRY_RUN_SIZE if args.dry_run else None),
             fullscreen=not (args.windowed or args.dry_run),
             skip_display_check=args.skip_display_check, tracker_address=args.tracker_address,
+            tracker_config=args.tracker_config,
             backend=args.backend, screen=args.screen,
             sim_truth=truth, sim_speed=args.sim_speed, sim_noise_scale=args.sim_noise_scale,
             sim_seed=args.sim_seed,
@@ -193,6 +227,12 @@ def run_command(args: argparse.Namespace) -> int:
         print(f"fovexp run: {protocol.experiment}, participant {args.participant}, session "
               f"{session.session_id}, {len(session.remaining)} of {len(session.trials)} trials "
               f"to run -> {session.folder}", file=sys.stderr)
+        if args.monitor or args.monitor_host or args.monitor_port is not None:
+            from fovexp.monitor.cli import DEFAULT_PORT, start_beside
+
+            monitor = start_beside(args.results, args.monitor_host,
+                                   args.monitor_port if args.monitor_port is not None
+                                   else DEFAULT_PORT)
         code = session.run(gaze=gaze)
     except FovexpError as exc:
         print(f"fovexp run: error: {exc}", file=sys.stderr)
@@ -203,6 +243,10 @@ def run_command(args: argparse.Namespace) -> int:
     finally:
         if session is not None:  # a session that never started leaves no empty folder
             session.release()
+        if monitor is not None:
+            from fovexp.monitor.cli import stop_beside
+
+            stop_beside(monitor)
     messages = {0: "finished", 3: "aborted by the operator; continue with --resume",
                 130: "interrupted; continue with --resume"}
     print(f"fovexp run: session {session.session_id} {messages.get(code, code)}", file=sys.stderr)

@@ -1,18 +1,35 @@
 """What the session and the frame loop need from their window, gaze source and renderer, as
-protocols (structural types): the real ones (``window.PsychoScreen``, ``tobii.TobiiGaze``,
-``gaze.SimulatedGaze`` / ``gaze.MouseGaze``, ``render.TestRenderer``) and the window-free
+protocols (structural types): the real ones (``window.PsychoScreen``; the sources of
+:mod:`fovexp.experiment.trackers`: ``TobiiGaze``, ``IoHubGaze``, ``SimulatedGaze``,
+``MouseGaze``; ``render.TestRenderer``) and the window-free
 stand-ins of the tests all satisfy them, so everything but the window itself runs without one.
+
+Clocks. Every time a :class:`Screen` returns (flips, key presses) is on ``time.monotonic``'s
+clock, in seconds; a :class:`GazeSource`'s times (``now_us``, the samples' ``system_time_us``)
+are on its own clock, in whole microseconds (a Tobii's system clock). The frame loop puts a
+flip on the gaze clock by reading ``now_us`` right after the flip returns
+(:class:`fovexp.experiment.frameloop.TrialLoop`). A screen whose toolkit keeps another clock
+(PsychoPy's, which is ``psychtoolbox.GetSecs``, seconds since the epoch, once psychtoolbox
+loads) converts at the source, from the two clocks read back to back.
+
+A frame's life on a :class:`Screen` (``frameloop.TrialLoop``): :meth:`Screen.prepare` draws it
+into the back buffer and returns when the drawing is done; it may be called again before the
+flip, and the later call replaces the frame (the loop draws the stimulus before it reads the
+gaze, and blanks it cheaply if the gaze then says so); :meth:`Screen.flip` presents it at the
+next vertical blank and returns :class:`FlipTimes`.
 
 Optional capabilities are read with ``getattr`` where they are used: a gaze source's
 ``validated`` (False: not calibrated, the mouse), ``calibration()`` (a real tracker's),
-``look_at`` (simulated eyes follow the targets), ``display_area()`` (a tracker's own);
+``look_at`` (simulated eyes follow the targets), ``display_area()`` (a tracker's own),
+``attach(screen)`` (a source that needs the window: the mouse's pointer, ioHub's window
+rectangle);
 a screen's ``gl_share()`` (the window's GL context, for the GPU backend).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Any, NamedTuple, Protocol
 
 import numpy as np
 
@@ -23,15 +40,31 @@ if TYPE_CHECKING:  # the renderer's module starts threads and GL on use, not on 
     from .render import Rendered
 
 
+class FlipTimes(NamedTuple):
+    """One flip, on ``time.monotonic``'s clock (s)."""
+
+    #: the frame appeared: the vertical blank the flip returned at (``win.flip()``'s return
+    #: value; a paced window's emulated blank)
+    flip_s: float
+    #: the frame was ready: its drawing done, so that from here it waited only for the
+    #: vertical blank (the late latch measures its draw time up to here)
+    ready_s: float
+
+
 class GazeSource(Protocol):
-    """A gaze stream on one clock (``now_us``, the samples' ``system_time_us``)."""
+    """A gaze stream on one clock (``now_us``, the samples' ``system_time_us``, whole
+    microseconds)."""
 
     name: str
 
     def start(self) -> None: ...
     def stop(self) -> None: ...
-    def now_us(self) -> int: ...
-    def poll(self) -> list[GazeSample]: ...
+    def now_us(self) -> int:
+        """The source's clock now (us): the time a frame's blanking decision is made at."""
+    def poll(self) -> list[GazeSample]:
+        """The samples that arrived since the last call, oldest first; never waits (the frame
+        loop calls it twice a frame when it late-latches: once to guess the frame, once to
+        decide it)."""
     def poll_events(self) -> list[SourceEvent]: ...
     @property
     def connected(self) -> bool: ...
@@ -39,10 +72,12 @@ class GazeSource(Protocol):
 
 
 class Screen(Protocol):
-    """The window a session draws on (``window.PsychoScreen``)."""
+    """The window a session draws on (``window.PsychoScreen``); times on ``time.monotonic``'s
+    clock (module docstring)."""
 
     size: tuple[int, int]
 
+    #: the rate the flips come at (Hz): the display's, or a paced window's
     refresh_hz: float
 
     def measure_display(self) -> tuple[float | None, tuple[int, int], tuple[int, int]]: ...
@@ -53,11 +88,22 @@ class Screen(Protocol):
     def take_operator_keys(self) -> set[str]: ...
     def set_reference(self, left: np.ndarray) -> None: ...
     def set_test(self, right: Rendered | np.ndarray) -> None: ...
-    def prepare(self, blank: bool) -> None: ...
-    def flip(self) -> float: ...
-    def draw(self, blank: bool) -> float: ...
-    def poll_input(self) -> list[InputEvent]: ...
+    def prepare(self, blank: bool) -> None:
+        """Draw the next frame into the back buffer, replacing what an earlier call drew since
+        the last flip: both halves and the cross, or (blank) the cross alone on black; returns
+        when the drawing is done."""
+    def flip(self) -> FlipTimes:
+        """Present the back buffer at the next vertical blank."""
+    def draw(self, blank: bool) -> FlipTimes:
+        """:meth:`prepare` and :meth:`flip`."""
+    def poll_input(self) -> list[InputEvent]:
+        """Wheel notches and keys since the last call (keys stamped with their press time where
+        the keyboard gives it: :class:`fovexp.experiment.trial.Key`)."""
     def mouse_position(self) -> tuple[float, float] | None: ...
+    def info(self) -> dict[str, Any]:
+        """What the session file records of the window: its keyboard (``backend``, and
+        ``key_time``: ``press`` where keys carry their press time, ``poll`` where not),
+        pacing."""
     def close(self) -> None: ...
 
 
@@ -77,4 +123,4 @@ class Renderer(Protocol):
 #: a screen factory: ``PsychoScreen`` or a test's stand-in
 ScreenFactory = Callable[..., Screen]
 
-__all__ = ["GazeSource", "Renderer", "Screen", "ScreenFactory"]
+__all__ = ["FlipTimes", "GazeSource", "Renderer", "Screen", "ScreenFactory"]

@@ -15,7 +15,8 @@ from __future__ import annotations
 import json
 import os
 import threading
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -32,7 +33,7 @@ from fovexp.results.format import (
 
 __all__ = ["BLANKING_COLUMNS", "FRAME_COLUMNS", "GAZE_COLUMNS", "TRIAL_COLUMNS", "BatchLog",
            "JsonWriter", "PeriodicFlusher", "TrialLog", "format_line", "format_value",
-           "read_trials", "repair_tail", "write_json_atomic"]
+           "read_trials", "repair_tail", "upgrade_header", "write_json_atomic"]
 
 def read_trials(path: Path) -> tuple[list[dict[str, Any]], int]:
     """Rows of a ``trials.csv`` and the byte length of its valid part
@@ -65,10 +66,57 @@ def repair_tail(path: Path, good_len: int) -> bytes:
     return cut
 
 
+@contextmanager
+def _cut_back_on_error(path: Path) -> Iterator[None]:
+    """Appends to ``path`` in the block; if they fail (a full disk: part of them may have
+    reached the file), the file is cut back to its length before them, and the error goes on."""
+    try:
+        before = path.stat().st_size
+    except FileNotFoundError:
+        before = 0
+    try:
+        yield
+    except OSError:
+        try:
+            os.truncate(path, before)  # frees blocks: needs no space
+        except OSError:
+            pass
+        raise
+
+
 def _csv_good_length(path: Path) -> int:
     """Length of a batch CSV up to its last complete line (torn tails of gaze/frame logs)."""
     data = path.read_bytes()
     return data.rfind(b"\n") + 1
+
+
+def upgrade_header(path: Path, columns: Sequence[str]) -> bool:
+    """A batch CSV written by an older format version, whose columns are the first of
+    ``columns`` (a newer version only appends columns: docs/LOGS.md, "Format versions"), is
+    rewritten with the current header and its rows padded with empty fields, in one atomic
+    replace; a resumed session then appends rows of the current format to it. Returns whether
+    it was rewritten; raises :class:`FovexpError` naming the file when its header is not an
+    older version of ``columns``."""
+    path = Path(path)
+    with open(path, "rb") as fh:
+        head = fh.readline()
+    header = head.decode("utf-8", "replace").rstrip("\r\n").split(",")
+    cols = list(columns)
+    if header == cols:
+        return False
+    if len(header) >= len(cols) or header != cols[: len(header)]:
+        raise FovexpError(f"{path}: its columns are not those of docs/LOGS.md "
+                          f"({','.join(header)[:80]}): move it aside to resume")
+    pad = b"," * (len(cols) - len(header))
+    data = path.read_bytes()[len(head):]
+    body = b"".join(line + pad + b"\n" for line in data.split(b"\n") if line)
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "wb") as fh:
+        fh.write(format_line(cols).encode() + body)
+        fh.flush()
+        os.fsync(fh.fileno())
+    os.replace(tmp, path)
+    return True
 
 
 class TrialLog:
@@ -85,11 +133,13 @@ class TrialLog:
             self._write(format_line(TRIAL_COLUMNS))
 
     def _write(self, line: str) -> None:
-        # One write of a whole line, then flush + fsync: at most this line can be torn.
-        with open(self.path, "a", encoding="utf-8", newline="") as fh:
-            fh.write(line)
-            fh.flush()
-            os.fsync(fh.fileno())
+        # One write of a whole line, then flush + fsync: at most this line can be torn, and a
+        # write that fails (a full disk) is cut back off, so the file stays whole.
+        with _cut_back_on_error(self.path):
+            with open(self.path, "a", encoding="utf-8", newline="") as fh:
+                fh.write(line)
+                fh.flush()
+                os.fsync(fh.fileno())
 
     def append(self, row: dict[str, Any]) -> None:
         missing = set(TRIAL_COLUMNS) - set(row)
@@ -105,8 +155,11 @@ class BatchLog:
     ``add`` only appends to a list under a lock; ``flush`` writes what has accumulated. On
     resume an existing file's torn tail is cut off first. ``formatter`` turns what was added
     into a row when it is written, on the flushing thread (the gaze log's eccentricities are
-    computed there, not in the frame loop).
+    computed there, not in the frame loop). ``tap``, when set, is also handed what is added, as
+    it is added (the live status file's publisher: :mod:`.live`); it must only queue it.
     """
+
+    tap: Callable[[Iterable[Any]], None] | None = None
 
     def __init__(self, path: Path, columns: Sequence[str],
                  formatter: Callable[[Any], Sequence[Any]] | None = None) -> None:
@@ -119,6 +172,8 @@ class BatchLog:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         if self.path.exists() and self.path.stat().st_size > 0:
             repair_tail(self.path, _csv_good_length(self.path))
+            if self.path.stat().st_size > 0:
+                upgrade_header(self.path, self.columns)
         if not self.path.exists() or self.path.stat().st_size == 0:
             with open(self.path, "w", encoding="utf-8", newline="") as fh:
                 fh.write(format_line(self.columns))
@@ -126,8 +181,13 @@ class BatchLog:
     def add(self, row: Sequence[Any]) -> None:
         with self._lock:
             self._pending.append(row)
+        if self.tap is not None:
+            self.tap((row,))
 
     def extend(self, rows: Iterable[Sequence[Any]]) -> None:
+        if self.tap is not None:
+            rows = rows if isinstance(rows, list) else list(rows)
+            self.tap(rows)
         with self._lock:
             self._pending.extend(rows)
 
@@ -142,21 +202,33 @@ class BatchLog:
                 return 0
             fmt = self._formatter
             text = "".join(format_line(fmt(r) if fmt is not None else r) for r in rows)
-            with open(self.path, "a", encoding="utf-8", newline="") as fh:
-                fh.write(text)
-                fh.flush()
-                if sync:
-                    os.fsync(fh.fileno())
+            try:
+                with _cut_back_on_error(self.path):
+                    with open(self.path, "a", encoding="utf-8", newline="") as fh:
+                        fh.write(text)
+                        fh.flush()
+                        if sync:
+                            os.fsync(fh.fileno())
+            except OSError:
+                with self._lock:  # not written: pending again, before any added since
+                    self._pending[:0] = rows
+                raise
             return len(rows)
 
 
 class PeriodicFlusher:
     """A thread that flushes :class:`BatchLog` objects every ``period_s`` (disk work off the
-    frame loop and out of the tracker callback)."""
+    frame loop and out of the tracker callback).
+
+    A write that fails (a full disk) leaves its log as it was and its rows pending; the thread
+    keeps the first error in :attr:`error` (the session stops on it: no traceback from the
+    thread) and tries again each period. :meth:`stop` flushes a last time and keeps a failure
+    there too."""
 
     def __init__(self, logs: Sequence[BatchLog], period_s: float = 0.5) -> None:
         self.logs = list(logs)
         self.period_s = period_s
+        self.error: OSError | None = None
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="fovexp-log-flusher", daemon=True)
 
@@ -164,17 +236,23 @@ class PeriodicFlusher:
         self._thread.start()
         return self
 
+    def _flush_all(self, sync: bool) -> None:
+        for log in self.logs:
+            try:
+                log.flush(sync=sync)
+            except OSError as exc:
+                if self.error is None:
+                    self.error = exc
+
     def _run(self) -> None:
         while not self._stop.wait(self.period_s):
-            for log in self.logs:
-                log.flush()
+            self._flush_all(sync=False)
 
     def stop(self) -> None:
         self._stop.set()
         if self._thread.is_alive():
             self._thread.join(timeout=5)
-        for log in self.logs:
-            log.flush(sync=True)
+        self._flush_all(sync=True)
 
 
 def json_text(data: dict[str, Any]) -> str:
@@ -184,14 +262,19 @@ def json_text(data: dict[str, Any]) -> str:
 
 def write_json_atomic(path: Path, data: dict[str, Any] | str) -> None:
     """Write JSON (a dict, or :func:`json_text` already made) via a temporary file and
-    ``os.replace``, fsync'ed: a reader sees old or new, never half."""
+    ``os.replace``, fsync'ed: a reader sees old or new, never half (a write that fails, a
+    full disk, leaves the old one and no temporary file)."""
     path = Path(path)
     text = data if isinstance(data, str) else json_text(data)
     tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "w", encoding="utf-8") as fh:
-        fh.write(text)
-        fh.flush()
-        os.fsync(fh.fileno())
+    try:
+        with open(tmp, "w", encoding="utf-8") as fh:
+            fh.write(text)
+            fh.flush()
+            os.fsync(fh.fileno())
+    except OSError:
+        tmp.unlink(missing_ok=True)
+        raise
     os.replace(tmp, path)
     dfd = os.open(path.parent, os.O_RDONLY)
     try:

@@ -19,8 +19,13 @@ from fovexp import FovexpError
 #: run, and the session file records it. docs/EXPERIMENT.md lists the same items.
 DISPLAY_CHECKLIST: tuple[str, ...] = (
     "the display runs at the profile's mode: 3840x2160, 120 Hz, no desktop scaling",
-    "picture mode: the lab's calibrated mode (for the LG OLED55CX: Expert/ISF Dark Room), "
-    "with peak luminance set to 167 cd/m2 (measured on a full-white patch)",
+    "the TV's low-latency mode: its game or PC mode, which shows each frame without the "
+    "picture processing that holds it back by tens of ms (for the LG OLED55CX: picture mode "
+    "Game, the HDMI input's icon set to PC); that mode turns off motion interpolation, noise "
+    "reduction, sharpness enhancement and super-resolution, and dynamic contrast: check each "
+    "below, a mode's defaults vary between firmware versions",
+    "the picture calibrated in that mode: peak luminance 167 cd/m2 (measured on a full-white "
+    "patch)",
     "sharpening (Sharpness) at 0 / off, and any super-resolution off",
     "noise reduction (noise and MPEG noise reduction) off",
     "motion smoothing (TruMotion / motion interpolation and OLED motion / black-frame "

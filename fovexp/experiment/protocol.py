@@ -41,7 +41,7 @@ from fovexp import (
 
 from .gaze import BLANKING_RADIUS_DEG, GAZE_TIMEOUT_S, TRACKER_RATE_HZ
 from .quality import MAX_ACCURACY_DEG, MAX_DATA_LOSS, QualityLimits, central_accuracy_limit_deg
-from .stimuli import ImageCheck, Size, StimulusSet
+from .stimuli import ImageCheck, Size, StimulusSet, may_scale
 
 Parameter = Literal["f_e", "s_k", "s_f", "blur_rate"]
 MethodName = Literal["foveated", "contrast", "ours"]
@@ -158,6 +158,9 @@ class TrackerSpec(_Strict):
     drift_check_every: int = Field(default=0, ge=0)
     #: a drift check fails above this offset at the centre (deg); default the central limit
     max_drift_deg: float | None = Field(default=None, gt=0, le=10)
+    #: ``--tracker iohub``'s configuration (the YAML PsychoPy Builder or ioHub uses), relative
+    #: to this file; ``--tracker-config`` overrides it
+    iohub_config: str | None = None
 
 
 class RenderSpec(_Strict):
@@ -315,7 +318,7 @@ class LoadedProtocol:
     derived: dict[str, dict[str, Any]] = field(default_factory=dict)
     #: the images checked for a frame size (:meth:`prepare_images`)
     images: dict[str, ImageCheck] = field(default_factory=dict)
-    _images_for: tuple[Size, bool] | None = None
+    _images_for: tuple[Size, bool, bool] | None = None  # frame size, dry run, may scale
 
     @property
     def native_size(self) -> Size:
@@ -324,13 +327,16 @@ class LoadedProtocol:
 
     def prepare_images(self, frame_size: Size, dry_run: bool) -> dict[str, ImageCheck]:
         """Check every image for frames of ``frame_size``: listed, present, unchanged (sha256)
-        and of exactly that size, or (``dry_run``) scaled to it. Raises FovexpError naming the
-        image, its size and the needed size, with the command that fixes it."""
-        key = (tuple(frame_size), bool(dry_run))
+        and of exactly that size, or (``dry_run`` in a window of another size than the
+        display's: :func:`.stimuli.may_scale`) scaled to it. Raises FovexpError naming the
+        image, its size and the needed size, with the command that fixes it: at the display's
+        own size a dry run refuses exactly what the real session refuses, with the same line."""
+        size: Size = (int(frame_size[0]), int(frame_size[1]))
+        key = (size, bool(dry_run), may_scale(dry_run, size, self.native_size))
         if self._images_for != key:
-            self.images = self.stimuli.require(self.spec.images, key[0], dry_run,
+            self.images = self.stimuli.require(self.spec.images, size, key[2],
                                                f"protocol {self.path}")
-            self._images_for = key  # type: ignore[assignment]
+            self._images_for = key
         return self.images
 
     @property
@@ -342,9 +348,9 @@ class LoadedProtocol:
         """What a session file keeps of its images: folder, frame size, each file's sha256 and
         size, and which a dry run scaled."""
         assert self._images_for is not None, "prepare_images first"
-        size, dry = self._images_for
+        size, dry, scale = self._images_for
         return {"folder": str(self.stimuli.folder), "found_by": self.stimuli.found_by,
-                "frame_size": list(size), "dry_run": dry,
+                "frame_size": list(size), "dry_run": dry, "may_scale": scale,
                 "scaled": sorted(k for k, v in self.images.items() if v.scaled),
                 "images": {k: v.record() for k, v in self.images.items()}}
 
@@ -406,7 +412,10 @@ class LoadedProtocol:
         """The session seed and the trial list: practice first, then the randomised conditions.
 
         The order depends only on the protocol's seed and the participant, so ``--resume``
-        regenerates the same plan. ``limit`` keeps the first ``limit`` main trials (tests).
+        regenerates the same plan. ``limit`` keeps the first ``limit`` main trials (pilots,
+        tests) with each scene's methods together (:func:`limit_order`), so that a short
+        validation still pairs ours with contrast; the kept trials keep their order and their
+        start values.
         """
         seed = session_seed(self.spec.seed, participant)
         rng = np.random.default_rng(seed)
@@ -424,8 +433,13 @@ class LoadedProtocol:
             practice_conds = [(*c[:3], pm[int(prng.integers(len(pm)))], c[4])
                               for c in practice_conds]
         main = [conds[int(i)] for i in order]
+        # positions in the full plan: a trial's start value is drawn from its own stream, so it
+        # does not depend on the limit
+        positions = list(range(n_practice + len(main)))
         if limit is not None:
-            main = main[:limit]
+            keep = limit_order([(c[0], c[1], c[2], c[4]) for c in main], limit)
+            main = [main[i] for i in keep]
+            positions = positions[:n_practice] + [n_practice + i for i in keep]
         lo, hi = s.adjust.range
         trials = []
         for k, (cond, is_practice) in enumerate(
@@ -433,12 +447,40 @@ class LoadedProtocol:
         ):
             rep, image, br, method, sf = cond
             start = s.adjust.start
-            # Drawn from a per-trial stream so the start value does not depend on the limit.
-            srng = np.random.default_rng([seed, k])
+            srng = np.random.default_rng([seed, positions[k]])
             start_value = float(srng.uniform(lo, hi)) if start == "random" else float(start)
             trials.append(Trial(k, is_practice, rep if not is_practice else 0, image, method,
                                 br, sf, start_value))
         return seed, trials
+
+
+def limit_order(groups: list[Any], limit: int) -> list[int]:
+    """Which of a randomised order's trials a ``--limit-trials`` of ``limit`` keeps, in order:
+    whole groups (``groups[i]`` is trial i's condition without its method: repetition, image,
+    blur-rate, s_f), taken in the order their first trial comes, until ``limit`` trials are
+    kept (the last group whole: ``limit`` rounded up). A group's methods are what the validation
+    pairs (ours against contrast on the same scene, section 6.1), so a short pilot still
+    pairs; with one method per group it is the first ``limit`` trials.
+
+    >>> limit_order(["a", "b", "a", "c", "b", "c"], 2)
+    [0, 2]
+    >>> limit_order(["a", "b", "a", "c", "b", "c"], 3)
+    [0, 1, 2, 4]
+    >>> limit_order(["a", "b", "c"], 2)
+    [0, 1]
+    """
+    chosen: set[Any] = set()
+    size: dict[Any, int] = {}
+    for g in groups:
+        size[g] = size.get(g, 0) + 1
+    n = 0
+    for g in groups:
+        if n >= limit:
+            break
+        if g not in chosen:
+            chosen.add(g)
+            n += size[g]
+    return [i for i, g in enumerate(groups) if g in chosen]
 
 
 def session_seed(protocol_seed: int, participant: str) -> int:
@@ -470,12 +512,18 @@ def read_protocol(path: str | Path) -> tuple[bytes, Protocol]:
 
 
 def protocol_display(path: Path, spec: Protocol) -> tuple[str, Any]:
-    """The display profile a protocol names (a name, or a YAML path relative to it)."""
+    """The display profile a protocol names: a YAML path relative to the protocol file, or a
+    profile's name (``lg-oled55cx``), looked up in ``displays/`` beside the protocol file (a
+    study folder's own profiles, wherever it is run from), then where
+    :func:`fovexp.load_display` looks (``./protocols/displays``, the shipped profiles)."""
     from fovexp import load_display
 
     disp = spec.display
+    beside = path.resolve().parent / "displays" / f"{disp}.yaml"
     if disp.endswith((".yaml", ".yml")):
         disp = str(_resolve_path(path.resolve().parent, disp))
+    elif "/" not in disp and beside.is_file():
+        disp = str(beside)
     try:
         return disp, load_display(disp)
     except FovexpError as exc:

@@ -51,6 +51,8 @@ MAX_ACCURACY_DEG = 1.0
 CENTRAL_ACCURACY_FRACTION = 0.4
 #: Where the fixation cross is (normalised): the central validation target.
 CENTRE = (0.5, 0.5)
+#: A binocular tracker's eyes (a monocular one records one of them).
+EYES: tuple[str, ...] = ("left", "right")
 
 
 def central_accuracy_limit_deg(radius_deg: float) -> float:
@@ -200,9 +202,9 @@ def eye_quality(area: DisplayArea, distance_mm: float, per_target: Sequence[Targ
     )
 
 
-def _worse(a: float, b: float) -> float:
-    """The worse of two eyes' figures (NaN counts as worst)."""
-    return math.inf if math.isnan(a) or math.isnan(b) else max(a, b)
+def _worst(values: Sequence[float]) -> float:
+    """The worst of the tracked eyes' figures (NaN counts as worst)."""
+    return math.inf if any(math.isnan(v) for v in values) else max(values)
 
 
 @dataclass
@@ -213,21 +215,26 @@ class ValidationResult:
     limits: QualityLimits
     #: where the angles' eye positions came from: ``measured gaze origin`` or ``nominal eye``
     origins: str = "nominal eye"
+    #: the eyes the tracker records (a monocular tracker's other eye is not judged)
+    eyes: tuple[str, ...] = EYES
+
+    def _tracked(self) -> list[EyeQuality]:
+        return [q for name, q in (("left", self.left), ("right", self.right)) if name in self.eyes]
 
     @property
     def accuracy_deg(self) -> float:
         """The worse eye's accuracy averaged over the targets."""
-        return _worse(self.left.accuracy_deg, self.right.accuracy_deg)
+        return _worst([q.accuracy_deg for q in self._tracked()])
 
     @property
     def central_accuracy_deg(self) -> float:
         """The worse eye's accuracy at the central target."""
-        return _worse(self.left.central_accuracy_deg, self.right.central_accuracy_deg)
+        return _worst([q.central_accuracy_deg for q in self._tracked()])
 
     @property
     def data_loss(self) -> float:
         """The worse eye's data loss."""
-        return max(self.left.data_loss, self.right.data_loss)
+        return max(q.data_loss for q in self._tracked())
 
     @property
     def passed(self) -> bool:
@@ -238,6 +245,8 @@ class ValidationResult:
         """Why the validation failed, or None when it passed."""
         lim = self.limits
         for name, q in (("left", self.left), ("right", self.right)):
+            if name not in self.eyes:
+                continue
             empty = [i + 1 for i, t in enumerate(q.targets) if t.n_valid == 0]
             if empty:
                 return (f"no valid {name}-eye samples at target{'s' * (len(empty) > 1)} "
@@ -258,7 +267,8 @@ class ValidationResult:
     def to_dict(self) -> dict[str, Any]:
         return {"left": asdict(self.left), "right": asdict(self.right),
                 "targets": [list(t) for t in self.targets], "limits": asdict(self.limits),
-                "origins": self.origins, "accuracy_deg": self.accuracy_deg,
+                "origins": self.origins, "eyes": list(self.eyes),
+                "accuracy_deg": self.accuracy_deg,
                 "central_accuracy_deg": self.central_accuracy_deg,
                 "data_loss": self.data_loss, "passed": self.passed, "failure": self.failure}
 
@@ -267,7 +277,8 @@ class ValidationResult:
             return (f"centre {q.central_accuracy_deg:.2f} deg, mean {q.accuracy_deg:.2f} deg, "
                     f"RMS-S2S {q.precision_rms_s2s_deg:.3f} deg, "
                     f"loss {100 * q.data_loss:.1f}%")
-        return f"left eye: {eye(self.left)}; right eye: {eye(self.right)}"
+        return "; ".join(f"{name} eye: {eye(q)}" for name, q in
+                         (("left", self.left), ("right", self.right)) if name in self.eyes)
 
 
 def _origins(per_eye: Sequence[EyeQuality]) -> str:
@@ -279,13 +290,15 @@ def _origins(per_eye: Sequence[EyeQuality]) -> str:
 
 
 def validation_result(area: DisplayArea, distance_mm: float, per_target: Sequence[TargetData],
-                      limits: QualityLimits) -> ValidationResult:
+                      limits: QualityLimits, eyes: Sequence[str] = EYES) -> ValidationResult:
     """Quality per eye over the samples collected at each validation target; ``distance_mm`` is
-    the display profile's viewing distance (the nominal eye, where no gaze origin is given)."""
+    the display profile's viewing distance (the nominal eye, where no gaze origin is given);
+    ``eyes``: those the tracker records (a monocular tracker's other eye is not judged)."""
     left = eye_quality(area, distance_mm, per_target, "left")
     right = eye_quality(area, distance_mm, per_target, "right")
+    tracked = [q for n, q in (("left", left), ("right", right)) if n in eyes]
     return ValidationResult(left=left, right=right, targets=[d.target for d in per_target],
-                            limits=limits, origins=_origins([left, right]))
+                            limits=limits, origins=_origins(tracked), eyes=tuple(eyes))
 
 
 @dataclass
@@ -296,15 +309,20 @@ class DriftResult:
     right: TargetQuality
     limit_deg: float
     max_data_loss: float
+    #: the eyes the tracker records
+    eyes: tuple[str, ...] = EYES
+
+    def _tracked(self) -> list[TargetQuality]:
+        return [q for name, q in (("left", self.left), ("right", self.right)) if name in self.eyes]
 
     @property
     def offset_deg(self) -> float:
         """The worse eye's offset."""
-        return _worse(self.left.accuracy_deg, self.right.accuracy_deg)
+        return _worst([q.accuracy_deg for q in self._tracked()])
 
     @property
     def data_loss(self) -> float:
-        return max(self.left.data_loss, self.right.data_loss)
+        return max(q.data_loss for q in self._tracked())
 
     @property
     def failure(self) -> str | None:
@@ -328,11 +346,11 @@ class DriftResult:
 
 
 def drift_result(area: DisplayArea, distance_mm: float, data: TargetData, limit_deg: float,
-                 max_data_loss: float = MAX_DATA_LOSS) -> DriftResult:
+                 max_data_loss: float = MAX_DATA_LOSS, eyes: Sequence[str] = EYES) -> DriftResult:
     """The drift check's figures from the samples collected at the central target."""
     return DriftResult(target_quality(area, distance_mm, data, "left"),
                        target_quality(area, distance_mm, data, "right"), limit_deg,
-                       max_data_loss)
+                       max_data_loss, tuple(eyes))
 
 
 def target_points(n: int) -> list[tuple[float, float]]:

@@ -41,10 +41,13 @@ def blanking_rows(trial_index: int, attempt: int,
 def trial_row(protocol: LoadedProtocol, trial: Trial, st: TrialState, *, participant: str,
               session_id: str, seed: int, tracker: str) -> dict[str, Any]:
     """The trial log's row of a confirmed trial. What is logged is what was on screen:
-    ``final_value`` is the value of the render shown when Enter was pressed (``shown_value``),
-    and the parameters are those it was rendered with."""
+    ``final_value`` is the value of the stimulus on screen when Enter went down
+    (:attr:`TrialState.final_value`), and the parameters are those it was rendered with;
+    ``response_time_s`` runs from the first stimulus frame's flip to the press (to the
+    microsecond, the flips' precision in the frame log)."""
     spec = protocol.spec
-    vals = protocol.parameter_values(trial, st.shown_value)
+    final = st.final_value
+    vals = protocol.parameter_values(trial, final)
     return {
         "participant": participant,
         "session": session_id,
@@ -61,8 +64,8 @@ def trial_row(protocol: LoadedProtocol, trial: Trial, st: TrialState, *, partici
         "s_k": vals["s_k"],
         "s_f": vals["s_f"],
         "start_value": st.start_value,
-        "final_value": st.shown_value,
-        "response_time_s": round(st.response_time_s, 4),
+        "final_value": final,
+        "response_time_s": round(st.response_time_s, 6),
         "wheel_events": st.adjuster.notches,
         "blanked_fraction": round(st.blanking.fraction, 5),
         "dropped_frames": st.timer.dropped,

@@ -656,6 +656,48 @@ def render_scene(index: int, width: int, height: int) -> np.ndarray:
     return c.img
 
 
+# -- test material for the paper's analyses of outputs (section 6.2 and 6.4) ----------------------
+def render_pan(index: int, width: int, height: int, frames: int, step_px: int) -> np.ndarray:
+    """A camera pan across scene ``index`` (section 6.2's test sequence): frame k is the
+    ``width`` x ``height`` window at x = k ``step_px`` of the scene drawn (frames - 1)
+    ``step_px`` wider, so the content moves ``step_px`` to the left per frame. uint8 RGB
+    (frames, H, W, 3); deterministic as :func:`render_scene`."""
+    if frames < 2 or step_px < 0:
+        raise ValueError(f"a pan needs 2 or more frames and a step >= 0 px (got {frames}, "
+                         f"{step_px})")
+    wide = render_scene(index, width + (frames - 1) * step_px, height)
+    return np.stack([wide[:, k * step_px:k * step_px + width] for k in range(frames)])
+
+
+def render_stereo_pair(index: int, width: int, height: int, far_px: int = 4,
+                       near_px: int = 16) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A stereo pair of two planes with a known disparity (section 6.4's test material):
+    scene ``index`` as a background plane at disparity ``far_px`` and a rectangle of scene
+    ``index + 7`` (mod 15) as a nearer plane at ``near_px``, in the right third of the frame.
+
+    Disparity d = x_left - x_right in pixels, on the left image's grid (a left pixel at x is
+    seen at x - d by the right eye; parallel cameras, so d >= 0 and nearer is larger). The
+    right eye sees a strip of ``near_px - far_px`` px of background beside the rectangle's right
+    edge that the left eye does not (a disocclusion). Returns ``(left, right, disparity)``:
+    uint8 RGB (H, W, 3) twice and float32 (H, W)."""
+    if not 0 <= far_px < near_px:
+        raise ValueError(f"need 0 <= far < near (got far {far_px}, near {near_px} px)")
+    background = render_scene(index, width + far_px, height)
+    left = background[:, :width].copy()
+    right = background[:, far_px:far_px + width].copy()
+    disparity = np.full((height, width), float(far_px), np.float32)
+    x0, y0 = (width * 3) // 5, (height * 3) // 10
+    fw, fh = max(16, width // 4), max(16, (height * 2) // 5)
+    fw = min(fw, width - x0)
+    plane = render_scene((index + 7) % N_SCENES, fw, fh)
+    left[y0:y0 + fh, x0:x0 + fw] = plane
+    xr0 = x0 - near_px  # the plane as the right eye sees it
+    lo, hi = max(0, xr0), min(width, xr0 + fw)
+    right[y0:y0 + fh, lo:hi] = plane[:, lo - xr0:hi - xr0]
+    disparity[y0:y0 + fh, x0:x0 + fw] = near_px
+    return left, right, disparity
+
+
 # -- PNG and hashes ------------------------------------------------------------------------------
 def pixels_sha256(pixels: np.ndarray) -> str:
     """sha256 of an image's samples (shape, type and bytes): what a PNG decodes to, whatever

@@ -15,7 +15,9 @@
   whenever the gaze leaves the 1.25 deg window around the cross, or is invalid or lost, the
   next frame is black);
 - :mod:`.rows`: the trial, gaze and blanking logs' rows;
-- :mod:`.operator`: the operator's console line and checklist.
+- :mod:`.operator`: the operator's console line and checklist;
+- :mod:`.live`: the live status file ``fovexp monitor`` reads (its own thread; the display
+  thread only queues the rows it gives the frame and gaze logs).
 
 The window is a :class:`~fovexp.experiment.interfaces.Screen` (``window.PsychoScreen``), the
 gaze a :class:`~fovexp.experiment.interfaces.GazeSource`. Between trials the screen shows the
@@ -38,17 +40,15 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from fovexp import FovexpError
+from fovexp.results.format import SIMULATED_TRACKER
+from fovexp.results.rigcheck import session_rig_record
 
 from .calibration import QUIT_KEYS, QUIT_PROMPT, QUIT_QUESTION, CalibrationTiming
-from .frameloop import TrialIO, TrialLoop, display_thread_first
-from .gaze import (
-    BlankingMonitor,
-    FixationGeometry,
-    MouseGaze,
-    SimGazeParams,
-    SimulatedGaze,
-)
+from .diskspace import check_space, disk_full_message, estimate_log_bytes, is_disk_full
+from .frameloop import LateLatch, TrialIO, TrialLoop, display_thread_first
+from .gaze import BlankingMonitor, FixationGeometry
 from .interfaces import GazeSource, Renderer, Screen, ScreenFactory
+from .live import LivePublisher
 from .lock import LOCK_FILE, FolderLock
 from .logs import (
     BLANKING_COLUMNS,
@@ -82,6 +82,8 @@ from .tracker_setup import (
     display_area,
     window_ppd,
 )
+from .trackers import iohub_config_path, make_gaze_source
+from .trackers.simulated import SimGazeParams
 from .trial import Key, TrialState, ValueAdjuster
 from .validation import check_participant
 
@@ -112,6 +114,9 @@ class SessionOptions:
     fullscreen: bool = True
     skip_display_check: bool = False
     tracker_address: str | None = None
+    #: ``--tracker iohub``: the ioHub configuration (default: the protocol's
+    #: ``tracker.iohub_config``)
+    tracker_config: Path | None = None
     #: enhancer backend: auto (a hardware GPU if there is one), cpu or gpu
     backend: str = "auto"
     #: the monitor of a multi-monitor rig (PsychoPy's ``screen``)
@@ -147,9 +152,10 @@ class Session:
         self.protocol = protocol
         self.opts = opts
         self.participant = check_participant(opts.participant)
-        if opts.dry_run and opts.tracker != "simulated":
+        if opts.dry_run and opts.tracker not in ("simulated", "iohub"):
             raise FovexpError("--dry-run uses simulated gaze: leave out --tracker or use "
-                              "--tracker simulated")
+                              "--tracker simulated (or --tracker iohub, to test an ioHub "
+                              "configuration)")
         self.display = load_display(protocol.display_name)
         # Every image checked for the frames this session shows, before anything is written:
         # a real session refuses any size but the window's (the display's own, unless
@@ -173,8 +179,18 @@ class Session:
         self.tracker: TrackerSetup | None = None
         self.sim: SimulatedParticipant | None = None
         self.refresh_hz: float = float(self.display.refresh_hz)
+        self.latch: LateLatch | None = None  # made with the window (its refresh rate)
         self._trial_seconds: list[float] = []  # this run's trial durations (the console's ETA)
         self._operator_notes: list[str] = []  # shown with the instructions (backend, budget)
+        self._seq: TrialSequence | None = None  # the run's (set by _trials)
+        spec = protocol.spec
+        self.live = LivePublisher(self.folder, self.session_id, {
+            "participant": self.participant, "experiment": protocol.experiment,
+            "protocol_path": str(protocol.path), "protocol_title": spec.title,
+            "protocol_sha256": protocol.sha256, "dry_run": opts.dry_run,
+            "radius_deg": spec.fixation.radius_deg,
+            "gaze_timeout_s": spec.fixation.gaze_timeout_s, "break_every": spec.break_every,
+            "n_trials": len(self.trials)}, self.fixation)
 
     def release(self) -> None:
         """Let go of the folder's lock; a folder this run created and wrote nothing to (a
@@ -240,22 +256,20 @@ class Session:
 
     # -- gaze ----------------------------------------------------------------------------------
     def make_gaze(self) -> GazeSource:
-        """The gaze source; ``--tracker tobii`` fails here, before a window opens."""
-        kind = self.opts.tracker
-        if kind == "tobii":
-            from .tobii import TobiiGaze
+        """The gaze source (:func:`fovexp.experiment.trackers.make_gaze_source`); ``--tracker
+        tobii`` or ``iohub`` fails here, before a window opens. A resumed run's simulated eyes
+        get fresh noise (another seed) but stay reproducible."""
+        n_runs = len(self.info.get("runs", [])) if self.info else 0
+        return make_gaze_source(
+            self.opts.tracker, protocol=self.protocol, display=self.display,
+            fixation=self.fixation, dry_run=self.opts.dry_run, screen=self.opts.screen,
+            tracker_address=self.opts.tracker_address, tracker_config=self.opts.tracker_config,
+            sim_seed=self._sim_seed() + 7919 * n_runs, sim_params=self.opts.sim_gaze)
 
-            return TobiiGaze(self.protocol.spec.tracker.sampling_hz, self.opts.tracker_address)
-        if kind == "simulated":
-            n_runs = len(self.info.get("runs", [])) if self.info else 0
-            params = self.opts.sim_gaze or SimGazeParams(
-                rate_hz=self.protocol.spec.tracker.sampling_hz)
-            # A resumed run gets fresh gaze noise (different seed) but stays reproducible.
-            return SimulatedGaze(self.fixation, seed=self._sim_seed() + 7919 * n_runs,
-                                 params=params)
-        if kind == "mouse":
-            return MouseGaze()
-        raise FovexpError(f"--tracker {kind!r}: choose tobii, simulated or mouse")
+    def iohub_config_path(self) -> Path:
+        """The ioHub configuration this session's ``--tracker iohub`` reads
+        (:func:`fovexp.experiment.trackers.iohub_config_path`)."""
+        return iohub_config_path(self.protocol, self.opts.tracker_config)
 
     def _gaze_row(self, item: GazeItem) -> tuple[Any, ...]:
         """A gaze log row (made on the log's flusher thread)."""
@@ -284,6 +298,7 @@ class Session:
                 self.finish_without_trials()
             return EXIT_OK
         try:
+            space = self._check_space()
             self.gaze = gaze if gaze is not None else self.make_gaze()
             # the tracker's display area against the profile: before any window opens
             self.area, area_info = display_area(self.gaze, self.display,
@@ -293,14 +308,33 @@ class Session:
         except BaseException:
             self.release()
             raise
-        if isinstance(self.gaze, MouseGaze):
-            self.gaze.position = self.screen.mouse_position
-        self._start_info()
-        self.file.start_writer()
-        self.file.update(display_check={**check, "screen": self.opts.screen},
-                         display_area=area_info)
-        self._open_logs()
+        # a source that needs the window: its place on the screen, or its pointer
+        attach = getattr(self.gaze, "attach", None)
+        if attach is not None:
+            attach(self.screen)
+        try:
+            self._start_info()
+            self.file.start_writer()
+            self.file.set_in_run("results_disk", space, write=False)
+            self.file.update(display_check={**check, "screen": self.opts.screen},
+                             display_area=area_info)
+            self._open_logs()
+        except BaseException as exc:
+            self.file.stop_writer()
+            for closer in (self.gaze.stop, self.screen.close):
+                try:
+                    closer()
+                except Exception:  # the error to report is the one above
+                    pass
+            self.release()
+            if is_disk_full(exc):
+                raise FovexpError(self._disk_full_message()) from None
+            raise
+        #: when each frame reads the gaze (one latch for the run: its margin carries over)
+        self.latch = LateLatch(1.0 / self.refresh_hz)
+        self._start_live()
         flusher = PeriodicFlusher([self.gaze_log, self.frame_log, self.blank_log]).start()
+        self._flusher = flusher
         old_handlers = self._install_signals()
         state, code, failure = "interrupted", EXIT_INTERRUPTED, None
         try:
@@ -312,12 +346,25 @@ class Session:
                                                 self.opts.sim_speed, self.opts.sim_noise_scale)
             self.tracker = self._make_tracker_setup()
             self._display_setup()
+            self._check_keyboard()
+            self._check_rig()
             self._check_render_budget()
+            self.live.set_state("calibrating")
             self.tracker.setup()
+            self.live.tracker_quality(self.info.get("tracker_quality"))
             self._instructions()
             with display_thread_first() as priority:
-                self.file.set_in_run("display_thread", priority, write=False)
-                self._trials()
+                latch = self.latch
+                assert latch is not None
+                self.file.set_in_run("display_thread", {**priority,
+                                                        "late_latch": latch.info()},
+                                     write=False)
+                try:
+                    self._trials()
+                finally:
+                    self.file.set_in_run("display_thread", {**priority,
+                                                            "late_latch": latch.info()},
+                                         write=False)
             state, code = "completed", EXIT_OK
             self._message("Thank you - this part is finished.", ["space", "return"], 3.0)
         except Aborted:
@@ -328,6 +375,9 @@ class Session:
             state, failure = "failed", str(exc)
             raise
         except Exception as exc:  # a bug: recorded with its traceback, reported in one line
+            if is_disk_full(exc):  # not a bug: one line, what to do
+                state, failure = "failed", self._disk_full_message()
+                raise FovexpError(failure) from None
             import traceback
 
             state, failure = "failed", f"{type(exc).__name__}: {exc}"
@@ -359,6 +409,15 @@ class Session:
         self.frame_log = BatchLog(self.folder / f"frames-{sid}.csv", FRAME_COLUMNS)
         self.blank_log = BatchLog(self.folder / f"blanking-{sid}.csv", BLANKING_COLUMNS)
 
+    def _start_live(self) -> None:
+        """The live status file (:mod:`.live`) from now on, fed by the frame and gaze logs'
+        taps (until then :attr:`live` only keeps what it is told)."""
+        self.live.header.update(tracker_name=self.gaze.name, refresh_hz=self.refresh_hz,
+                                remaining=len(self.remaining))
+        self.live.start()
+        self.gaze_log.tap = self.live.gaze
+        self.frame_log.tap = self.live.frames
+
     def _start_renderer(self) -> None:
         from .render import TestRenderer
 
@@ -388,6 +447,8 @@ class Session:
             except Exception:  # closing after an error must not hide the error
                 pass
         flusher.stop()
+        # the last rows (the closing screens' samples) not written: said, never silent
+        late = flusher.error if failure is None else None
         for closer in (getattr(self.renderer, "close", None),
                        getattr(self.screen, "close", None)):
             if closer is not None:
@@ -398,12 +459,60 @@ class Session:
         done = {int(r["trial_index"]) for r in self.trial_log.rows
                 if r["session"] == self.session_id}
         complete = state == "completed" and len(done) == len(self.trials)
-        extra = {"failure": failure} if failure is not None else {}
+        self.live.stop(state if complete or state != "completed" else "incomplete")
+        extra: dict[str, Any] = {"failure": failure} if failure is not None else {}
+        measured = getattr(self.gaze, "measured", None)  # the sampling rate over the run
+        if measured is not None and "tracker" in self.info:
+            extra["tracker"] = {**self.info["tracker"], "measured": measured()}
+        if late is not None:
+            extra["log_error"] = f"{late.filename}: {late.strerror}"
         self.file.stop_writer()  # the events it had still to write are in the final write
-        self.file.update(state=state if not (state == "completed" and not complete)
-                         else "incomplete", completed=complete, ended=now_iso(),
-                         n_completed=len(done), events=self.info.get("events", []), **extra)
-        self.release()
+        try:
+            self.file.update(state=state if not (state == "completed" and not complete)
+                             else "incomplete", completed=complete, ended=now_iso(),
+                             n_completed=len(done), events=self.info.get("events", []),
+                             **extra)
+        except OSError as exc:
+            # a full disk keeps the session file as last written (valid JSON, "running": it
+            # resumes); the run's own error, if any, is the one to report
+            if not is_disk_full(exc):
+                raise
+            if failure is None:
+                raise FovexpError(self._disk_full_message()) from None
+        finally:
+            self.release()
+        if late is not None:
+            raise FovexpError(self._disk_full_message() if is_disk_full(late) else
+                              f"cannot write {late.filename}: {late.strerror}")
+
+    # -- the results disk ----------------------------------------------------------------------
+    def _check_space(self) -> dict[str, Any]:
+        """Before anything is written: the results disk's free space against this run's
+        estimated logs (:mod:`.diskspace`); refuses with both figures when they cannot fit."""
+        estimate = estimate_log_bytes(len(self.remaining),
+                                      self.protocol.spec.tracker.sampling_hz,
+                                      float(self.display.refresh_hz))
+        return check_space(self.folder, estimate)
+
+    def _resume_command(self) -> str:
+        """The command that continues this session."""
+        opts = self.opts
+        parts = ["fovexp run", str(self.protocol.path), "--participant", self.participant]
+        if Path(opts.results_root) != Path("results"):
+            parts += ["--results", str(opts.results_root)]
+        if opts.dry_run:
+            parts.append("--dry-run")
+        return " ".join(parts + ["--resume"])
+
+    def _disk_full_message(self) -> str:
+        return disk_full_message(Path(self.opts.results_root), self._resume_command())
+
+    def _raise_log_error(self) -> None:
+        """A log the flusher thread could not write (a full disk) stops the session here,
+        between trials, with that error."""
+        flusher = getattr(self, "_flusher", None)
+        if flusher is not None and flusher.error is not None:
+            raise flusher.error
 
     def _display_setup(self) -> None:
         """The operator confirms the display checklist (docs/EXPERIMENT.md) with C; recorded
@@ -414,6 +523,31 @@ class Session:
             self._message(checklist_text(), ["c"], None)
             entry = {"confirmed": True, "time": now_iso(), "items": list(DISPLAY_CHECKLIST)}
         self.file.set_in_run("display_setup", entry)
+
+    def _check_rig(self) -> None:
+        """The newest rig check under the results root (``fovexp rig check``): its name and
+        sha256 in this run's entry (``runs[].rig_check``); a warning for the operator when
+        there is none from today, it failed, or it was only a dry run."""
+        rec, warning = session_rig_record(self.opts.results_root, now_iso()[:10],
+                                          self.opts.dry_run)
+        self.file.set_in_run("rig_check", rec)
+        if warning is not None and not self.opts.dry_run:
+            self._operator_note(warning, "rig_check_warning", warning=warning)
+
+    def _check_keyboard(self) -> None:
+        """Record the window's keyboard (its backend, and whether keys carry the time they went
+        down); warn when they do not: then an answer is the value on screen at the poll that
+        saw Enter, up to a frame later than the press (a dry run's simulated participant
+        answers at the poll anyway)."""
+        info = self.screen.info()
+        self.file.set_in_run("window", info)
+        kb = info.get("keyboard") or {}
+        if kb.get("key_time") != "press" and not self.opts.dry_run:
+            self._operator_note(
+                f"key presses are stamped when polled, not when pressed (keyboard backend "
+                f"{kb.get('backend')!r}): install psychtoolbox's libjack (Debian/Ubuntu: "
+                "apt-get install libjack-jackd2-0) or run an ioHub server",
+                "keyboard_stamps_at_poll", backend=kb.get("backend"))
 
     def _check_render_budget(self) -> None:
         """Warn when the backend cannot show a wheel step within the protocol's budget
@@ -496,13 +630,15 @@ class Session:
         for sig, h in old.items():
             signal.signal(sig, h)
 
-    def _message(self, text: str, keys: list[str], timeout_s: float | None = None) -> str | None:
+    def _message(self, text: str, keys: list[str], timeout_s: float | None = None,
+                 state: str = "message") -> str | None:
         """A message screen; the gaze stream keeps going into the gaze log meanwhile (a long
         break would otherwise overflow the tracker's buffer). Escape or Q (where Q is not one of
         the message's own keys) asks to quit (:meth:`confirm_quit`); going back shows the
         message again."""
         if self.opts.dry_run:
             timeout_s = self.opts.dry_message_s
+        self.live.set_state(state, text)
         quit_keys = [k for k in QUIT_KEYS if k not in keys]
         while True:
             key = self.screen.message(text, [*keys, *quit_keys], timeout_s, self._drain_gaze)
@@ -535,9 +671,10 @@ class Session:
     def _trials(self) -> None:
         """The run's trials in order (:class:`.sequence.TrialSequence`: announcements and
         breaks); each until an attempt is confirmed; after each, the tracker's checks."""
-        seq = TrialSequence(self.trials, self.remaining, self.done,
-                            self.protocol.spec.break_every)
+        seq = self._seq = TrialSequence(self.trials, self.remaining, self.done,
+                                        self.protocol.spec.break_every)
         for trial in self.remaining:
+            self._raise_log_error()
             for text in seq.before(trial):
                 self._message(text, ["space"])
             t0 = time.monotonic()
@@ -548,9 +685,11 @@ class Session:
             # breaks at the same places of the plan whatever runs it took (resume)
             pause = seq.after(trial)
             if pause is not None:
-                self._message(pause, ["space"])
+                self._message(pause, ["space"], state="break")
             # drift check / recalibration (D, C, every N)
+            self.live.set_state("between trials")
             self.tracker.between_trials(trial, more_trials=left > 0)
+            self.live.tracker_quality(self.info.get("tracker_quality"))
 
     def _attempts_until_done(self, trial: Trial) -> None:
         """Attempts at ``trial`` until one is confirmed: a pause or a lost tracker restarts it
@@ -565,6 +704,7 @@ class Session:
                 return
             if outcome == "pause":
                 self.file.event("paused", trial_index=trial.index)
+                self.live.set_state("paused")
                 # Waits for the operator even in a dry run (no auto-continue).
                 key = self.screen.message(
                     "Paused.\n\nSpace: continue (this trial starts again)\n"
@@ -580,15 +720,18 @@ class Session:
         """trial i/N, blanked %, dropped frames, gaze-to-flip latency, ETA (docs/EXPERIMENT.md)."""
         st = self._last_state
         position, total = seq.position(trial)
+        eta = eta_s(self._trial_seconds, left)
+        self.live.set_eta(eta)
         self._say(trial_line(position=position, total=total, practice=trial.practice,
                              blanked_fraction=st.blanking.fraction, dropped=st.timer.dropped,
                              frames=st.n_frames,
                              latency_ms=np.array(self._last_latency_ms, dtype=float),
-                             eta_s=eta_s(self._trial_seconds, left)))
+                             eta_s=eta))
 
     def _wait_reconnect(self, trial: Trial) -> None:
         """Tracker lost mid-session: screen blanked, a message, wait; Q quits (saved)."""
         self.file.event("tracker_disconnected", trial_index=trial.index)
+        self.live.set_state("disconnected")
         text = ("The eye tracker connection was lost. The trial will start again when it is "
                 "back.\n\nQ: quit (progress is saved; continue later with --resume)")
         while not self.gaze.connected:
@@ -601,6 +744,7 @@ class Session:
             if key is not None:
                 self.confirm_quit(trial.index)
         self.file.event("tracker_reconnected", trial_index=trial.index)
+        self.live.event("tracker_reconnected")
 
     def _params(self, trial: Trial, value: float) -> EnhanceParams:
         return self.protocol.make_params(trial, value, self.seed)
@@ -622,12 +766,21 @@ class Session:
         written (the commit point) after it.
         """
         loop, st = self._trial_loop(trial, attempt)
+        position, total = (self._seq.position(trial) if self._seq is not None
+                           else (None, None))
+        adj = self.protocol.spec.adjust
+        self.live.begin_attempt(trial.index, attempt, position=position, total=total,
+                                practice=trial.practice, method=trial.method,
+                                image=trial.image, parameter=adj.parameter,
+                                blur_rate=trial.blur_rate, start_value=trial.start_value)
+        outcome = "error"
         try:
             loop.show_first()
             outcome = loop.run()
         finally:
             st.finish(time.monotonic())  # when the loop could not flip its closing frame
             self.blank_log.extend(blanking_rows(trial.index, attempt, st.blanking.episodes))
+            self.live.end_attempt(outcome)
         if outcome != "done":
             return outcome
         # Side logs first (synced), then the trial row: the row is the commit point.
@@ -635,7 +788,8 @@ class Session:
             log.flush(sync=True)
         self.trial_log.append(trial_row(self.protocol, trial, st, participant=self.participant,
                                         session_id=self.session_id, seed=self.seed,
-                                        tracker=self.gaze.name))
+                                        tracker=SIMULATED_TRACKER if self.opts.dry_run
+                                        else self.gaze.name))
         self.done.add(trial.index)
         return "done"
 
@@ -669,10 +823,12 @@ class Session:
             screen=self.screen, gaze=self.gaze, renderer=self.renderer, monitor=monitor,
             state=st, params_for=lambda v: self._params(trial, v), parameter=adj.parameter,
             trial_index=trial.index, attempt=attempt, participant=participant,
+            latch=self.latch,
             io=TrialIO(frame=frame_row,
                        gaze=lambda i, a, samples: self.gaze_log.extend(
                            gaze_items(i, samples, a)),
-                       event=lambda kind, detail: self.file.event(kind, **detail)))
+                       event=lambda kind, detail: (self.file.event(kind, **detail),
+                                                   self.live.event(kind, detail))))
         self._last_state, self._last_latency_ms = st, latency_ms
         return loop, st
 

@@ -12,14 +12,16 @@ Protocols name images by id. Two kinds of id:
 
 The **stimulus folder** is the lab's (the package's files are read-only data). It is, first
 found: ``--stimuli DIR``; the protocol's ``stimuli:`` key (a folder or its ``manifest.yaml``,
-relative to the protocol file); ``$FOVEXP_STIMULI``; ``./stimuli`` of the current folder (in
+relative to the protocol file); ``stimuli/`` of the study folder (``fovexp init``) the current
+folder is in; ``$FOVEXP_STIMULI``; ``./stimuli`` of the current folder (in
 the project's clone, the top-level ``stimuli/``); the per-user data folder
 (``platformdirs.user_data_dir("fovexp")/stimuli``, e.g. ``~/.local/share/fovexp/stimuli``).
 
 A session shows every image at its frame size: a real session at the display's own resolution
-(``3840x2160`` on the paper's LG OLED55CX) and refuses any other size; a dry run takes the
-nearest generated resolution and scales it to its small window, and says so
-(:meth:`StimulusSet.check`).
+(``3840x2160`` on the paper's LG OLED55CX) and refuses any other size; a dry run in a smaller
+window takes the nearest generated resolution and scales it to the window, and says so
+(:meth:`StimulusSet.check`); a dry run at the display's own size scales nothing
+(:func:`may_scale`): it is a rehearsal of the real session.
 """
 
 from __future__ import annotations
@@ -35,7 +37,7 @@ import numpy as np
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from fovexp import FovexpError, read_yaml, validation_error, write_bytes_atomic
+from fovexp import FovexpError, did_you_mean, read_yaml, validation_error, write_bytes_atomic
 from fovexp import read_samples as fovexp_read_samples
 
 from . import scenes
@@ -44,6 +46,9 @@ from . import scenes
 ENV_VAR = "FOVEXP_STIMULI"
 #: a stimulus folder's own manifest (the lab's frames)
 MANIFEST = "manifest.yaml"
+#: what marks a study folder (``fovexp init``): its ``stimuli/`` is the stimulus folder of every
+#: command run in it
+STUDY_FILE = "fovexp-study.yaml"
 #: the shipped pins of the generated scenes (in the package ``fovexp.stimuli``)
 SCENE_PINS = "scenes.yaml"
 #: where generated scenes and added frames go in a stimulus folder
@@ -61,6 +66,14 @@ _WXH = r"^[0-9]{1,5}x[0-9]{1,5}$"
 
 def size_text(size: Size) -> str:
     return f"{size[0]}x{size[1]}"
+
+
+def may_scale(dry_run: bool, frame_size: Size, native_size: Size) -> bool:
+    """Whether a session showing frames of ``frame_size`` on a display of ``native_size`` may
+    scale its images: only a dry run in a window of another size (480x270 by default). A dry
+    run at the display's own size is a rehearsal of the real session, and refuses what the real
+    session refuses (size, id, sha256), with the same line."""
+    return bool(dry_run) and tuple(frame_size) != tuple(native_size)
 
 
 def parse_size(text: str) -> Size:
@@ -197,6 +210,16 @@ def user_stimulus_folder() -> Path:
     return Path(platformdirs.user_data_dir("fovexp", appauthor=False)) / "stimuli"
 
 
+def find_study(start: Path) -> Path | None:
+    """The study folder (``fovexp init``: a folder holding :data:`STUDY_FILE`) that ``start``
+    is in, or None."""
+    here = Path(start).resolve()
+    for folder in (here, *here.parents):
+        if (folder / STUDY_FILE).is_file():
+            return folder
+    return None
+
+
 def find_folder(explicit: str | Path | None = None, protocol_key: str | None = None,
                 protocol_dir: Path | None = None) -> tuple[Path, Path, str]:
     """The stimulus folder, its manifest file and how it was found (module docstring)."""
@@ -207,6 +230,9 @@ def find_folder(explicit: str | Path | None = None, protocol_key: str | None = N
         if not p.is_absolute() and protocol_dir is not None:
             p = protocol_dir / p
         return _folder_and_manifest(p.resolve(), "the protocol's stimuli key")
+    study = find_study(Path.cwd())
+    if study is not None:  # a study's own folder, also from its subfolders
+        return study / "stimuli", study / "stimuli" / MANIFEST, f"the study folder {study}"
     env = os.environ.get(ENV_VAR)
     if env:
         return _folder_and_manifest(Path(env).expanduser(), f"${ENV_VAR}")
@@ -360,10 +386,12 @@ class StimulusSet:
             return self._check_scene(image_id, frame_size, dry_run)
         if image_id in self.frames:
             return self._check_frame(image_id, frame_size, dry_run)
+        hint = did_you_mean(image_id, self.ids, n=2)
         return ImageCheck(image_id, "unknown", None, None, frame_size, "-", "unknown",
                           f"image {image_id!r} is neither a generated scene "
                           f"({scenes.SCENE_IDS[0]} ... {scenes.SCENE_IDS[-1]}) nor in "
-                          f"{self.manifest_path}",
+                          f"{self.manifest_path}{hint}",
+                          "fix the id" + hint if hint else
                           "add it with: fovexp stimuli add IMAGE --id ID, or fix the id")
 
     def _check_scene(self, image_id: str, frame_size: Size, dry_run: bool) -> ImageCheck:

@@ -22,8 +22,8 @@ DEFAULT_DISPLAY = "lg-oled55cx"
 
 
 def _folder_help() -> str:
-    return ("stimulus folder (default: $FOVEXP_STIMULI, ./stimuli if there is one, else the "
-            "user data folder)")
+    return ("stimulus folder (default: the stimuli/ of the study folder (fovexp init) you are "
+            "in, $FOVEXP_STIMULI, ./stimuli if there is one, else the user data folder)")
 
 
 def add_stimuli_parser(subparsers: Any) -> argparse.ArgumentParser:
@@ -84,12 +84,41 @@ def add_stimuli_parser(subparsers: Any) -> argparse.ArgumentParser:
     c.add_argument("--display", default=None, metavar="PROFILE",
                    help="check for this display profile instead of the protocol's")
     c.add_argument("--dry-run", action="store_true",
-                   help="check for a dry run (scaling allowed) instead of a real session")
+                   help="check for a dry run instead of a real session (scaling allowed, "
+                   "except at the display's own size: a rehearsal)")
     c.add_argument("--window", default=None, metavar="WxH",
                    help="the window size, as fovexp run --window")
     c.add_argument("--stimuli", type=Path, default=None, metavar="DIR",
                    help="stimulus folder (default: the protocol's, then as for generate)")
     c.set_defaults(func=check_command)
+
+    pan = sub.add_parser("pan", help="write a camera pan over a generated scene (frames)",
+                         description="A deterministic test sequence for 'fovexp evaluate "
+                         "temporal' (paper section 6.2): the camera pans across a generated "
+                         "scene, the content moving --step px to the left per frame; frames "
+                         "written as frame-0000.png ... into --out.")
+    pan.add_argument("--scene", default="scene-00", help="generated scene id (default scene-00)")
+    pan.add_argument("--size", default="3840x2160", metavar="WxH", help="frame size")
+    pan.add_argument("--frames", type=int, default=30, help="number of frames (default 30)")
+    pan.add_argument("--step", type=int, default=8, metavar="PX",
+                     help="pan per frame in px (default 8: 960 px/s at 120 Hz)")
+    pan.add_argument("--out", type=Path, required=True, metavar="DIR")
+    pan.set_defaults(func=pan_command)
+
+    st = sub.add_parser("stereo", help="write a stereo pair with a known disparity map",
+                        description="A stereo test pair for 'fovexp stereo' (paper section "
+                        "6.4): a generated scene as a far plane and a rectangle of another as a "
+                        "near plane. Writes left.png, right.png and the disparity of the left "
+                        "image's pixels, d = x_left - x_right in px, as disparity.npy (float32) "
+                        "and disparity.png (16-bit, d = value / 256).")
+    st.add_argument("--scene", default="scene-00", help="generated scene id (default scene-00)")
+    st.add_argument("--size", default="3840x2160", metavar="WxH", help="image size")
+    st.add_argument("--far", type=int, default=4, metavar="PX",
+                    help="disparity of the background plane (default 4 px)")
+    st.add_argument("--near", type=int, default=16, metavar="PX",
+                    help="disparity of the near rectangle (default 16 px)")
+    st.add_argument("--out", type=Path, required=True, metavar="DIR")
+    st.set_defaults(func=stereo_command)
     return p
 
 
@@ -252,6 +281,77 @@ def _add(args: argparse.Namespace) -> int:
     return 0
 
 
+# -- pan, stereo --------------------------------------------------------------------------------
+#: 16-bit PNG disparity maps hold d * DISPARITY_PNG_SCALE (fovexp stereo reads them so).
+DISPARITY_PNG_SCALE = 256
+
+
+def _scene_index(scene: str) -> int:
+    from . import scenes
+
+    if scene not in scenes.SCENE_IDS:
+        raise FovexpError(f"--scene {scene!r}: not a generated scene ({scenes.SCENE_IDS[0]} ... "
+                          f"{scenes.SCENE_IDS[-1]})")
+    return scenes.SCENE_IDS.index(scene)
+
+
+def pan_command(args: argparse.Namespace) -> int:
+    return _run("pan", _pan, args)
+
+
+def _pan(args: argparse.Namespace) -> int:
+    from fovexp import write_bytes_atomic
+
+    from . import scenes
+    from .stimuli import parse_size, size_text
+
+    index = _scene_index(args.scene)
+    size = parse_size(args.size)
+    if args.frames < 2:
+        raise FovexpError(f"--frames {args.frames}: a pan needs 2 frames or more")
+    if not 0 <= args.step <= size[0]:
+        raise FovexpError(f"--step {args.step}: must be 0 to the frame width ({size[0]} px)")
+    frames = scenes.render_pan(index, size[0], size[1], args.frames, args.step)
+    for k, frame in enumerate(frames):
+        write_bytes_atomic(args.out / f"frame-{k:04d}.png", scenes.png_bytes(frame))
+    print(f"fovexp stimuli pan: {args.frames} frames of {size_text(size)} ({args.scene}, "
+          f"{args.step} px per frame to the left) in {args.out}")
+    return 0
+
+
+def stereo_command(args: argparse.Namespace) -> int:
+    return _run("stereo", _stereo, args)
+
+
+def _stereo(args: argparse.Namespace) -> int:
+    import io
+
+    import numpy as np
+
+    from fovexp import write_bytes_atomic
+
+    from . import scenes
+    from .stimuli import parse_size, size_text
+
+    index = _scene_index(args.scene)
+    size = parse_size(args.size)
+    if not 0 <= args.far < args.near:
+        raise FovexpError(f"--far {args.far} --near {args.near}: need 0 <= far < near (px)")
+    if args.near * DISPARITY_PNG_SCALE > 65535 or args.near >= size[0] // 4:
+        raise FovexpError(f"--near {args.near}: too large for a {size_text(size)} pair")
+    left, right, disp = scenes.render_stereo_pair(index, size[0], size[1], args.far, args.near)
+    write_bytes_atomic(args.out / "left.png", scenes.png_bytes(left))
+    write_bytes_atomic(args.out / "right.png", scenes.png_bytes(right))
+    buf = io.BytesIO()
+    np.save(buf, disp)
+    write_bytes_atomic(args.out / "disparity.npy", buf.getvalue())
+    coded = np.round(disp * DISPARITY_PNG_SCALE).astype(np.uint16)
+    write_bytes_atomic(args.out / "disparity.png", scenes.png_bytes(coded))
+    print(f"fovexp stimuli stereo: {size_text(size)} pair ({args.scene}; far plane "
+          f"{args.far} px, near rectangle {args.near} px of disparity) in {args.out}")
+    return 0
+
+
 # -- check ---------------------------------------------------------------------------------------
 def check_command(args: argparse.Namespace) -> int:
     return _run("check", _check, args)
@@ -276,7 +376,7 @@ def _check_one(name: str, args: argparse.Namespace) -> int:
     from fovexp import find_protocol, load_display
 
     from .protocol import protocol_display, protocol_stimuli, read_protocol
-    from .stimuli import DRY_RUN_SIZE, parse_size, size_text
+    from .stimuli import DRY_RUN_SIZE, may_scale, parse_size, size_text
 
     path = find_protocol(name)
     _, spec = read_protocol(path)
@@ -288,8 +388,10 @@ def _check_one(name: str, args: argparse.Namespace) -> int:
     frame = parse_size(args.window) if args.window else (
         DRY_RUN_SIZE if args.dry_run else native)
     stim = protocol_stimuli(path, spec, args.stimuli)
-    rows = stim.check_all(spec.images, frame, args.dry_run)
-    mode = "a dry run" if args.dry_run else "a real session"
+    scale = may_scale(args.dry_run, frame, native)
+    rows = stim.check_all(spec.images, frame, scale)
+    mode = ("a real session" if not args.dry_run else "a dry run" if scale else
+            "a dry run at the display's size (a rehearsal: nothing scaled)")
     print(f"protocol {path}")
     print(f"stimulus folder {stim.describe()}")
     print(f"display {display.name} ({size_text(native)}); {mode} shows {size_text(frame)}")

@@ -82,6 +82,17 @@ class TrackerSetup:
         self.since_drift = 0
 
     @property
+    def rate_hz(self) -> float:
+        """The gaze source's nominal sampling rate (an ioHub tracker's configured one), else
+        the protocol's: the validation's expected samples."""
+        return float(getattr(self.gaze, "rate_hz", None) or self.spec.tracker.sampling_hz)
+
+    @property
+    def eyes(self) -> tuple[str, ...]:
+        """The eyes the source records (both, unless a monocular tracker)."""
+        return tuple(getattr(self.gaze, "eyes", ("left", "right")))
+
+    @property
     def calibrated(self) -> bool:
         """Whether the source is calibrated at all (not the mouse, nor a test's script)."""
         return bool(getattr(self.gaze, "validated", True))
@@ -113,11 +124,11 @@ class TrackerSetup:
         flow = CalibrationFlow(
             backend, target_points(spec.tracker.calibration_points),
             target_points(spec.tracker.validation_points), spec.quality_limits, self.area,
-            self.distance_mm, spec.tracker.sampling_hz, self.screen.size,
+            self.distance_mm, self.rate_hz, self.screen.size,
             self.ppd_px, spec.fixation.radius_deg, timing=self.timing,
             look_at=getattr(self.gaze, "look_at", None), on_record=record,
             auto=self.auto, seed=self.seed + len(info["tracker_quality"]),
-            now_iso=now_iso)
+            now_iso=now_iso, eyes=self.eyes)
         self.run_flow(flow)
         if flow.outcome == "accepted":
             self.since_drift = 0
@@ -165,10 +176,11 @@ class TrackerSetup:
         drift limit (``tracker.max_drift_deg``, by default the central accuracy limit); logged
         as a ``drift_check`` event; a recalibration when the operator (or a dry run) asks."""
         spec = self.spec
-        check = DriftCheck(self.area, self.distance_mm, spec.tracker.sampling_hz,
+        check = DriftCheck(self.area, self.distance_mm, self.rate_hz,
                            self.screen.size, self.ppd_px, spec.drift_limit_deg,
                            spec.tracker.max_data_loss, timing=self.timing,
-                           look_at=getattr(self.gaze, "look_at", None), auto=self.auto)
+                           look_at=getattr(self.gaze, "look_at", None), auto=self.auto,
+                           eyes=self.eyes)
         self.run_flow(check)
         self.since_drift = 0
         self.file.event("drift_check", why=why, after_trial=trial.index, outcome=check.outcome,

@@ -56,9 +56,16 @@ def wheel_notches(scrolls: list[tuple[float, bool]],
 
 @dataclass(frozen=True)
 class Key:
-    """A key press: ``enter`` (confirm), ``escape`` (pause), ``space``, ``q`` ..."""
+    """A key press: ``return`` (confirm), ``escape`` (pause), ``space``, ``q`` ...
+
+    ``t_s`` is when the key went down, on ``time.monotonic``'s clock (the flips' clock), where
+    the keyboard stamps the press itself (PsychoPy's ``Keyboard`` with its 'ptb' or 'iohub'
+    backend); None where the key is known only from the poll that saw it (then the poll's time
+    stands for it). Not part of equality: ``Key("return")`` names the key.
+    """
 
     name: str
+    t_s: float | None = field(default=None, compare=False)
 
 
 InputEvent = Wheel | Key
@@ -180,13 +187,20 @@ class BlankingLog:
         return self.blanked / self.frames if self.frames else 0.0
 
 
+#: the keys that confirm the value on screen
+CONFIRM_KEYS = ("return", "enter", "num_enter")
+
+
 class TrialState:
     """The state of one trial between its first frame and Enter.
 
     ``handle`` consumes input events and returns ``"changed"``, ``"confirm"``, ``"pause"`` or
     None; ``flip`` records a shown frame (its time, whether it was black and why). ``value`` is
-    the requested value (the wheel's), ``shown_value`` that of the render on screen, which lags
-    while a render is computed; what is logged is ``shown_value``.
+    the requested value (the wheel's), ``shown_value`` that of the render the next frames show,
+    which lags while a render is computed. The answer, :attr:`final_value`, is the value the
+    participant saw when Enter went down: that of the last stimulus frame flipped at or before
+    the press (:meth:`confirm`), not of a render that reached the screen between the press and
+    the poll that saw it.
     """
 
     def __init__(self, adjuster: ValueAdjuster, refresh_hz: float) -> None:
@@ -199,12 +213,18 @@ class TrialState:
         self.t_confirm: float | None = None
         self.n_frames = 0
         self.shown_value: float = adjuster.value
+        #: every frame so far: (flip time, black, value of its test half)
+        self.frames: list[tuple[float, bool, float]] = []
 
     @property
     def value(self) -> float:
         return self.adjuster.value
 
-    def handle(self, events: list[InputEvent]) -> str | None:
+    def handle(self, events: list[InputEvent], now_s: float | None = None) -> str | None:
+        """Input events in order; ``now_s``: the poll's time (``time.monotonic``), the press
+        time of a key the keyboard did not stamp. Enter confirms (:meth:`confirm`, at the key's
+        own time) once the stimulus was on screen: a press before the first stimulus frame's
+        flip does not count."""
         outcome = None
         for ev in events:
             if isinstance(ev, Wheel):
@@ -212,8 +232,11 @@ class TrialState:
                     continue  # before the stimulus is first shown the wheel does nothing
                 if self.adjuster.apply(ev):
                     outcome = "changed"
-            elif ev.name in ("return", "enter", "num_enter"):
-                if self.t_start is not None:
+            elif ev.name in CONFIRM_KEYS:
+                t = ev.t_s if ev.t_s is not None else now_s
+                if self.t_start is not None and (t is None or t >= self.t_start):
+                    if t is not None:
+                        self.confirm(t)
                     return "confirm"
             elif ev.name == "escape":
                 return "pause"
@@ -223,6 +246,7 @@ class TrialState:
         if self.t_start is None:
             self.t_start = t
         self.n_frames += 1
+        self.frames.append((t, blank, self.shown_value))
         self.blanking.frame(t - self.t_start, blank, reason)
         return self.timer.flip(t)
 
@@ -231,9 +255,25 @@ class TrialState:
         self.shown_value = float(value)
 
     def confirm(self, t: float) -> None:
-        """Enter pressed at ``t`` (the response time ends here)."""
+        """Enter pressed at ``t`` (``time.monotonic``; the response time ends here)."""
         if self.t_confirm is None:
             self.t_confirm = t
+
+    def value_at(self, t: float) -> float:
+        """The value the participant saw at ``t``: that of the last stimulus (not black) frame
+        flipped at or before ``t``; the start value when none was (the trial's first frames
+        were black)."""
+        for flip_s, blank, value in reversed(self.frames):
+            if flip_s <= t and not blank:
+                return value
+        return self.start_value
+
+    @property
+    def final_value(self) -> float:
+        """The answer: the value on screen when Enter went down (:meth:`value_at`), or, without
+        a press time, when the trial ended; before either, the value the next frames show."""
+        t = self.t_confirm if self.t_confirm is not None else self.t_end
+        return self.shown_value if t is None else self.value_at(t)
 
     def finish(self, t: float) -> None:
         if self.t_end is not None:

@@ -18,7 +18,21 @@ Flip times come from ``win.flip()``'s return value (the time the driver released
 close to the vertical blank; ``waitBlanking`` is always on, so every frame's drawing is finished
 when it returns), on ``time.monotonic``'s clock. Xvfb has no vsync: a window opened with
 ``pace_hz`` emulates it, holding each flip to the next boundary of a fixed ``1/pace_hz`` grid
-(a frame that misses one lands on a later one, as with vsync).
+(a frame that misses one lands on a later one, as with vsync). :meth:`PsychoScreen.prepare`
+finishes its drawing (``glFinish``) before it returns, so that a frame drawn before the gaze is
+read costs nothing after it (the frame loop's late latch); a flip's ``ready_s`` is when the
+frame waited only for the vertical blank: right after ``prepare`` (with vsync), or after the
+swap's copy into the X server (paced: that copy is the software display's own work).
+
+Keys come from PsychoPy's ``Keyboard`` where its backend stamps the press ('ptb', which needs
+psychtoolbox and libjack; else 'iohub' when an ioHub server runs): each key carries the time it
+went down, so the answer is the value on screen at the press, not at the poll that saw it
+(../docs/EXPERIMENT.md). Without either, keys come from PsychoPy's event module and are stamped
+at the poll (``info()["keyboard"]["key_time"] == "poll"``; the session warns). PsychoPy keeps
+its own clock (``psychtoolbox.GetSecs``, seconds since the epoch, once psychtoolbox loads):
+every time taken from it is put on ``time.monotonic``'s clock by
+:meth:`PsychoScreen._to_monotonic` (both clocks read back to back). 'ptb' stamps a press on
+that clock; 'iohub' on the hub's, which agrees with it to within about 0.4 ms.
 """
 
 from __future__ import annotations
@@ -34,10 +48,14 @@ import numpy as np
 from fovexp import FovexpError
 
 from .calibration import CAL_KEYS, HeadBoxView, ResultView, TargetView, TextView
+from .interfaces import FlipTimes
 from .render import Rendered, to_rgba8
 from .trial import InputEvent, Key, WheelCarry, wheel_notches
 
 KEYS = ["return", "num_enter", "escape", "space", "q", "r", "c"]
+#: how many key presses are remembered to drop the second report of one press (PsychoPy's
+#: ``Keyboard`` reports a key once while down and again when released)
+KEYS_REMEMBERED = 64
 #: measured refresh may differ from the profile by this fraction (a 120 Hz screen run at 60 Hz
 #: is off by 50 %, far outside it)
 REFRESH_TOLERANCE = 0.05
@@ -238,6 +256,8 @@ class PsychoScreen:
         self._operator_keys: set[str] = set()
         self.win.winHandle.push_handlers(on_key_press=self._on_key_press)
         self.mouse = event.Mouse(win=self.win, visible=not fullscreen)
+        self._kb, self._kb_backend = self._open_keyboard()
+        self._kb_seen: list[tuple[str, float]] = []
         half = (w // 2, h)
         self._tex_left = _HalfTexture(gl, w // 2, h)
         self._tex_right = _HalfTexture(gl, w // 2, h)
@@ -262,9 +282,57 @@ class PsychoScreen:
         self._shared: SharedGLContext | None = None
         #: seconds the last :meth:`set_test` / :meth:`set_reference` spent uploading
         self.last_upload_s = 0.0
+        #: the photodiode patch in the bottom-left corner (``fovexp rig check --photodiode``):
+        #: None not drawn, True white, False black (on every frame until changed)
+        self.photodiode: bool | None = None
+        side = max(16, h // 20)
+        self._patch = visual.Rect(self.win, width=side, height=side, units="pix",
+                                  pos=(-w / 2 + side / 2, -h / 2 + side / 2), lineColor=None,
+                                  fillColor=(1, 1, 1))
         #: keep a copy of every frame shown in ``last_frame`` (tests; slow)
         self.capture = False
         self.last_frame: np.ndarray | None = None
+
+    @staticmethod
+    def _open_keyboard() -> tuple[Any, str]:
+        """PsychoPy's ``Keyboard`` with a backend that stamps the press: 'ptb' where
+        psychtoolbox loads (it reads the keyboards itself, beside an ioHub server if one
+        runs), else 'iohub' when an ioHub server already runs (an ioHub gaze source; started
+        with ``Keyboard=dict(use_keymap='psychopy')`` its key names are PsychoPy's). Returns
+        (None, 'event') when neither is to be had (psychtoolbox not importable: libjack
+        missing); PsychoPy picks its keyboard backend once per process."""
+        import sys
+
+        from psychopy.hardware import keyboard
+
+        iohub = sys.modules.get("psychopy.iohub.client")
+        # 'ptb' first: ioHub's keyboard asks the ioHub server on every poll, so the display
+        # thread would wait on it (up to a request's timeout when the server is gone)
+        if keyboard.havePTB:
+            want = "ptb"
+        elif iohub is not None and iohub.ioHubConnection.getActiveConnection() is not None:
+            want = "iohub"
+        else:
+            return None, "event"
+        kb = keyboard.Keyboard(backend=want)
+        got = kb.getBackend()
+        if got not in ("ptb", "iohub"):  # chosen before, in this process
+            return None, str(got or "event")
+        return kb, str(got)
+
+    def info(self) -> dict[str, Any]:
+        """The keyboard (``backend``; ``key_time``: ``press`` when keys carry the time they went
+        down, ``poll`` when only the poll that saw them), the pacing and the refresh rate."""
+        return {"keyboard": {"backend": self._kb_backend,
+                             "key_time": "press" if self._kb is not None else "poll"},
+                "pace_hz": self.pace_hz, "refresh_hz": self.refresh_hz}
+
+    def _to_monotonic(self, t_psychopy: float) -> float:
+        """A time on PsychoPy's clock (``logging.defaultClock``: flips, key presses) on
+        ``time.monotonic``'s: both clocks read back to back, the interval since ``t_psychopy``
+        taken from PsychoPy's."""
+        now = time.monotonic()
+        return now - (self._clock.getTime() - t_psychopy)
 
     def _texture_stim(self, visual: Any, source: Any, size: tuple[int, int], x: float) -> Any:
         if not isinstance(source, _TextureSource):
@@ -311,12 +379,17 @@ class PsychoScreen:
 
     def set_reference(self, left: np.ndarray) -> None:
         """A new trial's reference half (display-encoded [0, 1], or 8-bit RGBA); wheel turns
-        from before it (a break, the last trial's leftover fraction) do not move its start
-        value."""
+        and keys from before it (a break, the last trial's leftover fraction) do not move its
+        start value or answer it."""
         t0 = time.perf_counter()
         self._tex_left.upload(self._rgba8(left))
         self.last_upload_s = time.perf_counter() - t0
         self._wheel, self._wheel_carry = [], (0.0, False)
+        if self._kb is not None:
+            try:
+                self._kb.clearEvents()
+            except RuntimeError:  # ioHub's keyboard without its server (gone; started again)
+                pass
 
     def set_test(self, right: Rendered | np.ndarray) -> None:
         """The test half from now on: a render (its 8-bit RGBA uploaded, or its texture drawn as
@@ -339,25 +412,35 @@ class PsychoScreen:
             stim._needUpdate = True
 
     def prepare(self, blank: bool) -> None:
-        """Draw the next frame into the back buffer: black but for the cross when ``blank``."""
+        """Draw the next frame into the back buffer, replacing whatever an earlier call drew
+        there since the last flip: both halves and the cross, or the cross alone on black when
+        ``blank``. Returns when the drawing is done (``glFinish``): a frame drawn with the
+        stimulus before the gaze was read is blanked afterwards by a clear and the cross."""
+        self.win.clearBuffer()  # the window's colour: black
         if not blank:
             self.left.draw()
             self.right.draw()
         for c in self.cross:
             c.draw()
+        if self.photodiode is not None:
+            self._patch.fillColor = (1, 1, 1) if self.photodiode else (-1, -1, -1)
+            self._patch.draw()
+        self._gl.glFinish()
 
-    def flip(self) -> float:
+    def flip(self) -> FlipTimes:
         """Show the back buffer; returns the flip time (``time.monotonic`` seconds) from
-        ``win.flip()``'s return value, or the emulated vblank when pacing."""
+        ``win.flip()``'s return value, or the emulated vblank when pacing, and when the frame
+        was ready (:class:`~fovexp.experiment.interfaces.FlipTimes`)."""
         if self.capture:
             # The back buffer just before the flip is exactly the frame about to be shown.
             self.last_frame = np.asarray(self.win._getFrame(buffer="back"))
+        ready = time.monotonic()  # prepare() finished the drawing: vsync only waits from here
         ret = self.win.flip()
-        now = time.monotonic()
-        t = now if ret is None else now - max(0.0, self._clock.getTime() - ret)
+        t = time.monotonic() if ret is None else min(time.monotonic(), self._to_monotonic(ret))
         if self.pace_hz:
+            ready = t  # the swap's copy into Xvfb is the software display's drawing
             t = self._pace(t)
-        return t
+        return FlipTimes(t, ready)
 
     def _pace(self, t: float) -> float:
         """Hold the flip at ``t`` to the next boundary of the ``1/pace_hz`` grid (vsync): a
@@ -374,8 +457,8 @@ class PsychoScreen:
             time.sleep(wait)
         return due
 
-    def draw(self, blank: bool) -> float:
-        """:meth:`prepare` and :meth:`flip`; returns the flip time."""
+    def draw(self, blank: bool) -> FlipTimes:
+        """:meth:`prepare` and :meth:`flip`."""
         self.prepare(blank)
         return self.flip()
 
@@ -582,13 +665,35 @@ class PsychoScreen:
         # returning None lets PsychoPy's own handler run too
 
     def poll_input(self) -> list[InputEvent]:
-        """Wheel notches since the last call (merged per modifier state, in order) and keys."""
+        """Wheel notches since the last call (merged per modifier state, in order) and keys in
+        the order they went down, each with its press time where the keyboard stamps it."""
         self.win.winHandle.dispatch_events()
         events, self._wheel = self._wheel, []
         wheel, self._wheel_carry = wheel_notches(events, self._wheel_carry)
         out: list[InputEvent] = list(wheel)
-        for name in self._event.getKeys(keyList=KEYS):
-            out.append(Key(name))
+        if self._kb is None:
+            out += [Key(name) for name in self._event.getKeys(keyList=KEYS)]
+            return out
+        try:
+            return out + self._pressed_keys()
+        except RuntimeError:  # ioHub's keyboard without its server (gone; started again)
+            return out + [Key(name) for name in self._event.getKeys(keyList=KEYS)]
+
+    def _pressed_keys(self) -> list[Key]:
+        """The keys that went down since the last call, with their press times: those still
+        held (``waitRelease=False``) and those already released (a tap between two polls); a
+        press reported again at its release is dropped."""
+        kb = self._kb
+        got = [*kb.getKeys(keyList=KEYS, waitRelease=False),
+               *kb.getKeys(keyList=KEYS, waitRelease=True)]
+        out = []
+        for k in sorted(got, key=lambda k: float(k.tDown)):
+            ident = (str(k.name), float(k.tDown))
+            if ident in self._kb_seen:
+                continue
+            self._kb_seen = [*self._kb_seen[-(KEYS_REMEMBERED - 1):], ident]
+            out.append(Key(ident[0], self._to_monotonic(ident[1])))
+        self._event.clearEvents("keyboard")  # the event module saw them too: not for later
         return out
 
     def mouse_position(self) -> tuple[float, float] | None:
@@ -598,6 +703,15 @@ class PsychoScreen:
         if not (0 <= nx <= 1 and 0 <= ny <= 1):
             return None
         return nx, ny
+
+    def window_rect(self) -> tuple[int, int, int, int]:
+        """The window's place on its screen: left, top, width, height (px); a full-screen
+        window's is the whole screen (a source that reports positions on the screen, ioHub's,
+        normalises them over it)."""
+        if getattr(self.win, "_isFullScr", False):
+            return 0, 0, self.size[0], self.size[1]
+        x, y = self.win.winHandle.get_location()
+        return int(x), int(y), self.size[0], self.size[1]
 
     def close(self) -> None:
         """Close the window (call after the render thread let go of :meth:`gl_share`)."""

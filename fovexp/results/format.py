@@ -42,8 +42,9 @@ REQUIRED_VALUES: tuple[str, ...] = (
     "image", "blur_rate", "method", "adjusted_parameter", "final_value", "timestamp",
 )
 ADJUSTABLE: tuple[str, ...] = ("f_e", "s_k", "s_f", "blur_rate")
-#: Gaze sources (the ``tracker`` column); the simulated one marks dry runs, never a participant.
-TRACKERS: tuple[str, ...] = ("tobii", "simulated", "mouse")
+#: Gaze sources (the ``tracker`` column); the simulated one marks dry runs, never a participant
+#: (a dry run through ioHub too). ``iohub``: any ioHub eye tracker (its MouseGaze is ``mouse``).
+TRACKERS: tuple[str, ...] = ("tobii", "simulated", "mouse", "iohub")
 SIMULATED_TRACKER = "simulated"
 #: Mouse gaze: a person, but a pilot (no eye tracker): the analysis and the calibration chain
 #: leave pilot sessions out unless asked (``--include-pilots``).
@@ -80,12 +81,34 @@ GAZE_COLUMNS: tuple[str, ...] = (
 )
 #: ``frames-<session>.csv``: one row per stimulus frame; ``value`` is the adjusted value of the
 #: frame actually on screen; ``gaze_system_time_us`` and ``gaze_ecc_deg`` are the newest gaze
-#: sample the frame's blanking decision used, ``flip_system_time_us`` the flip, both on the
-#: tracker's system clock (their difference is the gaze-to-flip latency).
+#: sample the frame's blanking decision used, ``flip_system_time_us`` the flip and
+#: ``decide_system_time_us`` the decision, all on the tracker's system clock (flip minus
+#: sample is the gaze-to-flip latency, decision minus sample the sample's age the blanking
+#: rule limits, flip minus decision the frame's draw latency).
 FRAME_COLUMNS: tuple[str, ...] = (
     "trial_index", "attempt", "frame", "flip_time_s", "interval_s", "dropped", "blanked", "value",
-    "gaze_system_time_us", "gaze_ecc_deg", "flip_system_time_us",
+    "gaze_system_time_us", "gaze_ecc_deg", "flip_system_time_us", "decide_system_time_us",
 )
+#: The frame log's format versions (docs/LOGS.md, "Format versions"), each by its columns: a
+#: reader tells them apart by the header, and a newer version only appends columns, so an older
+#: log reads with the new columns empty. 1: issue 9 (to ``flip_system_time_us``); 2: issue 18
+#: (``decide_system_time_us``).
+FRAME_LOG_VERSIONS: dict[int, tuple[str, ...]] = {1: FRAME_COLUMNS[:11], 2: FRAME_COLUMNS}
+FRAME_LOG_VERSION = max(FRAME_LOG_VERSIONS)
+
+
+def frame_log_version(header: Sequence[str]) -> int | None:
+    """The frame-log version whose columns ``header`` has (a log written before version 1
+    lacks the latency columns: 0); None when it is none of them."""
+    cols = tuple(header)
+    for version, columns in sorted(FRAME_LOG_VERSIONS.items(), reverse=True):
+        if cols == columns:
+            return version
+    if cols == FRAME_COLUMNS[:8]:
+        return 0
+    return None
+
+
 #: ``blanking-<session>.csv``: one row per blanking episode.
 BLANKING_COLUMNS: tuple[str, ...] = (
     "trial_index", "attempt", "start_s", "end_s", "frames", "reason",
@@ -165,9 +188,11 @@ class TrialsFile:
     #: documented columns missing from the header (then no row is read)
     missing: list[str] = field(default_factory=list)
     extra: list[str] = field(default_factory=list)
+    #: rows left out by a lenient read (``strict=False``): (line, problem)
+    skipped: list[tuple[int, str]] = field(default_factory=list)
 
 
-def read_trials_file(path: str | Path) -> TrialsFile:
+def read_trials_file(path: str | Path, strict: bool = True) -> TrialsFile:
     """Read a ``trials.csv``: typed rows, a torn last row dropped with a warning naming the file.
 
     The last row counts as torn (an interrupted write: the runner writes each row in one
@@ -175,6 +200,9 @@ def read_trials_file(path: str | Path) -> TrialsFile:
     count or an unparsable value. Any other bad row raises :class:`FovexpError` naming the file
     and line: the file is damaged and nothing is guessed. A header lacking a documented column
     gives ``missing`` and no rows. Blank lines are skipped.
+
+    ``strict=False`` (a live view of a file being written, ``fovexp monitor``) raises and warns
+    for nothing: every bad row, the last or another, is left out and listed in ``skipped``.
     """
     path = Path(path)
     try:
@@ -199,6 +227,8 @@ def read_trials_file(path: str | Path) -> TrialsFile:
     try:
         head_text = decode(raw_lines[0].removeprefix(b"\xef\xbb\xbf"), 1)
     except ValueError as exc:
+        if not strict:
+            return TrialsFile(path, [], skipped=[(1, f"header: {exc}")])
         raise FovexpError(f"{path}: line 1: {exc}") from None
     header = [h.strip() for h in next(csv.reader([head_text]), [])]
     out = TrialsFile(path, header)
@@ -207,7 +237,8 @@ def read_trials_file(path: str | Path) -> TrialsFile:
     if out.missing:
         if len(raw_lines) == 1 and not tail_complete:
             out.torn, out.torn_line = "torn header", 1
-            warnings.warn(f"{path}: line 1: torn header dropped", stacklevel=2)
+            if strict:
+                warnings.warn(f"{path}: line 1: torn header dropped", stacklevel=2)
             out.missing = []
         return out
     index = {c: header.index(c) for c in TRIAL_COLUMNS}
@@ -239,6 +270,9 @@ def read_trials_file(path: str | Path) -> TrialsFile:
                     problem = f"column {col}: {value.strip()!r} {exc}"
                     break
         if problem is not None:
+            if not strict:
+                out.skipped.append((i, problem))
+                continue
             if last:
                 out.torn, out.torn_line = problem, i
                 warnings.warn(f"{path}: line {i}: torn last row dropped ({problem})",

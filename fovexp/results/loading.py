@@ -69,7 +69,7 @@ from .format import (
 )
 from .format import read_trials_file as _read_file
 from .frames import read_frame_log, trial_quality
-from .limits import TrialLimits
+from .limits import R11, R12, R13, TrialLimits
 
 #: ``trials.csv`` columns in their documented order (docs/LOGS.md); the format is defined once,
 #: in :mod:`fovexp.results.format`.
@@ -398,9 +398,9 @@ def _trial_quality_rules(trials: pd.DataFrame, limits: TrialLimits,
     person = trials["tracker"] != SIMULATED_TRACKER
     if not person.any():
         return trials
-    blanked = person & (trials["blanked_fraction"] > limits.max_blanked_fraction)
+    blanked = person & limits.blanked_excluded(trials["blanked_fraction"])
     if blanked.any():
-        trials = _exclude(trials, blanked, "R11 blanking",
+        trials = _exclude(trials, blanked, R11,
                           f"blanked for more than {limits.max_blanked_fraction:.0%} of the "
                           "trial's frames", exclusions)
     dropped = pd.Series(False, index=trials.index)
@@ -414,15 +414,15 @@ def _trial_quality_rules(trials: pd.DataFrame, limits: TrialLimits,
             continue
         quality = trial_quality(read_frame_log(path)).set_index("trial_index")
         q = quality.reindex(grp["trial_index"].astype(int).to_numpy())
-        dropped[grp.index] = (q["dropped_fraction"] > limits.max_dropped_fraction).to_numpy()
-        late[grp.index] = (q["latency_p95_ms"] > limits.max_latency_p95_ms).to_numpy()
+        dropped[grp.index] = limits.dropped_excluded(q["dropped_fraction"]).to_numpy()
+        late[grp.index] = limits.latency_excluded(q["latency_p95_ms"]).to_numpy()
     if dropped.any():
-        trials = _exclude(trials, dropped, "R12 dropped frames",
+        trials = _exclude(trials, dropped, R12,
                           f"more than {limits.max_dropped_fraction:.0%} of the trial's frames "
                           "dropped", exclusions)
     late = late[trials.index]
     if late.any():
-        trials = _exclude(trials, late, "R13 latency",
+        trials = _exclude(trials, late, R13,
                           "the 95th percentile of the gaze-to-flip latency above "
                           f"{limits.max_latency_p95_ms:g} ms", exclusions)
     return trials

@@ -1,6 +1,7 @@
 """Gaze-to-flip latency per session and the blanking rule, read from frame logs through
-``fovexp.results.frames`` (issue 9, section 3): exact figures on logs written here with known
-latencies, each kind of rule violation caught, and the report's section."""
+``fovexp.results.frames`` (issues 9 and 18): exact figures on logs written here with known
+latencies, each kind of rule violation caught exactly at the decision, and the report's
+section."""
 
 from __future__ import annotations
 
@@ -15,8 +16,10 @@ import pytest
 from fovexp.analysis.latency import session_latency
 from fovexp.analysis.report import run_analysis
 from fovexp.results import load_results
+from fovexp.results.blanking import BlankingRule
 from fovexp.results.format import FRAME_COLUMNS, format_value
 from fovexp.results.frames import (
+    draw_latency_ms,
     gaze_to_flip_ms,
     latency_summary,
     read_frame_log,
@@ -26,17 +29,18 @@ from fovexp.results.frames import (
 from analysis_fixtures import write_study
 
 PERIOD_US = 8333  # 120 Hz
+DRAW_US = 1500  # each frame decided this long before its flip
 
 
 def frame_rows(trial: int, latencies_ms: list[float], t0_us: int = 10_000_000,
                attempt: int = 0, ecc: float = 0.3, blanked: int = 0) -> list[list]:
     """Frames of one attempt, one per refresh period, each decided by a sample
-    ``latency`` ms before its flip."""
+    ``latency`` ms before its flip, :data:`DRAW_US` before the flip."""
     rows = []
     for k, lat in enumerate(latencies_ms):
         flip = t0_us + k * PERIOD_US
         rows.append([trial, attempt, k, flip / 1e6, None if k == 0 else PERIOD_US / 1e6, 0,
-                     blanked, 0.2, flip - round(1e3 * lat), ecc, flip])
+                     blanked, 0.2, flip - round(1e3 * lat), ecc, flip, flip - DRAW_US])
     return rows
 
 
@@ -60,6 +64,7 @@ def test_latency_summary_is_exact(tmp_path: Path) -> None:
     assert got["median_ms"] == pytest.approx(np.median(lat), abs=1e-3)
     assert got["p95_ms"] == pytest.approx(np.percentile(lat, 95), abs=1e-3)
     assert got["max_ms"] == pytest.approx(21.8, abs=1e-3)
+    assert got["draw_median_ms"] == got["draw_p95_ms"] == pytest.approx(DRAW_US / 1e3)
 
 
 def test_an_older_log_reads_with_empty_latency_columns(tmp_path: Path) -> None:
@@ -69,29 +74,30 @@ def test_an_older_log_reads_with_empty_latency_columns(tmp_path: Path) -> None:
     frames = read_frame_log(path)
     assert list(frames.columns) == list(FRAME_COLUMNS)
     assert gaze_to_flip_ms(frames).isna().all() and latency_summary(frames)["with_gaze"] == 0
+    assert draw_latency_ms(frames).isna().all()
 
 
 def test_each_breach_of_the_blanking_rule_is_caught() -> None:
-    """Stimulus frames whose newest sample is invalid, outside 1.25 deg, or was older than the
-    gaze timeout when the frame was decided (after the previous flip) are flagged; the same
-    frames blanked, or a sample just within the limits, are not."""
+    """Stimulus frames whose newest sample is invalid, outside 1.25 deg, or older than the
+    gaze timeout when the frame was decided are flagged; the same frames blanked, or a sample
+    just within the limits, are not: exactly, the first frame included."""
     rows = frame_rows(0, [5.0] * 8)
     rows[2][9] = None  # invalid (no eccentricity)
     rows[3][9] = 1.26  # outside
     rows[4][9] = 1.25  # on the radius: allowed
-    # decided after frame 4's flip with a sample 50 ms older than that flip: allowed;
-    rows[5][8] = rows[4][10] - 50_000
-    # 1 us older: not
-    rows[6][8] = rows[5][10] - 50_001
+    rows[5][8] = rows[5][11] - 50_000  # 50 ms old when decided: allowed
+    rows[6][8] = rows[6][11] - 50_001  # 1 us older: not
     frames = pd.DataFrame(rows, columns=FRAME_COLUMNS)
-    bad = unblanked_violations(frames, 1.25, 0.05, 2 * PERIOD_US / 1e6)
+    rule = BlankingRule(1.25, 0.05)
+    bad = unblanked_violations(frames, rule)
     assert sorted(bad["frame"]) == [2, 3, 6]
     frames["blanked"] = 1
-    assert unblanked_violations(frames, 1.25, 0.05, 0.0).empty
-    # an attempt's first frame: the sample may be the timeout plus the slack older than its flip
-    first = pd.DataFrame(frame_rows(1, [50.0 + 16.0]), columns=FRAME_COLUMNS)
-    assert unblanked_violations(first, 1.25, 0.05, 0.0167).empty
-    assert len(unblanked_violations(first, 1.25, 0.05, 0.015)) == 1
+    assert unblanked_violations(frames, rule).empty
+    # an attempt's first frame: the same rule, no slack for its drawing
+    first = pd.DataFrame(frame_rows(1, [50.0 + DRAW_US / 1e3]), columns=FRAME_COLUMNS)
+    assert unblanked_violations(first, rule).empty
+    first.loc[0, "gaze_system_time_us"] -= 1
+    assert len(unblanked_violations(first, rule)) == 1
 
 
 def test_report_has_the_latency_per_session(tmp_path: Path) -> None:

@@ -234,3 +234,29 @@ def test_a_viewport_enhances_part_of_the_frame_as_the_whole_frame_would(frame):
     assert ratio[0] == pytest.approx(ratio[1], rel=0.1) and 0.1 < ratio[1] < 0.3, ratio
     with pytest.raises(FovexpError, match="does not fit"):
         Enhancer(LG).set_image(frame, viewport=(10, 0, w, h))
+
+
+def test_with_noise_composes_like_the_output_and_takes_another_layer():
+    """EnhanceResult.with_noise (stereo, section 6.4): with the result's own noise layer it
+    is the output (to float32 rounding: the contrast image is summed first); with none it is
+    the contrast output; the foveated method has no contrast image to add to."""
+    from fovexp import Enhancer, FovexpError, load_display, make_params
+
+    from evaluation_helpers import scene
+
+    enh = Enhancer(load_display("lg-oled55cx"))
+    img = scene(4, (480, 270))
+    enh.set_image(img, viewport=(3360, 1890, 3840, 2160))  # a corner: the band is open
+    res = enh.enhance((0.5, 0.5), make_params(blur_rate=0.57, impulses=12))
+    noise = res.map("noise")
+    assert np.abs(noise).max() > 0
+    np.testing.assert_allclose(res.with_noise(noise), res.output, atol=1e-7, rtol=0)
+    plain = res.with_noise(np.zeros_like(noise))
+    np.testing.assert_allclose(plain, res.map("contrast"), atol=1e-6)
+    with pytest.raises(FovexpError, match="shape"):
+        res.with_noise(noise[:-1])
+    with pytest.raises(FovexpError, match="finite"):
+        res.with_noise(np.full_like(noise, np.nan))
+    fov = enh.enhance((0.5, 0.5), make_params(method="foveated", blur_rate=0.57))
+    with pytest.raises(FovexpError, match="foveated"):
+        fov.with_noise(noise)

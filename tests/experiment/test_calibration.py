@@ -29,10 +29,11 @@ from fovexp.experiment.calibration import (
     _Animator,
     head_box_view,
 )
-from fovexp.experiment.gaze import DisplayArea, FixationGeometry, SimGazeParams, SimulatedGaze
+from fovexp.experiment.gaze import DisplayArea, FixationGeometry
 from fovexp.experiment.protocol import load_protocol
 from fovexp.experiment.quality import CENTRE, QualityLimits, target_points
 from fovexp.experiment.session import Session, SessionOptions
+from fovexp.experiment.trackers.simulated import SimGazeParams, SimulatedGaze
 
 from experiment_helpers import StubScreen, make_workspace
 

@@ -21,8 +21,9 @@ from fovexp.experiment.calibration import (
     TargetView,
     TextView,
 )
-from fovexp.experiment.gaze import DisplayArea, FixationGeometry, SimulatedGaze
+from fovexp.experiment.gaze import DisplayArea, FixationGeometry
 from fovexp.experiment.quality import QualityLimits, target_points
+from fovexp.experiment.trackers.simulated import SimulatedGaze
 
 from experiment_helpers import xvfb_display  # noqa: F401
 

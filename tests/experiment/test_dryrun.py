@@ -19,7 +19,14 @@ from fovexp.experiment.logs import (
     read_trials,
 )
 from fovexp.experiment.protocol import load_protocol
-from fovexp.results.frames import gaze_to_flip_ms, read_frame_log, unblanked_violations
+from fovexp.results.blanking import BlankingRule
+from fovexp.results.frames import (
+    decision_age_us,
+    draw_latency_ms,
+    gaze_to_flip_ms,
+    read_frame_log,
+    unblanked_violations,
+)
 
 from experiment_helpers import make_workspace, run_cli, xvfb_display  # noqa: F401
 
@@ -106,8 +113,10 @@ def check_common(folder: Path, n_trials: int, n_practice: int) -> list[dict]:
         assert float(fr[0]["value"]) == pytest.approx(r["start_value"])
         enter = t[0] + r["response_time_s"]
         before = [f for f in fr if float(f["flip_time_s"]) < enter]
-        assert before and before[-1] is fr[-1]  # no frame of the trial after Enter
-        assert float(before[-1]["value"]) == pytest.approx(r["final_value"])
+        # a simulated participant presses at the poll: no frame of the trial after Enter
+        assert before and before[-1] is fr[-1]
+        seen = [f for f in before if f["blanked"] == "0"]
+        assert float(seen[-1]["value"]) == pytest.approx(r["final_value"])
     check_frame_log(folder, sid, info)
     # Gaze rows within a trial carry its attempt; between trials both are empty.
     assert all(bool(g["trial_index"]) == bool(g["attempt"]) for g in gaze)
@@ -116,18 +125,21 @@ def check_common(folder: Path, n_trials: int, n_practice: int) -> list[dict]:
 
 def check_frame_log(folder: Path, sid: str, info: dict) -> None:
     """From the frame log alone (the logs' reader, fovexp.results.frames): every stimulus frame
-    names the gaze sample that decided it and its flip on the tracker's clock, and none was
-    drawn with the stimulus while the newest sample was invalid, outside 1.25 deg, or older
-    than the gaze timeout when it was decided (after the previous flip)."""
+    names the gaze sample that decided it, the decision and its flip on the tracker's clock,
+    and none was drawn with the stimulus while the newest sample was invalid, outside 1.25 deg,
+    or older than the gaze timeout when it was decided (the rule, exactly)."""
     frames = read_frame_log(folder / f"frames-{sid}.csv")
     assert frames["flip_system_time_us"].notna().all()
+    assert frames["decide_system_time_us"].notna().all()
     lat = gaze_to_flip_ms(frames).dropna()
     assert len(lat) >= 0.95 * len(frames) and (lat >= 0).all()
-    period_s = 1 / info["display_check"]["refresh_hz"]
-    bad = unblanked_violations(frames, 1.25, 0.05, 2 * period_s)
+    assert (draw_latency_ms(frames) >= 0).all()
+    rule = BlankingRule()
+    bad = unblanked_violations(frames, rule)
     assert bad.empty, bad.to_string()
     shown = frames[frames["blanked"] == 0]
-    assert (shown["gaze_ecc_deg"] <= 1.25).all() and len(shown)
+    assert rule.inside(shown["gaze_ecc_deg"]).all() and len(shown)
+    assert rule.fresh(decision_age_us(shown)).all()
 
 
 def test_dry_run_calibration_fe(ws: Path) -> None:

@@ -1,7 +1,8 @@
-"""Issue 9, "Done when": a 4K dry run of the validation protocol (``--window 3840x2160`` in a
-3840x2160 X screen, the scenes generated at 3840x2160, nothing scaled) writes frame logs whose
-blanking rule and ``final_value`` rule hold, checked from the logs alone with the checkers of
-:mod:`fovexp.results.frames` (tested on synthetic and doctored logs in
+"""Issues 9 and 18, "Done when": a 4K dry run of the validation protocol (``--window
+3840x2160`` in a 3840x2160 X screen, the scenes generated at 3840x2160, nothing scaled) writes
+frame logs whose blanking rule (exactly, at each frame's logged decision, with the runner's
+own definition of it) and ``final_value`` rule hold, checked from the logs alone with the
+checkers of :mod:`fovexp.results.frames` (tested on synthetic and doctored logs in
 tests/results/test_frames.py); and ``fovexp stimuli check protocols/*.yaml --display
 lg-oled55cx`` passes after ``fovexp stimuli generate --display lg-oled55cx``.
 
@@ -22,7 +23,9 @@ import pytest
 import yaml
 
 from fovexp.experiment.logs import read_trials
+from fovexp.results.blanking import BlankingRule
 from fovexp.results.frames import (
+    decision_age_us,
     final_value_violations,
     latency_summary,
     read_frame_log,
@@ -70,28 +73,33 @@ def test_validation_dry_run_at_4k_keeps_the_logging_rules(tmp_path: Path, xvfb_4
     frames = read_frame_log(folder / f"frames-{sid}.csv")
     assert len(frames) >= 4 and (frames["blanked"] == 0).any()
     print(f"4K dry run: {len(frames)} frames, latency {latency_summary(frames)}")
-    # the blanking rule: no frame drawn with the stimulus whose newest sample was invalid,
-    # beyond 1.25 deg, or older than the gaze timeout when the frame was decided. A frame is
-    # decided after the previous flip; an attempt's first frame has none in the log, and its
-    # sample may be older by its drawing time: in a 4K software-rendered Xvfb window that is
-    # hundreds of ms, bounded here by the longest flip-to-flip interval of the run.
-    period_s = 1 / info["display_check"]["refresh_hz"]
-    slack_s = max(2 * period_s, float(frames["interval_s"].max()))
+    # the blanking rule, exactly, with the runner's own definition: no frame drawn with the
+    # stimulus whose newest sample was invalid, beyond 1.25 deg, or older than the gaze
+    # timeout when the frame was decided (the log names the decision: no slack for drawing,
+    # the first frame of each attempt included)
     fix = spec["fixation"]
-    timeout_s = fix.get("gaze_timeout_s", 0.05)
-    bad = unblanked_violations(frames, fix["radius_deg"], timeout_s, slack_s)
+    rule = BlankingRule(fix["radius_deg"], fix.get("gaze_timeout_s", 0.05))
+    assert frames["decide_system_time_us"].notna().all()
+    bad = unblanked_violations(frames, rule)
     assert bad.empty, bad.to_string()
-    # not vacuous on this log: a shown frame doctored to a sample beyond 1.25 deg is caught
+    first = frames[(frames["frame"] == 0) & (frames["blanked"] == 0)]
+    assert (decision_age_us(first) <= rule.timeout_us).all()
+    # not vacuous on this log: a shown frame doctored to a sample beyond 1.25 deg is caught,
+    # and one doctored to a sample a microsecond past the timeout at its decision
     shown = frames.index[frames["blanked"] == 0][-1]
     doctored = frames.copy()
     doctored.loc[shown, "gaze_ecc_deg"] = 1.3
-    assert len(unblanked_violations(doctored, fix["radius_deg"], timeout_s, slack_s)) == 1
+    assert len(unblanked_violations(doctored, rule)) == 1
+    doctored = frames.copy()
+    doctored.loc[shown, "gaze_system_time_us"] = (doctored.loc[shown, "decide_system_time_us"]
+                                                  - rule.timeout_us - 1)
+    assert len(unblanked_violations(doctored, rule)) == 1
     # what is logged is what was on screen: the last frame before Enter shows final_value
     bad = final_value_violations(frames, rows)
     assert bad.empty, bad.to_string()
     # the checker is not vacuous on this log: a doctored final_value is caught
-    doctored = [{**r, "final_value": r["final_value"] + 0.02} for r in rows]
-    assert len(final_value_violations(frames, doctored)) == 2
+    doctored_rows = [{**r, "final_value": r["final_value"] + 0.02} for r in rows]
+    assert len(final_value_violations(frames, doctored_rows)) == 2
 
 
 def test_generate_then_check_every_protocol_at_the_display(tmp_path: Path) -> None:
@@ -107,11 +115,11 @@ def test_generate_then_check_every_protocol_at_the_display(tmp_path: Path) -> No
           f"({os.cpu_count()} CPUs)")
     assert len(list((stim / "generated" / f"{W}x{H}").glob("scene-*.png"))) == 15
     protocols = sorted(str(p.relative_to(ws)) for p in (ws / "protocols").glob("*.yaml"))
-    assert len(protocols) == 4
+    assert len(protocols) == 5  # the four of sections 5-6.1 and validation-12 (6.3)
     r = run_cli(["stimuli", "check", *protocols, "--display", "lg-oled55cx",
                  "--stimuli", str(stim)], cwd=ws)
     assert r.returncode == 0, r.stdout + r.stderr
-    assert r.stdout.count("can be shown by a real session") == 4
+    assert r.stdout.count("can be shown by a real session") == 5
     # one missing scene makes the whole check fail, naming the fix
     (stim / "generated" / f"{W}x{H}" / "scene-07.png").unlink()
     r = run_cli(["stimuli", "check", *protocols, "--display", "lg-oled55cx",

@@ -9,10 +9,11 @@ import inspect
 
 import pytest
 
-from fovexp.experiment.gaze import MouseGaze, SimulatedGaze
 from fovexp.experiment.interfaces import GazeSource, Renderer, Screen
 from fovexp.experiment.render import TestRenderer
-from fovexp.experiment.tobii import TobiiGaze
+from fovexp.experiment.trackers.mouse import MouseGaze
+from fovexp.experiment.trackers.simulated import SimulatedGaze
+from fovexp.experiment.trackers.tobii import TobiiGaze
 from fovexp.experiment.window import PsychoScreen
 
 from experiment_helpers import ScriptedGaze, StubScreen

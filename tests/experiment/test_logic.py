@@ -13,15 +13,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from fovexp import FovexpError, load_display
-from fovexp.experiment.gaze import (
-    BlankingMonitor,
-    FixationGeometry,
-    GazeSample,
-    SimGazeParams,
-    SimulatedGaze,
-)
+from fovexp.experiment.gaze import BlankingMonitor, FixationGeometry, GazeSample
 from fovexp.experiment.logs import TRIAL_COLUMNS, BatchLog, TrialLog, read_trials
 from fovexp.experiment.participant import SimTruth, SimulatedParticipant
+from fovexp.experiment.trackers.simulated import SimGazeParams, SimulatedGaze
 from fovexp.experiment.trial import (
     BlankingLog,
     FrameTimer,
@@ -446,6 +441,31 @@ def test_batch_log(tmp_path: Path) -> None:
         fh.write("3,0.")  # torn by a kill
     BatchLog(path, ["a", "b"]).flush()
     assert path.read_text() == "a,b\n1,0.5\n2,\n"
+
+
+def test_a_resumed_log_of_an_older_format_is_upgraded(tmp_path: Path) -> None:
+    """A frame log of version 1 (docs/LOGS.md, "Format versions") reopened by a newer runner:
+    its header becomes the current one and its rows get the new column empty, so the rows
+    appended after it line up; the reader sees the old rows with the column empty. A file
+    whose columns are not an older version's is refused, naming it."""
+    from fovexp.results.format import FRAME_COLUMNS, FRAME_LOG_VERSIONS
+    from fovexp.results.frames import read_frame_log
+
+    path = tmp_path / "frames-s.csv"
+    v1 = FRAME_LOG_VERSIONS[1]
+    path.write_text(",".join(v1) + "\n0,0,0,1.0,,0,0,0.2,990000,0.3,1000000\n0,0,1,1.0")
+    log = BatchLog(path, FRAME_COLUMNS)
+    log.add((0, 0, 1, 1.008, 0.008, 0, 0, 0.2, 999000, 0.3, 1008000, 1007000))
+    log.flush(sync=True)
+    frames = read_frame_log(path)
+    assert path.read_text().splitlines()[0] == ",".join(FRAME_COLUMNS)
+    assert list(frames["frame"]) == [0, 1]  # the torn row cut, then the new one
+    assert frames["decide_system_time_us"].isna().tolist() == [True, False]
+    assert path.with_name(path.name + ".torn").read_text() == "0,0,1,1.0\n"
+    other = tmp_path / "other.csv"
+    other.write_text("x,y\n1,2\n")
+    with pytest.raises(FovexpError, match="other.csv: its columns are not those"):
+        BatchLog(other, FRAME_COLUMNS)
 
 
 def test_synced_flush_waits_for_a_flush_under_way(tmp_path: Path,

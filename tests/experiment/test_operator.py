@@ -298,7 +298,8 @@ def test_slow_backend_and_fallback_are_shown_and_recorded(tmp_path: Path, monkey
     assert s.run(screen_factory=lambda **kw: stubs.append(StubScreen(inputs=enter_every(3),
                                                                      **kw)) or stubs[-1],
                  gaze=gaze()) == 0
-    warnings = [ln for ln in lines if "warning" in ln]
+    # the backend's warnings (the rig check's, with no report under this results root, apart)
+    warnings = [ln for ln in lines if "warning" in ln and "rig check" not in ln]
     assert len(warnings) == 2
     assert "software (test)" in warnings[0] and "takes" in warnings[1]
     info = session_file(s)
@@ -326,8 +327,14 @@ def test_fast_backend_gives_no_warning(tmp_path: Path, monkeypatch) -> None:
     s = Session(lp, options(tmp_path, "S02", console=lines.append))
     assert s.run(screen_factory=lambda **kw: StubScreen(inputs=enter_every(3), **kw),
                  gaze=gaze()) == 0
-    assert not [ln for ln in lines if "warning" in ln]
-    assert session_file(s)["render"]["wheel_step"]["within_budget"] is True
+    # the only warning: no rig check under this results root (fovexp rig check), recorded
+    assert [ln for ln in lines if "warning" in ln] == [
+        "fovexp run: warning: no rig check under this results root: run fovexp rig check "
+        "before the first participant"]
+    info = session_file(s)
+    assert info["render"]["wheel_step"]["within_budget"] is True
+    assert info["runs"][-1]["rig_check"] == {"report": None}
+    assert "rig_check_warning" in [e["event"] for e in info["events"]]
 
 
 # -- the session file off the frame loop ---------------------------------------------------------

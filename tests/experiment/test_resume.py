@@ -55,7 +55,8 @@ def test_sigkill_then_resume(tmp_path: Path, xvfb_display) -> None:  # noqa: F81
             Session(load_protocol(ws / "protocols" / "calibration-fe.yaml",
                                   results_root=ws / "results"),
                     SessionOptions(participant="K01", results_root=ws / "results",
-                                   tracker="simulated", dry_run=True, resume=True))
+                                   tracker="simulated", dry_run=True, resume=True,
+                                   window_size=(480, 270)))  # the CLI's dry-run window
         assert proc.poll() is None
         proc.send_signal(signal.SIGKILL)
         proc.wait(timeout=30)

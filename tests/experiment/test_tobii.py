@@ -24,7 +24,7 @@ if sys.version_info[:2] != (3, 10):
 tr = pytest.importorskip("tobii_research", reason="tobii-research is not installed")
 
 from fovexp import FovexpError  # noqa: E402
-from fovexp.experiment.tobii import TobiiCalibration, TobiiGaze, sample_from_sdk  # noqa: E402
+from fovexp.experiment.trackers.tobii import TobiiCalibration, TobiiGaze, sample_from_sdk  # noqa: E402
 
 from experiment_helpers import REPO, run_cli  # noqa: E402
 

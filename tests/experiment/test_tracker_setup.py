@@ -13,7 +13,7 @@ import pytest
 
 from fovexp import FovexpError, load_display
 from fovexp.experiment.calibration import CalibrationTiming
-from fovexp.experiment.gaze import DisplayArea, FixationGeometry, MouseGaze, SimulatedGaze
+from fovexp.experiment.gaze import DisplayArea, FixationGeometry
 from fovexp.experiment.protocol import load_protocol
 from fovexp.experiment.sessionfile import SessionFile
 from fovexp.experiment.tracker_setup import (
@@ -23,6 +23,8 @@ from fovexp.experiment.tracker_setup import (
     display_area,
     window_ppd,
 )
+from fovexp.experiment.trackers.mouse import MouseGaze
+from fovexp.experiment.trackers.simulated import SimulatedGaze
 
 from experiment_helpers import REPO, StubScreen
 

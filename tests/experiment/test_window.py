@@ -8,21 +8,18 @@ import csv
 import json
 import math
 import threading
+import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from fovexp import load_display
-from fovexp.experiment.gaze import (
-    BlankingMonitor,
-    FixationGeometry,
-    SimGazeParams,
-    SimulatedGaze,
-)
+from fovexp.experiment.gaze import BlankingMonitor, FixationGeometry
 from fovexp.experiment.logs import read_trials
 from fovexp.experiment.protocol import load_protocol
 from fovexp.experiment.session import Session, SessionOptions
+from fovexp.experiment.trackers.simulated import SimGazeParams, SimulatedGaze
 from fovexp.experiment.trial import Key, Wheel
 
 from experiment_helpers import (  # noqa: F401
@@ -30,6 +27,7 @@ from experiment_helpers import (  # noqa: F401
     ScriptedGaze,
     make_workspace,
     run_cli,
+    x_key,
     xvfb_display,
 )
 
@@ -238,9 +236,37 @@ def test_wheel_and_modifier_and_keys(screen) -> None:
     win.dispatch_event("on_mouse_scroll", W // 2, H // 2, 0, -1)
     assert screen.poll_input() == [Wheel(-1, True)]
     win.dispatch_event("on_key_release", key.LSHIFT, 0)
-    press(screen, key.RETURN)
-    press(screen, key.ESCAPE)
+    x_key(screen, "Return")
+    x_key(screen, "Escape")
+    time.sleep(0.05)
     assert screen.poll_input() == [Key("return"), Key("escape")]
+
+
+def test_keys_carry_their_press_time(screen) -> None:
+    """Issue 18: a key carries the time it went down (PsychoPy's Keyboard with the 'ptb'
+    backend: psychtoolbox with libjack; or 'iohub'), on the flips' clock, not the time of the
+    poll that saw it: the press comes after it was sent and well before the poll, whether the
+    key is still down or already released at the poll, and a press is reported once."""
+    kb = screen.info()["keyboard"]
+    assert kb["key_time"] == "press", (
+        f"keys are stamped at the poll (backend {kb['backend']!r}): psychtoolbox needs "
+        "libjack (apt-get install libjack-jackd2-0)")
+    screen.poll_input()
+    sent = x_key(screen, "Return")
+    time.sleep(0.3)
+    polled = time.monotonic()
+    got = screen.poll_input()
+    assert got == [Key("return")]
+    t = got[0].t_s
+    assert t is not None and sent < t < polled - 0.25, (sent, t, polled)
+    assert screen.poll_input() == []  # reported once, not again at its release
+    # the press time is on the flips' clock: between the flips around it
+    before = screen.draw(blank=True).flip_s
+    x_key(screen, "Escape")
+    after = screen.draw(blank=True).flip_s
+    time.sleep(0.05)
+    (esc,) = screen.poll_input()
+    assert esc == Key("escape") and before < esc.t_s < after + 0.05
 
 
 def test_a_key_that_answers_a_message_is_not_an_operator_request(screen) -> None:
@@ -278,7 +304,7 @@ class EscapeGaze(SimulatedGaze):
             from pyglet.window import key
 
             self.pressed = True
-            press(s.screen, key.ESCAPE)
+            x_key(s.screen, "Escape")  # through the X server: the trial's keyboard
             # Q arrives while the pause message is up (its loop reads the key buffer).
             threading.Timer(0.5, press, args=(s.screen, key.Q)).start()
         return super().poll()

@@ -1,11 +1,15 @@
 """The frame log's checkers (:mod:`fovexp.results.frames`) on synthetic logs with known answers:
-the blanking rule (no frame drawn with the stimulus without a recent valid sample within
-1.25 deg) and the ``final_value`` rule (the last frame before Enter shows the logged answer).
-Each is shown to pass a log that keeps the rule and to name every kind of break of it."""
+the blanking rule (:class:`fovexp.results.blanking.BlankingRule`: no frame drawn with the
+stimulus without a valid sample within 1.25 deg no older than the gaze timeout when the frame
+was decided, checked exactly, the first frame of an attempt included) and the ``final_value``
+rule (the last stimulus frame before the press shows the logged answer). Each is shown to pass
+a log that keeps the rule and to name every kind of break of it; a log of the previous format
+(no decision time) still reads and is checked as far as it can be."""
 
 from __future__ import annotations
 
 import csv
+import math
 from pathlib import Path
 
 import numpy as np
@@ -13,32 +17,38 @@ import pandas as pd
 import pytest
 
 from fovexp import FovexpError
-from fovexp.results.format import FRAME_COLUMNS
+from fovexp.results.blanking import BlankingRule
+from fovexp.results.format import FRAME_COLUMNS, FRAME_LOG_VERSIONS, frame_log_version
 from fovexp.results.frames import (
+    decision_age_us,
+    draw_latency_ms,
     final_value_violations,
     latency_summary,
     read_frame_log,
     unblanked_violations,
+    unchecked_ages,
 )
 
 PERIOD_S = 1 / 120
-RADIUS_DEG, TIMEOUT_S = 1.25, 0.05
+RULE = BlankingRule(1.25, 0.05)
 
 
 def frame(i: int, frame_no: int, t_s: float, value: float, blanked: int = 0,
-          ecc: float | None = 0.3, age_s: float = 0.004, attempt: int = 0) -> dict:
-    """A frame flipped at ``t_s``, decided by a sample ``age_s`` older than its flip."""
+          ecc: float | None = 0.3, age_s: float | None = 0.004, attempt: int = 0,
+          draw_s: float = 0.002) -> dict:
+    """A frame flipped at ``t_s``, decided ``draw_s`` before its flip by a sample ``age_s``
+    older than the flip (None: no sample)."""
     flip_us = round(t_s * 1e6)
     return {"trial_index": i, "attempt": attempt, "frame": frame_no, "flip_time_s": t_s,
             "interval_s": PERIOD_S if frame_no else "", "dropped": 0, "blanked": blanked,
-            "value": value, "gaze_system_time_us": "" if ecc is None and age_s is None
+            "value": value, "gaze_system_time_us": "" if age_s is None
             else flip_us - round(age_s * 1e6), "gaze_ecc_deg": "" if ecc is None else ecc,
-            "flip_system_time_us": flip_us}
+            "flip_system_time_us": flip_us, "decide_system_time_us": flip_us - round(draw_s * 1e6)}
 
 
-def write(path: Path, rows: list[dict]) -> pd.DataFrame:
+def write(path: Path, rows: list[dict], columns=FRAME_COLUMNS) -> pd.DataFrame:
     with open(path, "w", newline="") as fh:
-        w = csv.DictWriter(fh, FRAME_COLUMNS)
+        w = csv.DictWriter(fh, columns, extrasaction="ignore")
         w.writeheader()
         w.writerows(rows)
     return read_frame_log(path)
@@ -50,51 +60,91 @@ def trial(i: int, t0: float, values: list[float], **kw) -> list[dict]:
 
 GOOD = trial(0, 10.0, [0.0, 0.0, 0.02, 0.02, 0.04]) + trial(1, 20.0, [0.1, 0.12, 0.12])
 ROWS = [{"trial_index": 0, "start_value": 0.0, "final_value": 0.04,
-         "response_time_s": round(4 * PERIOD_S + 0.003, 4)},
+         "response_time_s": round(4 * PERIOD_S + 0.003, 6)},
         {"trial_index": 1, "start_value": 0.1, "final_value": 0.12,
-         "response_time_s": round(2 * PERIOD_S + 0.005, 4)}]
+         "response_time_s": round(2 * PERIOD_S + 0.005, 6)}]
 
 
 def test_a_log_that_keeps_the_rules(tmp_path: Path) -> None:
     frames = write(tmp_path / "f.csv", GOOD)
-    assert unblanked_violations(frames, RADIUS_DEG, TIMEOUT_S, 2 * PERIOD_S).empty
+    assert unblanked_violations(frames, RULE).empty and unchecked_ages(frames) == 0
     assert final_value_violations(frames, ROWS).empty
-    assert latency_summary(frames)["median_ms"] == pytest.approx(4.0)
+    got = latency_summary(frames)
+    assert got["median_ms"] == pytest.approx(4.0) and got["draw_median_ms"] == pytest.approx(2.0)
+    assert (draw_latency_ms(frames) == 2.0).all() and (decision_age_us(frames) == 2000).all()
 
 
 @pytest.mark.parametrize("change, expected", [
     ({"ecc": 1.3}, "outside"),                # a valid sample beyond 1.25 deg
     ({"ecc": None}, "invalid"),               # no valid sample (no eccentricity)
     ({"ecc": None, "age_s": None}, "none"),   # no sample at all
-    ({"age_s": 0.07}, "old"),                 # older than the previous flip minus 50 ms
+    ({"age_s": 0.053}, "old"),                # 51 ms old when decided, 2 ms before the flip
 ])
 def test_unblanked_frames_that_break_the_rule(tmp_path: Path, change: dict,
                                               expected: str) -> None:
     rows = [dict(r) for r in GOOD]
     rows[2] = frame(0, 2, 10.0 + 2 * PERIOD_S, 0.02, **change)
     frames = write(tmp_path / "f.csv", rows)
-    bad = unblanked_violations(frames, RADIUS_DEG, TIMEOUT_S, 2 * PERIOD_S)
+    bad = unblanked_violations(frames, RULE)
     assert list(zip(bad["trial_index"], bad["frame"], strict=True)) == [(0, 2)], expected
     # the same frame blanked keeps the rule
     rows[2] = frame(0, 2, 10.0 + 2 * PERIOD_S, 0.02, blanked=1, **change)
-    assert unblanked_violations(write(tmp_path / "g.csv", rows), RADIUS_DEG, TIMEOUT_S,
-                                2 * PERIOD_S).empty
+    assert unblanked_violations(write(tmp_path / "g.csv", rows), RULE).empty
 
 
-def test_the_first_frame_of_an_attempt_gets_the_slack(tmp_path: Path) -> None:
-    """No previous flip: its sample may be the timeout plus the slack older than its flip."""
-    ok = write(tmp_path / "a.csv", [frame(0, 0, 10.0, 0.0, age_s=0.06)])
-    assert unblanked_violations(ok, RADIUS_DEG, TIMEOUT_S, 2 * PERIOD_S).empty
-    old = write(tmp_path / "b.csv", [frame(0, 0, 10.0, 0.0, age_s=0.07)])
-    assert len(unblanked_violations(old, RADIUS_DEG, TIMEOUT_S, 2 * PERIOD_S)) == 1
+@pytest.mark.parametrize("frame_no", [0, 3])
+def test_the_age_is_checked_exactly_at_the_decision(tmp_path: Path, frame_no: int) -> None:
+    """No slack, the first frame of an attempt included: a sample exactly the timeout old
+    when the frame was decided is allowed, one a microsecond older is not, however long the
+    frame then took to its flip (the issue's 4K dry run: 90 ms old at the flip, 60 ms of
+    drawing, 30 ms at the decision: allowed)."""
+    def with_first(age_s: float, draw_s: float) -> pd.DataFrame:
+        rows = [dict(r) for r in GOOD]
+        rows[frame_no] = frame(0, frame_no, rows[frame_no]["flip_time_s"],
+                               rows[frame_no]["value"], age_s=age_s, draw_s=draw_s)
+        return write(tmp_path / f"{age_s}-{draw_s}.csv", rows)
+
+    assert unblanked_violations(with_first(0.090, 0.060), RULE).empty
+    assert unblanked_violations(with_first(0.052, 0.002), RULE).empty  # 50 000 us: allowed
+    bad = unblanked_violations(with_first(0.052001, 0.002), RULE)  # 50 001 us
+    assert list(bad["frame"]) == [frame_no]
+    # a protocol's own timeout is the rule's
+    assert unblanked_violations(with_first(0.052001, 0.002), BlankingRule(1.25, 0.0501)).empty
+
+
+def test_the_radius_is_checked_exactly(tmp_path: Path) -> None:
+    rows = [dict(r) for r in GOOD]
+    rows[1] = frame(0, 1, rows[1]["flip_time_s"], 0.0, ecc=1.25)
+    rows[2] = frame(0, 2, rows[2]["flip_time_s"], 0.02, ecc=1.2501)
+    assert list(unblanked_violations(write(tmp_path / "r.csv", rows), RULE)["frame"]) == [2]
+
+
+def test_a_log_of_the_previous_format(tmp_path: Path) -> None:
+    """Version 1 (no decision time) reads with the column empty; the rule is checked against
+    the previous flip (a frame is decided after it: a sample older than the previous flip
+    minus the timeout breaks the rule for certain) and a first frame's age is left unchecked
+    (counted), never guessed."""
+    v1 = FRAME_LOG_VERSIONS[1]
+    assert frame_log_version(v1) == 1 and frame_log_version(FRAME_COLUMNS) == 2
+    assert frame_log_version(FRAME_COLUMNS[:8]) == 0 and frame_log_version(["x"]) is None
+    rows = [dict(r) for r in GOOD]
+    rows[0] = frame(0, 0, 10.0, 0.0, age_s=0.2)  # first frame: cannot be checked
+    rows[3] = frame(0, 3, 10.0 + 3 * PERIOD_S, 0.02, age_s=0.05 + PERIOD_S + 0.001)
+    frames = write(tmp_path / "v1.csv", rows, columns=v1)
+    assert frames["decide_system_time_us"].isna().all()
+    assert list(unblanked_violations(frames, RULE)["frame"]) == [3]
+    assert unchecked_ages(frames) == 2  # the first frame of each attempt
+    assert math.isnan(latency_summary(frames)["draw_median_ms"])
 
 
 @pytest.mark.parametrize("doctor, problem", [
-    (lambda rows, log: log[0].update(final_value=0.02), "the last frame before Enter shows"),
+    (lambda rows, log: log[0].update(final_value=0.02), "the last stimulus frame before Enter"),
     (lambda rows, log: rows.__setitem__(4, {**rows[4], "value": 0.06}),
-     "the last frame before Enter shows 0.06"),
-    (lambda rows, log: rows.insert(5, frame(0, 5, 10.0 + 5 * PERIOD_S, 0.04)),
-     "1 frame(s) flipped after Enter"),
+     "the last stimulus frame before Enter shows 0.06"),
+    # a render that reached the screen after the press (before the poll saw it) is in the
+    # frame log, and is not the answer
+    (lambda rows, log: (rows.insert(5, frame(0, 5, 10.0 + 5 * PERIOD_S, 0.06)),
+                        log[0].update(final_value=0.06)), "the last stimulus frame before"),
     (lambda rows, log: log[0].update(start_value=0.2), "first frame shows 0"),
     (lambda rows, log: log.append({"trial_index": 5, "start_value": 0, "final_value": 0,
                                    "response_time_s": 1}), "no frames"),
@@ -106,6 +156,32 @@ def test_final_value_violations(tmp_path: Path, doctor, problem: str) -> None:
     assert len(bad) == 1 and bad["problem"].iloc[0].startswith(problem), bad.to_string()
 
 
+def test_the_answer_is_what_was_seen_at_the_press(tmp_path: Path) -> None:
+    """Frames flipped between the press and the poll are allowed (the answer is the frame on
+    screen at the press); a black frame at the press shows nothing: the answer is the last
+    stimulus frame's value; a frame flipped within the logs' rounding of the press counts
+    either way."""
+    rows = [dict(r) for r in GOOD]
+    rows.insert(5, frame(0, 5, 10.0 + 5 * PERIOD_S, 0.06))  # after the press: allowed
+    assert final_value_violations(write(tmp_path / "a.csv", rows), ROWS).empty
+    rows = [dict(r) for r in GOOD]
+    rows[4] = frame(0, 4, rows[4]["flip_time_s"], 0.04, blanked=1)  # black at the press
+    log = [{**ROWS[0], "final_value": 0.02}]
+    assert final_value_violations(write(tmp_path / "b.csv", rows), log).empty
+    assert not final_value_violations(write(tmp_path / "b.csv", rows), ROWS[:1]).empty
+    # every frame before the press black: the participant saw the start value only
+    rows = [frame(0, n, 10.0 + n * PERIOD_S, v, blanked=1) for n, v in
+            enumerate([0.0, 0.02, 0.04])]
+    log = [{**ROWS[0], "final_value": 0.0, "response_time_s": 0.02}]
+    assert final_value_violations(write(tmp_path / "c.csv", rows), log).empty
+    # a frame flipped 50 us after the press: either value is taken as seen
+    rows = [dict(r) for r in GOOD]
+    for final in (0.02, 0.04):
+        log = [{**ROWS[0], "final_value": final,
+                "response_time_s": round(4 * PERIOD_S - 50e-6, 6)}]
+        assert final_value_violations(write(tmp_path / "d.csv", rows), log).empty
+
+
 def test_final_value_uses_the_confirmed_attempt(tmp_path: Path) -> None:
     """An attempt paused and restarted: the rule holds on the last one, whatever the first
     showed."""
@@ -114,6 +190,20 @@ def test_final_value_uses_the_confirmed_attempt(tmp_path: Path) -> None:
     frames = write(tmp_path / "f.csv", rows)
     assert final_value_violations(frames, ROWS[:1]).empty
     assert not final_value_violations(frames[frames["attempt"] == 0], ROWS[:1]).empty
+
+
+def test_the_rule_is_one_definition() -> None:
+    """The runner's scalar decision and the checker's column-wise one are the same
+    expressions: on a grid of ages and eccentricities they agree everywhere."""
+    ages = np.array([0, 49_999, 50_000, 50_001, 90_000, np.nan])
+    eccs = np.array([0.0, 1.2499, 1.25, 1.2501, np.inf, np.nan])
+    a, e = np.meshgrid(ages, eccs)
+    vec = RULE.allows(a.ravel(), e.ravel())
+    for age, ecc, ok in zip(a.ravel(), e.ravel(), vec, strict=True):
+        reason = RULE.reason(None if np.isnan(age) else int(age), not np.isnan(ecc), float(ecc))
+        assert (reason == "") == bool(ok), (age, ecc, reason)
+    assert RULE.reason(50_001, True, 0.0) == "lost" and RULE.reason(10, False, 0.0) == "invalid"
+    assert RULE.reason(10, True, 1.3) == "outside" and RULE.reason(None, True, 0.0) == "lost"
 
 
 def test_a_file_that_is_not_a_frame_log(tmp_path: Path) -> None:
@@ -179,55 +269,31 @@ def test_latency_summary_and_trial_quality_by_hand(tmp_path: Path) -> None:
         "trial_index", "frames", "dropped_fraction", "latency_p95_ms"]
 
 
-def test_the_blanking_rule_reads_the_previous_flip_and_a_missing_flag(tmp_path: Path) -> None:
-    """'Recent' is measured from the previous flip of the same attempt (not the one before
-    it): a sample exactly the timeout (2 s here) older than the previous flip keeps the rule,
-    one a microsecond older breaks it; a frame whose blanked flag is missing counts as
-    shown."""
-    base = [frame(0, n, 10.0 + n * 0.02, 0.0) for n in range(3)]
-    edge = [dict(r) for r in base]
-    edge[2]["gaze_system_time_us"] = edge[1]["flip_system_time_us"] - 2_000_000  # just recent
-    frames = write(tmp_path / "a.csv", edge)
-    assert unblanked_violations(frames, RADIUS_DEG, 2.0, 0.0).empty
-    edge[2]["gaze_system_time_us"] -= 1  # 1 us too old
-    frames = write(tmp_path / "b.csv", edge)
-    assert unblanked_violations(frames, RADIUS_DEG, 2.0, 0.0)["frame"].tolist() == [2]
-    unflagged = [dict(r) for r in base]
-    unflagged[1]["blanked"] = ""
-    unflagged[1]["gaze_ecc_deg"] = 2.0
-    frames = write(tmp_path / "c.csv", unflagged)
-    assert unblanked_violations(frames, RADIUS_DEG, TIMEOUT_S, 0.0)["frame"].tolist() == [1]
+def test_a_frame_without_its_blanked_flag_counts_as_shown(tmp_path: Path) -> None:
+    rows = [frame(0, n, 10.0 + n * 0.02, 0.0) for n in range(3)]
+    rows[1]["blanked"] = ""
+    rows[1]["gaze_ecc_deg"] = 2.0  # outside: a violation if the frame was shown
+    frames = write(tmp_path / "c.csv", rows)
+    assert unblanked_violations(frames, RULE)["frame"].tolist() == [1]
 
 
-def test_final_value_at_the_edges_of_enter(tmp_path: Path) -> None:
-    """A frame flipped exactly at Enter (+ the slack) is before it; one later is after; the
-    logged values must match to value_tol; a trial row without frames does not stop the
-    others being checked; the first frame named as shown."""
+def test_final_value_after_a_trial_without_frames_and_at_the_tolerance(tmp_path: Path) -> None:
+    """A trial row without frames does not stop the next one being checked; the logged values
+    match within value_tol, the tolerance itself included (values 0.5 apart, exact in
+    binary)."""
     rows = trial(0, 10.0, [0.0, 0.0, 0.02])
-    enter = 2 * PERIOD_S  # the last frame's flip, exactly
+    enter = 2 * PERIOD_S + 0.003
     log = [{"trial_index": 7, "start_value": 0, "final_value": 0, "response_time_s": 1},
            {"trial_index": 0, "start_value": 0.0, "final_value": 0.02, "response_time_s": enter}]
-    bad = final_value_violations(write(tmp_path / "f.csv", rows), log)
-    assert bad["problem"].tolist() == ["no frames"]
-    wrong = [log[0], dict(log[1], start_value=0.5)]  # checked after a trial without frames
-    assert final_value_violations(write(tmp_path / "f.csv", rows), wrong)["problem"].tolist() == [
+    frames = write(tmp_path / "f.csv", rows)
+    assert final_value_violations(frames, log)["problem"].tolist() == ["no frames"]
+    wrong = [log[0], dict(log[1], start_value=0.5)]
+    assert final_value_violations(frames, wrong)["problem"].tolist() == [
         "no frames", "first frame shows 0, start_value is 0.5"]
-    # the tolerance itself is within it: values 0.5 apart with value_tol = 0.5 (exact binary)
-    halves = trial(0, 10.0, [0.25, 0.25, 0.25])
+    halves = write(tmp_path / "h.csv", trial(0, 10.0, [0.25, 0.25, 0.25]))
     ok = [{"trial_index": 0, "start_value": 0.75, "final_value": 0.75, "response_time_s": enter}]
-    assert final_value_violations(write(tmp_path / "h.csv", halves), ok, value_tol=0.5).empty
-    assert len(final_value_violations(write(tmp_path / "h.csv", halves), ok,
-                                      value_tol=0.4999)) == 2
-    log[1]["final_value"] = 0.02 + 1e-9  # within value_tol = 1e-9 of the frame's
-    assert final_value_violations(write(tmp_path / "f.csv", rows), log[1:]).empty
-    log[1]["response_time_s"] = enter - 2e-4  # the last frame now after Enter
-    bad = final_value_violations(write(tmp_path / "f.csv", rows), log[1:])
-    assert bad["problem"].tolist() == ["1 frame(s) flipped after Enter",
-                                       "the last frame before Enter shows 0, final_value is 0.02"]
-    rows = trial(0, 10.0, [0.5, 0.0, 0.02])
-    log[1]["response_time_s"] = enter
-    bad = final_value_violations(write(tmp_path / "f.csv", rows), log[1:])
-    assert bad["problem"].tolist() == ["first frame shows 0.5, start_value is 0"]
+    assert final_value_violations(halves, ok, value_tol=0.5).empty
+    assert len(final_value_violations(halves, ok, value_tol=0.4999)) == 2
 
 
 def test_a_frame_flipped_exactly_at_enter_plus_the_slack_is_before_it(tmp_path: Path) -> None:

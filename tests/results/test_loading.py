@@ -322,7 +322,7 @@ def _frame_log(folder: Path, session: str, trials: dict[int, dict]) -> None:
                        "flip_time_s": t_us / 1e6, "interval_s": 0.00833, "dropped": dropped,
                        "blanked": 0, "value": 0.1, "gaze_system_time_us": int(t_us - 1e3 * lat),
                        "gaze_ecc_deg": 0.3, "flip_system_time_us": t_us}
-                lines.append(",".join(str(row[c]) for c in FRAME_COLUMNS))
+                lines.append(",".join(str(row.get(c, "")) for c in FRAME_COLUMNS))
     (folder / f"frames-{session}.csv").write_text("\n".join(lines) + "\n")
 
 

@@ -21,8 +21,8 @@ import numpy as np
 
 from fovexp import FovexpError
 
-from .calibration import CalibrationOutcome, PointSamples
-from .gaze import (
+from ..calibration import CalibrationOutcome, PointSamples
+from ..gaze import (
     GAZE_BUFFER_S,
     TRACKER_RATE_HZ,
     DisplayArea,

@@ -1,0 +1,255 @@
+"""``fovexp evaluate spectra|fovvdp|temporal|compression`` and ``fovexp stereo``: the paper's
+analyses of outputs (section 6) and its stereo extension (6.4). ``fovexp.cli`` registers
+:func:`add_evaluate_parser` and :func:`add_stereo_parser`; this module only parses and hands
+over to the analysis modules (imported when the command runs). Bad input is one
+``fovexp: error: ...`` line and exit status 2 (``fovexp.cli.main``)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+BACKEND_CHOICES = ("auto", "cpu", "gpu")
+
+
+def _gaze(text: str) -> tuple[float, float]:
+    from fovexp.cli import _gaze as parse  # the one gaze parser of the command line
+
+    return parse(text)
+
+
+def _common(p: argparse.ArgumentParser, blur_help: str, blur_default: str | None) -> None:
+    p.add_argument("--display", default="lg-oled55cx", help="display profile name or YAML path")
+    p.add_argument("--gaze", type=_gaze, default=(0.5, 0.5),
+                   help="x,y in [0, 1] (x right, y down; default the centre)")
+    if blur_default is None:
+        p.add_argument("--blur-rate", required=True, help=blur_help)
+    else:
+        p.add_argument("--blur-rate", default=blur_default, help=blur_help)
+    p.add_argument("--impulses", type=int, default=64, help="impulses per kernel (default 64)")
+    p.add_argument("--seed", type=int, default=1, help="the impulses' seed (default 1)")
+    p.add_argument("--backend", choices=BACKEND_CHOICES, default="auto",
+                   help="cpu, gpu, or auto (a hardware GPU if there is one)")
+    p.add_argument("--out", type=Path, required=True, metavar="DIR",
+                   help="folder for the CSV, the PNG figure and the Markdown note")
+
+
+def _setup(args: argparse.Namespace) -> Any:
+    from fovexp import FovexpError, check_parameter
+
+    from .outputs import Setup
+
+    for name in ("impulses", "seed"):
+        try:
+            check_parameter(name, getattr(args, name))
+        except ValueError as exc:
+            raise FovexpError(f"--{name} {getattr(args, name)}: {exc}") from None
+    return Setup.make(args.display, args.backend, args.impulses, args.seed, args.gaze)
+
+
+def add_evaluate_parser(sub: Any) -> argparse.ArgumentParser:
+    p = sub.add_parser(
+        "evaluate", help="the paper's analyses of outputs: spectra, FovVDP, temporal, JPEG",
+        description="The paper's analyses of the enhancer's outputs (section 6): output "
+        "spectra per eccentricity ring (6.1), FovVDP (6.1, the [fovvdp] extra), temporal "
+        "coherence (6.2), foveated JPEG compression (6.3). Each writes a CSV, a PNG figure and "
+        "a Markdown note to --out.")
+    ev = p.add_subparsers(dest="evaluate_command", required=True, parser_class=type(p))
+
+    s = ev.add_parser(
+        "spectra", help="power spectra of the outputs per eccentricity ring (section 6.1)",
+        description="Per method (foveated, contrast, ours), blur-rate and eccentricity ring: "
+        "the radially averaged power spectrum of the output over windowed patches in the "
+        "ring, relative to the full-resolution image's, in dB against cycles/deg, with T_L "
+        "and T_H of the ring marked. The paper's figure averages the 5 calibration scenes "
+        "(fovexp stimuli generate; stimuli/generated/3840x2160/scene-00.png ... scene-04.png) "
+        "at three blur-rates.")
+    s.add_argument("images", nargs="+", type=Path, metavar="IMAGE",
+                   help="full-resolution images (or folders of them), one size")
+    _common(s, "blur-rates, comma-separated (default 0.11,0.34,0.57: Table 2's)",
+            "0.11,0.34,0.57")
+    s.add_argument("--rings", default="12,18,24",
+                   help="ring centres in deg, comma-separated (default 12,18,24), each "
+                   "--ring-width wide")
+    s.add_argument("--ring-width", type=float, default=4.0,
+                   help="width of each ring in deg (default 4)")
+    s.add_argument("--patch", type=int, default=None, metavar="PX",
+                   help="patch side in px (default 128 at 3840 px width, scaled)")
+    s.set_defaults(func=spectra_command)
+
+    f = ev.add_parser(
+        "fovvdp", help="FovVDP JOD of each method against full resolution (section 6.1)",
+        description="FovVDP (Mantiuk et al. 2021; pyfvvdp, the optional [fovvdp] extra, "
+        "licensed CC BY-NC 4.0) of foveated, contrast and ours against the full-resolution "
+        "image, with a display model built from the display profile (size, resolution, "
+        "distance, peak luminance, gamma), fixation at the gaze; JOD per scene and the "
+        "paper's three paired t-tests across scenes.")
+    f.add_argument("images", nargs="+", type=Path, metavar="IMAGE")
+    _common(f, "the blur-rate (the paper's figure: 0.68)", None)
+    f.add_argument("--contrast-ratio", type=float, default=1000.0,
+                   help="the display's contrast ratio for FovVDP's display model "
+                   "(default 1000, pyfvvdp's)")
+    f.add_argument("--device", default="cpu", help="PyTorch device (default cpu)")
+    f.set_defaults(func=fovvdp_command)
+
+    t = ev.add_parser(
+        "temporal", help="mean inter-frame SSIM and temporal slices (section 6.2)",
+        description="The mean SSIM between consecutive frames per condition (full "
+        "resolution, foveated, contrast, ours, and ours with the impulses re-seeded every "
+        "frame as a control) and blur-rate, and the temporal slices of two pixels. A test "
+        "sequence: fovexp stimuli pan --out DIR.")
+    t.add_argument("frames", type=Path, metavar="FRAMES", help="a folder of frames or a video")
+    _common(t, "blur-rates, comma-separated (default 0.11,0.34,0.57)", "0.11,0.34,0.57")
+    t.add_argument("--slices", default="0.25,0.5;0.8,0.7", metavar="X,Y;X,Y",
+                   help="the pixels of the temporal slices, normalised (default "
+                   "0.25,0.5;0.8,0.7: left of and below right of a central gaze)")
+    t.add_argument("--no-reseed", action="store_true",
+                   help="leave out the re-seeded-impulses control (one enhancement less per "
+                   "frame)")
+    t.set_defaults(func=temporal_command)
+
+    c = ev.add_parser(
+        "compression", help="JPEG sizes at the participants' blur-rates (section 6.3)",
+        description="For each validation scene: the foveated image at the blur-rate where "
+        "participants judged contrast enhancement invisible and at the one for ours (their "
+        "means), each encoded as JPEG quality 90 with Pillow (4:2:0 chroma subsampling); the "
+        "file sizes and the saving of ours over contrast in %.")
+    c.add_argument("results", type=Path, metavar="RESULTS",
+                   help="results folder holding a validation experiment's trial logs")
+    c.add_argument("--experiment", default="validation",
+                   help="the experiment (default validation)")
+    c.add_argument("--images", type=Path, default=None, metavar="DIR",
+                   help="folder of the scenes as <image id>.png at the display's resolution "
+                   "(default: the files the sessions recorded)")
+    c.add_argument("--display", default="lg-oled55cx", help="display profile name or YAML path")
+    c.add_argument("--gaze", type=_gaze, default=(0.5, 0.5), help="x,y in [0, 1]")
+    c.add_argument("--quality", type=int, default=90, help="JPEG quality (default 90)")
+    c.add_argument("--backend", choices=BACKEND_CHOICES, default="auto")
+    c.add_argument("--out", type=Path, required=True, metavar="DIR")
+    c.set_defaults(func=compression_command)
+    return p
+
+
+def spectra_command(args: argparse.Namespace) -> int:
+    from fovexp import FovexpError
+
+    from . import spectra
+    from .outputs import parse_blur_rates
+
+    try:
+        centres = [float(v) for v in args.rings.split(",")]
+    except ValueError:
+        raise FovexpError(f"--rings {args.rings!r}: expected degrees, comma-separated") from None
+    half = 0.5 * args.ring_width
+    if not (half > 0 and all(c - half >= 0 for c in centres)):  # NaN fails too
+        raise FovexpError(f"--rings {args.rings} --ring-width {args.ring_width}: each ring must "
+                          "lie at eccentricities >= 0 and be wider than 0 deg")
+    if args.patch is not None and not 8 <= args.patch <= 4096:
+        raise FovexpError(f"--patch {args.patch}: must be 8 to 4096 px")
+    res = spectra.run(args.images, _setup(args), parse_blur_rates(args.blur_rate), args.out,
+                      spectra.default_rings(centres, half), args.patch)
+    print(f"fovexp evaluate spectra: {len(res.images)} image(s) x {len(res.blur_rates)} "
+          f"blur-rate(s) x {len(res.rings)} ring(s); wrote {args.out}/spectra.csv, bands.csv, "
+          "spectra.png, spectra.md")
+    return 0
+
+
+def fovvdp_command(args: argparse.Namespace) -> int:
+    from fovexp import FovexpError
+
+    from . import fovvdp
+    from .outputs import parse_blur_rates
+
+    rates = parse_blur_rates(args.blur_rate)
+    if len(rates) != 1:
+        raise FovexpError(f"--blur-rate {args.blur_rate}: give one blur-rate")
+    if not args.contrast_ratio > 1:
+        raise FovexpError(f"--contrast-ratio {args.contrast_ratio}: must be a number above 1")
+    res = fovvdp.run(args.images, _setup(args), rates[0], args.out,
+                     contrast_ratio=args.contrast_ratio, device=args.device)
+    print(f"fovexp evaluate fovvdp: {len(res.images)} image(s) at blur-rate {rates[0]:g}; "
+          f"wrote {args.out}/fovvdp.csv, fovvdp-tests.csv, fovvdp.png, fovvdp.md")
+    return 0
+
+
+def _slices(text: str) -> list[tuple[float, float]]:
+    from fovexp import FovexpError
+
+    out = []
+    for part in text.split(";"):
+        try:
+            out.append(_gaze(part.strip()))
+        except argparse.ArgumentTypeError as exc:
+            raise FovexpError(f"--slices {text!r}: {exc}") from None
+    return out
+
+
+def temporal_command(args: argparse.Namespace) -> int:
+    from . import temporal
+    from .outputs import parse_blur_rates
+
+    res = temporal.run(args.frames, _setup(args), parse_blur_rates(args.blur_rate), args.out,
+                       _slices(args.slices), reseed=not args.no_reseed)
+    print(f"fovexp evaluate temporal: {res.n_frames} frames x {len(res.blur_rates)} "
+          f"blur-rate(s); wrote {args.out}/temporal.csv, slices.csv, temporal.png, temporal.md")
+    return 0
+
+
+def compression_command(args: argparse.Namespace) -> int:
+    from fovexp import FovexpError
+
+    from . import compression
+    from .outputs import Setup
+
+    if not 1 <= args.quality <= 100:
+        raise FovexpError(f"--quality {args.quality}: must be 1 to 100")
+    setup = Setup.make(args.display, args.backend, gaze=args.gaze)
+    res = compression.run(args.results, setup, args.out, experiment=args.experiment,
+                          images=args.images, quality=args.quality)
+    print(f"fovexp evaluate compression: {len(res.table)} scene(s); largest saving "
+          f"{res.max_saving_pct:.1f} %; wrote {args.out}/compression.csv, compression.png, "
+          "compression.md")
+    return 0
+
+
+# -------------------------------------------------------------------------------- stereo
+def add_stereo_parser(sub: Any) -> argparse.ArgumentParser:
+    p = sub.add_parser(
+        "stereo", help="enhance a stereo pair: noise for one eye, warped to the other (6.4)",
+        description="Paper section 6.4: each eye is foveated and contrast-enhanced on its own "
+        "image; the noise is synthesised once, for the left eye, and forward-warped to the "
+        "right eye by the disparity (d = x_left - x_right in px on the left image's grid); "
+        "pixels of the right eye no left pixel lands on (disocclusions) get noise of the right "
+        "eye's own parameters. Writes left.png, right.png and anaglyph.png (red-cyan). A test "
+        "pair: fovexp stimuli stereo --out DIR.")
+    p.add_argument("left", type=Path, metavar="LEFT")
+    p.add_argument("right", type=Path, metavar="RIGHT")
+    p.add_argument("--disparity", type=Path, required=True, metavar="FILE",
+                   help="float32 .npy (px), or a 16-bit PNG holding d x --disparity-scale")
+    p.add_argument("--disparity-scale", type=float, default=256.0,
+                   help="a PNG disparity's value per px (default 256)")
+    _common(p, "the blur-rate", "0.34")
+    p.add_argument("--dump-maps", action="store_true",
+                   help="also write each eye's noise layer (noise-left.npy, noise-right.npy, "
+                   "float32, linear luminance) and the disocclusion mask (disocclusion.png)")
+    p.set_defaults(func=stereo_command)
+    return p
+
+
+def stereo_command(args: argparse.Namespace) -> int:
+    from fovexp import FovexpError
+
+    from . import stereo
+    from .outputs import parse_blur_rates
+
+    rates = parse_blur_rates(args.blur_rate)
+    if len(rates) != 1:
+        raise FovexpError(f"--blur-rate {args.blur_rate}: give one blur-rate")
+    rate = rates[0]
+    res = stereo.run(args.left, args.right, args.disparity, _setup(args), rate, args.out,
+                     disparity_scale=args.disparity_scale, dump_maps=args.dump_maps)
+    print(f"fovexp stereo: wrote {args.out}/left.png, right.png, anaglyph.png; "
+          f"{res.disoccluded_fraction * 100:.2f} % of the right eye disoccluded"
+          + (", noise layers dumped" if args.dump_maps else ""))
+    return 0

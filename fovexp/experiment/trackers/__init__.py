@@ -1,0 +1,77 @@
+"""The gaze sources, one module per source, and the one place that chooses among them
+(:func:`make_gaze_source`: ``fovexp run`` and ``fovexp rig check`` both call it).
+
+- :mod:`.simulated`: the simulated eye tracker of dry runs and CI (:class:`SimulatedGaze`);
+- :mod:`.mouse`: the mouse pointer as gaze, for pilot sessions (:class:`MouseGaze`);
+- :mod:`.tobii`: Tobii Pro through tobii-research (``TobiiGaze``, 600 Hz, the paper's);
+- :mod:`.families`: the eye-tracker families ioHub reaches (EyeLink, Tobii, GazePoint, Pupil
+  Labs, EyeLogic, MouseGaze), the extra and plugin each needs, and the ioHub configuration a
+  lab already has for PsychoPy Builder or ioHub (YAML), read without PsychoPy;
+- :mod:`.iohub`: any ioHub eye tracker (its server process, samples on the frame log's clock,
+  the lost-tracker path, the tracker's own calibration).
+
+Each satisfies :class:`fovexp.experiment.interfaces.GazeSource`; what they share (samples,
+events, the clock, the fixation geometry) is :mod:`fovexp.experiment.gaze`. Nothing here
+imports PsychoPy or a tracker's SDK at import time.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from fovexp import FovexpError
+from fovexp.results.format import TRACKERS
+
+if TYPE_CHECKING:
+    from ..gaze import FixationGeometry
+    from ..interfaces import GazeSource
+    from .simulated import SimGazeParams
+
+def iohub_config_path(protocol: Any, tracker_config: str | Path | None) -> Path:
+    """The ioHub configuration: ``--tracker-config``, else the protocol's
+    ``tracker.iohub_config`` (relative to the protocol file)."""
+    if tracker_config is not None:
+        return Path(tracker_config)
+    name = protocol.spec.tracker.iohub_config
+    if name is None:
+        raise FovexpError("--tracker iohub needs an ioHub configuration: --tracker-config "
+                          "FILE (the YAML PsychoPy Builder or ioHub uses), or "
+                          "tracker.iohub_config in the protocol")
+    return Path(protocol.path).parent / name
+
+
+def make_gaze_source(kind: str, *, protocol: Any, display: Any, fixation: FixationGeometry,
+                     dry_run: bool = False, screen: int = 0,
+                     tracker_address: str | None = None,
+                     tracker_config: str | Path | None = None, sim_seed: int = 1,
+                     sim_params: SimGazeParams | None = None) -> GazeSource:
+    """The gaze source ``kind`` (``--tracker``) for ``protocol`` on ``display``: a Tobii at
+    the protocol's rate (``tracker_address``: a given one, else the first found), the
+    simulated eyes (``sim_seed``, ``sim_params``; default: the protocol's rate), the mouse, or
+    the ioHub tracker of :func:`iohub_config_path` (a dry run's MouseGaze moves the pointer to
+    the calibration targets itself). A Tobii or ioHub source whose SDK or plugin is missing
+    fails here, before a window opens."""
+    if kind == "tobii":
+        from .tobii import TobiiGaze
+
+        return TobiiGaze(protocol.spec.tracker.sampling_hz, tracker_address)
+    if kind == "simulated":
+        from .simulated import SimGazeParams, SimulatedGaze
+
+        params = sim_params or SimGazeParams(rate_hz=protocol.spec.tracker.sampling_hz)
+        return SimulatedGaze(fixation, seed=sim_seed, params=params)
+    if kind == "mouse":
+        from .mouse import MouseGaze
+
+        return MouseGaze()
+    if kind == "iohub":
+        from .families import load_iohub_config
+        from .iohub import IoHubGaze
+
+        return IoHubGaze(load_iohub_config(iohub_config_path(protocol, tracker_config)),
+                         display, screen, pointer=dry_run)
+    raise FovexpError(f"--tracker {kind!r}: choose {', '.join(TRACKERS)}")
+
+
+__all__ = ["iohub_config_path", "make_gaze_source"]
