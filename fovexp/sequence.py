@@ -124,7 +124,7 @@ SSIM_K1, SSIM_K2, SSIM_WINDOW_PX = 0.01, 0.03, 7
 
 def ssim(a: np.ndarray, b: np.ndarray, data_range: float = 1.0) -> float:
     """Mean structural similarity of two grey images of the same shape (paper section 6.2,
-    the measure of Kaplanyan et al. 2019's temporal procedure; Wang et al. 2004, eqs. 13-15
+    the measure of Kaplanyan et al. 2019's temporal procedure; Wang et al. 2004's SSIM index
     with a 7 x 7 uniform window).
 
     The same number as scikit-image's ``structural_similarity(a, b, data_range=...)`` with
