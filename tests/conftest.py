@@ -11,11 +11,16 @@ from engine_helpers import sponza  # noqa: F401  (fixture)
 def dry_run_scenes(tmp_path_factory) -> Iterator[Path]:
     """The generated scenes at the dry run's resolution (480x270, pinned; about a second), in
     a stimulus folder of this test session's own, named by $FOVEXP_STIMULI for every test and
-    every command a test starts: tests never read or write the clone's stimuli/ folder."""
+    every command a test starts: tests never read or write the clone's stimuli/ folder.
+    ``$FOVEXP_TEST_STIMULI`` names a folder made beforehand instead (the mutation runs')."""
     from fovexp.experiment.stimuli import DRY_RUN_SIZE, ENV_VAR, StimulusSet, generate_scenes
 
-    folder = tmp_path_factory.mktemp("stimuli")
-    generate_scenes(StimulusSet(folder), DRY_RUN_SIZE)
+    prepared = os.environ.get("FOVEXP_TEST_STIMULI")
+    if prepared:  # benchmarks/mutate.py: made once for its thousands of short test runs
+        folder = Path(prepared)
+    else:
+        folder = tmp_path_factory.mktemp("stimuli")
+        generate_scenes(StimulusSet(folder), DRY_RUN_SIZE)
     old = os.environ.get(ENV_VAR)
     os.environ[ENV_VAR] = str(folder)
     yield folder

@@ -11,9 +11,12 @@ from scipy import ndimage
 SPONZA = Path(__file__).resolve().parents[2] / "shared" / "stimuli" / "sponza-4k.jpg"
 
 
-def textured_image(height: int = 270, width: int = 480, seed: int = 0, rgb: bool = True):
+def textured_image(height: int = 270, width: int = 480, seed: int = 0, rgb: bool = True,
+                   flat_squares: bool = True):
     """Display-encoded test image in [0.05, 0.95]: 1/f-like texture with a few flat patches and
-    sharp edges, so every stage has something to work on."""
+    sharp edges, so every stage has something to work on. The flat squares are 60 px, one of
+    them in the top-left corner: a crop smaller than that is one constant, on which no formula
+    can be told from another (``flat_squares=False`` leaves them out)."""
     rng = np.random.default_rng(seed)
     tex = sum(
         ndimage.gaussian_filter(rng.standard_normal((height, width)), s) * s**0.5
@@ -21,7 +24,8 @@ def textured_image(height: int = 270, width: int = 480, seed: int = 0, rgb: bool
     )
     tex = (tex - tex.min()) / (tex.max() - tex.min())
     yy, xx = np.mgrid[0:height, 0:width]
-    tex[(xx // 60 + yy // 60) % 5 == 0] = 0.5  # flat squares
+    if flat_squares:
+        tex[(xx // 60 + yy // 60) % 5 == 0] = 0.5
     tex = 0.05 + 0.9 * tex
     if not rgb:
         return tex.astype(np.float32)

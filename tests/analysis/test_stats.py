@@ -91,3 +91,56 @@ def test_sampling_rate_ratio() -> None:
     assert sampling_rate_ratio(0.5, 0.4) == pytest.approx(0.8)
     assert 1 - sampling_rate_ratio(0.5, 0.4) == pytest.approx(0.2)
     assert math.isnan(sampling_rate_ratio(0.0, 0.4))
+
+
+def _quiet(fn, *args):
+    """``fn(*args)`` with every warning an error: the degenerate cases are handled, not left
+    to NumPy's 'mean of empty slice' or 'degrees of freedom <= 0'."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        return fn(*args)
+
+
+def test_degenerate_samples_give_nan_quietly() -> None:
+    m, s, n = _quiet(mean_sem, [])
+    assert n == 0 and math.isnan(m) and math.isnan(s)
+    m, s, n = _quiet(mean_sem, [2.5])
+    assert (m, n) == (2.5, 1) and math.isnan(s)
+    none = _quiet(paired_ttest, [], [])
+    assert none.n == 0 and none.df == 0
+    assert all(math.isnan(getattr(none, k)) for k in ("mean_a", "mean_b", "mean_diff", "sd_diff",
+                                                      "t", "p", "d_z", "ci_low", "ci_high"))
+    one = _quiet(paired_ttest, [0.7], [0.4])
+    assert (one.n, one.df, one.mean_a, one.mean_b) == (1, 0, 0.7, 0.4)
+    assert one.mean_diff == pytest.approx(0.3)
+    assert all(math.isnan(getattr(one, k)) for k in ("sd_diff", "t", "p", "d_z", "ci_low"))
+
+
+def test_two_pairs_and_differences_of_sd_one_and_zero() -> None:
+    """Two pairs are a t-test (df 1); d = 1, 2, 3 has sd 1 exactly (d_z = mean = 2); equal
+    differences have sd 0: d_z is +-inf (or NaN for no difference at all)."""
+    two = paired_ttest([1.0, 2.0], [0.0, 0.5])  # d = 1, 1.5: mean 1.25, se 0.25
+    assert two.df == 1 and two.t == pytest.approx(5.0)
+    r = paired_ttest([1.0, 2.0, 3.0], [0.0, 0.0, 0.0])
+    assert r.sd_diff == 1.0 and r.d_z == pytest.approx(2.0)
+    assert paired_ttest([1.0, 2.0, 3.0], [0.5, 1.5, 2.5]).d_z == math.inf
+    assert paired_ttest([0.5, 1.5], [1.0, 2.0]).d_z == -math.inf
+    assert math.isnan(paired_ttest([1.0, 2.0], [1.0, 2.0]).d_z)
+
+
+def test_results_are_values() -> None:
+    """The statistics' records cannot be changed after the fact (frozen dataclasses)."""
+    import dataclasses
+
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        paired_ttest(A, B).t = 0.0  # type: ignore[misc]
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        linear_fit([0.0, 1.0], [1.0, 2.0]).slope = 0.0  # type: ignore[misc]
+
+
+def test_sampling_rate_ratio_needs_positive_blur_rates() -> None:
+    assert sampling_rate_ratio(0.5, 0.25) == pytest.approx(0.5)
+    for new, base in ((0.5, 0.0), (0.0, 0.5), (-0.5, 0.5), (0.5, -0.5)):
+        assert math.isnan(sampling_rate_ratio(new, base)), (new, base)

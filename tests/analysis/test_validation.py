@@ -81,3 +81,10 @@ def test_missing_method_cells() -> None:
     assert only.tests.empty and only.sampling.empty and "not both present" in only.notes[0]
     with pytest.raises(FovexpError, match="no trials adjusting blur_rate"):
         validate(frame().assign(adjusted_parameter="f_e"))
+
+
+def test_scenes_come_out_sorted_whatever_the_trials_order() -> None:
+    rows = frame()
+    res = validate(rows.iloc[::-1].reset_index(drop=True))  # s2 before s1
+    assert res.tests["scope"].tolist() == ["all scenes", "participant means", "s1", "s2"]
+    assert res.sampling["scope"].tolist() == ["all scenes", "s1", "s2"]

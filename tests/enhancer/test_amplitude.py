@@ -51,3 +51,54 @@ def test_measured_attenuation_crosses_a_at_the_selected_level():
 def test_headroom_limit_never_negative():
     k = amp.headroom_limit(np.array([0.2, -0.1, 0.9]), np.array([0.7, 0.5, 1.2]))
     assert np.allclose(k, [0.4, 0.0, 0.0])
+
+
+def test_the_formulas_of_eqs_7_to_9_by_hand():
+    """f_c = sqrt(-2 ln a) / (2 pi sigma) (eq. 7, corrected), centre 2**-(l + 0.5) (eq. 6,
+    levels from 1), l_a = log2(1 / f_c) - 0.5 at least 1 (eq. 8), and the release's gain
+    3.5722 (docs/METHOD.md, 3.1-3.2 and 5.7), at values worked out by hand."""
+    a = 0.25
+    fc = math.sqrt(-2 * math.log(a)) / (2 * math.pi * 4.0)
+    assert amp.attenuation_cutoff_cpp(np.array([4.0]), a)[0] == pytest.approx(fc, rel=1e-12)
+    assert amp.attenuation_cutoff_cpp(np.array([0.0]), a)[0] == np.inf
+    assert amp.band_centre_cpp(np.array([1.0, 2.5])) == pytest.approx(
+        [2**-1.5, 2**-3.0], rel=1e-12)
+    level = amp.laplacian_level(np.array([4.0, 0.05, 0.0]), a)
+    assert level == pytest.approx([math.log2(1 / fc) - 0.5, 1.0, 1.0], rel=1e-12)
+    assert amp.RELEASE_AMPLITUDE_GAIN == 3.5722
+
+
+def test_bracketing_levels_and_their_reach():
+    """(k0, t): the levels below and above a continuous level, at most the coarsest built,
+    and the weight of the upper one (eq. 9's interpolation)."""
+    k0, t = amp.bracketing_levels(np.array([1.0, 2.25, 7.5, 9.0]), 8)
+    assert k0.tolist() == [1, 2, 7, 7] and t == pytest.approx([0.0, 0.25, 0.5, 1.0])
+    k0, t = amp.bracketing_levels(np.array([1.0, 3.0]), 1)  # one level: no interpolation
+    assert k0.tolist() == [1, 1] and t == pytest.approx([0.0, 0.0])
+    reach = amp.laplacian_reach_px(np.array([1, 2, 7]), 7)
+    assert reach.tolist() == [pyramids.abs_laplacian_reach_px(k) for k in (2, 3, 7)]
+
+
+def test_laplacian_amplitude_interpolates_between_the_two_levels():
+    """|L| at a continuous level: (1 - t) |L_k0| + t |L_k0+1|, each read on its own grid
+    (level k lives on G_{k-1}'s grid); the coarsest level read alone."""
+    levels = {k: np.full((64 >> (k - 1), 64 >> (k - 1)), float(10 * k)) for k in (1, 2, 3)}
+    x, y = np.array([10.0, 20.0, 30.0]), np.array([12.0, 5.0, 40.0])
+    got = amp.laplacian_amplitude_at(levels, np.array([1.0, 2.25, 3.0]), x, y)
+    assert got == pytest.approx([10.0, 22.5, 30.0])
+    ramp = {1: np.tile(np.arange(64.0), (64, 1)), 2: np.zeros((32, 32))}
+    lo = amp.laplacian_amplitude_at(ramp, np.array([1.5]), np.array([20.0]), np.array([9.0]))
+    assert lo[0] == pytest.approx(0.5 * 20.0)  # x = 20 on level 1's full-resolution grid
+
+
+def test_headroom_limit_takes_the_nearer_side():
+    """K <= 2 min(1 - N_max, N_min): 3 std either side within [0, 1] (section 4.2)."""
+    k = amp.headroom_limit(np.array([0.3, 0.05, 0.5]), np.array([0.9, 0.5, 0.5]))
+    assert k == pytest.approx([0.2, 0.1, 1.0])
+
+
+def test_the_coarsest_level_is_the_one_a_blur_of_94_px_selects():
+    """MAX_LAPLACIAN_LEVEL: the level eq. 8 selects (a = 0.25) for sigma = 94 px, centre
+    2**-8.5 cycles/px (amplitude's docstring)."""
+    assert amp.MAX_LAPLACIAN_LEVEL == 8
+    assert amp.laplacian_level(np.array([94.0]), 0.25)[0] == pytest.approx(8.0, abs=0.05)

@@ -51,3 +51,54 @@ def test_the_power_works_in_a_forked_child():
     with ctx.Pool(1) as pool:
         got = pool.apply_async(power, (x, np.float32(2.2))).get(timeout=60)
     assert np.array_equal(got, want)
+
+
+def test_linearize_is_the_transfer_function_written_out():
+    """power: v ** gamma; release: ((v + 0.055) / 1.055) ** 2.2 (docs/METHOD.md, 5.1), in
+    float32 unless asked for float64, against the formulas in float64."""
+    v = np.linspace(0, 1, 257)
+    assert np.allclose(linearize(v, 2.4), v**2.4, rtol=1e-6, atol=1e-7)
+    rel = linearize(v, 2.2, "release", dtype=np.float64)
+    assert rel.dtype == np.float64 and np.allclose(rel, ((v + 0.055) / 1.055) ** 2.2, rtol=1e-12)
+    assert linearize(v, 2.2).dtype == np.float32
+    assert linearize(np.float32(0.5), 1.0) == np.float32(0.5)
+
+
+def test_encode_adds_the_grey_images_clips_then_encodes():
+    """encode(lin, gamma, transfer, a, b) = transfer^-1(clip(lin + a + b, 0, 1)) on every
+    channel; the release's inverse v ** (1 / 2.2) 1.055 - 0.055, clipped to [0, 1]."""
+    rng = np.random.default_rng(2)
+    lin = rng.uniform(0, 1, (5, 6, 3))
+    a = rng.uniform(-0.4, 0.4, (5, 6))
+    b = rng.uniform(-0.4, 0.4, (5, 6))
+    want = np.clip(lin + (a + b)[..., None], 0, 1) ** (1 / 2.2)
+    assert np.allclose(encode(lin, 2.2, "power", a, b), want, rtol=1e-12)
+    assert np.allclose(encode(lin, 2.2, "power", a), np.clip(lin + a[..., None], 0, 1)
+                       ** (1 / 2.2), rtol=1e-12)
+    grey = encode(lin[..., 0], 2.0, "power", a, b)  # a grey image: (H, W)
+    assert grey.shape == (5, 6) and np.allclose(grey, np.sqrt(np.clip(lin[..., 0] + a + b, 0, 1)))
+    assert np.allclose(encode(lin, 2.2), lin ** (1 / 2.2), rtol=1e-12)
+    # without grey images too, values outside [0, 1] clip before the power (no NaN)
+    assert encode(np.array([-0.1, 0.25, 1.2]), 2.0).tolist() == [0.0, 0.5, 1.0]
+    rel = encode(lin, 2.2, "release", a)
+    want = np.clip(np.clip(lin + a[..., None], 0, 1) ** (1 / 2.2) * 1.055 - 0.055, 0, 1)
+    assert np.allclose(rel, want, rtol=1e-12, atol=1e-15) and (rel == 0).any()
+    f32 = encode(lin.astype(np.float32), 2.2, "power", a)
+    assert f32.dtype == np.float32 and np.allclose(f32, encode(lin, 2.2, "power", a), atol=1e-6)
+    with pytest.raises(ValueError, match="at most two"):
+        encode(lin, 2.2, "power", a, a, a)
+
+
+def test_luminance_weights_are_bt601():
+    from fovexp.colour import luminance
+
+    rgb = np.array([[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [0.2, 0.4, 0.8]]])
+    y = luminance(rgb)
+    assert y.dtype == np.float64
+    assert y[0] == pytest.approx([0.299, 0.587, 0.114, 0.299 * 0.2 + 0.587 * 0.4 + 0.114 * 0.8],
+                                 abs=1e-15)
+    y32 = luminance(rgb.astype(np.float32))
+    assert y32.dtype == np.float32 and y32[0] == pytest.approx(y[0], abs=1e-7)
+    grey = np.full((2, 2), 0.25, np.float32)
+    assert luminance(grey) is not None and np.array_equal(luminance(grey), grey)
+    assert luminance(grey.astype(np.float64)).dtype == np.float64

@@ -86,7 +86,17 @@ def test_the_sigma_bound_is_above_every_pixel_of_the_map(dtype):
             x, y = g.grid()
             ecc, ppd = g.eccentricity_deg(x, y, gaze), g.ppd(x, y)
         sigma = sigma_px(ecc, ppd, rate, fovea, dtype)
-        assert float(sigma.max()) <= sigma_bound_px(g, gaze, rate, fovea), (i, fovea)
+        bound = sigma_bound_px(g, gaze, rate, fovea)
+        assert float(sigma.max()) <= bound, (i, fovea)
+        # ... and not far above it (a bound too high costs work: a wider stack and boxes).
+        # The bound takes the largest eccentricity and the largest ppd over the image's
+        # corners, half a pixel past the outer pixels' centres (0.71 px: the eccentricity a
+        # little over 0.71 / min(ppd) deg more), even where they are at different corners:
+        # the paper's formula (section 5.2) at those two maxima, with the bound's own
+        # relative 1e-4 and 1e-3 px, written out here in float64
+        e_hi = float(ecc.max()) + 0.75 / float(ppd.min())
+        upper = rate / 60.0 * max(0.0, e_hi - fovea) * float(ppd.max()) * (1 + 2e-4) + 2e-3
+        assert bound <= upper, (i, bound, upper)
 
 
 def _sigma_in_numpy_float32(ecc, ppd, rate, fovea):
@@ -132,3 +142,188 @@ def test_the_sigma_map_of_some_blocks_is_the_whole_maps_there(viewport):
         assert np.array_equal(got[px].view(np.uint32), full[px].view(np.uint32))
         assert np.array_equal(sigma_on_blocks(g, gaze, rate, fovea).view(np.uint32),
                               full.view(np.uint32))
+
+
+# --- small inputs, for the mutation runs (their kernels run as Python there) and as unit
+# checks of each formula of the stage (issue 19)
+
+def test_sigma_px_is_the_papers_formula():
+    """sigma = blur_rate / 60 * max(0, e - fovea) * ppd (px; section 5.2), float32 or
+    float64, 0 inside the fovea."""
+    from fovexp.foveation import sigma_px
+
+    ecc = np.array([3.0, 8.0, 20.0, 45.5])
+    ppd = np.array([39.0, 40.0, 44.0, 51.0])
+    want = 0.34 / 60 * np.maximum(ecc - 8.0, 0) * ppd
+    got = sigma_px(ecc, ppd, 0.34, 8.0, np.float64)
+    assert got.dtype == np.float64 and np.allclose(got, want, rtol=1e-14, atol=0)
+    got32 = sigma_px(ecc.astype(np.float32), ppd.astype(np.float32), 0.34, 8.0)
+    assert got32.dtype == np.float32 and np.allclose(got32, want, rtol=1e-6)
+    assert sigma_px(np.float64(20.0), np.float64(44.0), 5.0, 8.0, np.float64) == pytest.approx(
+        5 / 60 * 12 * 44, rel=1e-14)
+
+
+def test_the_blur_stack_and_its_kernels():
+    """Stack sigmas 0.25 px apart up to 1.5 px, then x 2**0.25; each level blurred on the
+    coarsest pyramid level whose residual blur is still >= 1.25 level px, with the residual
+    Gaussian: pyramid blur and residual add up (in variance) to the stack sigma."""
+    from fovexp.foveation import (
+        MIN_RESIDUAL_LEVEL_PX,
+        STACK_RATIO,
+        blur_stack_plan,
+        gaussian_kernel,
+        stack_sigmas_px,
+    )
+    from fovexp.pyramids import gaussian_sigma_px
+
+    assert STACK_RATIO == 2**0.25 and MIN_RESIDUAL_LEVEL_PX == 1.25
+    s = stack_sigmas_px(3.0)
+    assert s[:7] == pytest.approx([0, 0.25, 0.5, 0.75, 1.0, 1.25, 1.5])
+    # then by the ratio until 3 is reached (1.5 * 2**(4/4) lands a rounding below 3: one more)
+    assert s[7:] == pytest.approx([1.5 * 2 ** (k / 4) for k in range(1, s.size - 6)])
+    assert s[-2] < 3.0 <= s[-1] and stack_sigmas_px(0.3).tolist() == s[:7].tolist()
+    plan = blur_stack_plan(40.0)
+    assert plan.sigmas_px[-1] >= 40.0 and plan.top == int(plan.pyramid_level.max()) >= 3
+    for sig, m, g in zip(plan.sigmas_px, plan.pyramid_level, plan.kernels, strict=True):
+        m = int(m)
+        r = g.size // 2
+        res = np.sqrt(max(sig**2 - gaussian_sigma_px(m) ** 2, 0.0)) / 2**m
+        if sig > 0:
+            assert res >= 1.25 or m == 0
+            nxt = np.sqrt(max(sig**2 - gaussian_sigma_px(m + 1) ** 2, 0.0)) / 2 ** (m + 1)
+            assert nxt < 1.25
+            assert r == int(4 * res + 0.5)
+            assert np.allclose(g, gaussian_kernel(res))
+        else:
+            assert g.tolist() == [1.0]
+    step = 2**plan.top
+    assert plan.pad_px % step == 0 and plan.pad_px >= 4 * 40.0 + 2 * step
+    assert plan.pad_px < 4 * 40.0 + 3 * step
+    assert plan.reach_px() == max(2**int(m) * (g.size // 2 + 1) + 2 * (2**int(m) - 1)
+                                  for m, g in zip(plan.pyramid_level, plan.kernels, strict=True))
+    assert blur_stack_plan(1.0).pad_px == 0  # no pyramid: no border
+    g = gaussian_kernel(1.7, np.float64)
+    d = np.arange(-7, 8)
+    assert g.size == 15 and np.allclose(g, np.exp(-d**2 / (2 * 1.7**2)) / np.exp(
+        -d**2 / (2 * 1.7**2)).sum(), rtol=1e-14)
+    assert gaussian_kernel(1.7).dtype == np.float32
+
+
+def test_the_exact_reference_is_the_gaussian_of_each_pixels_own_sigma():
+    """foveate_exact: SciPy's gaussian_filter (nearest borders, 4 sigma) for a constant
+    sigma, and each pixel with its own sigma otherwise (pixels at two sigmas each compared
+    with the constant-sigma filter of their own); sigma 0 keeps the pixel."""
+    img = textured_image(20, 26, seed=3, rgb=False, flat_squares=False)
+    for s in (0.8, 1.7):
+        ref = ndimage.gaussian_filter(img.astype(np.float64), s, mode="nearest")
+        assert np.abs(foveate_exact(img, np.full(img.shape, s, np.float32)) - ref).max() < 1e-6
+    sigma = np.where(np.arange(26)[None, :] < 13, 0.8, 1.7).astype(np.float32).repeat(20, 0)
+    sigma[5, 5] = 0.0
+    got = foveate_exact(img.astype(np.float64), sigma)
+    assert got.dtype == np.float64 and got[5, 5] == img[5, 5]
+    for s, cols in ((0.8, slice(0, 5)), (1.7, slice(13, 26))):
+        ref = ndimage.gaussian_filter(img.astype(np.float64), s, mode="nearest")
+        assert np.abs(got[:, cols] - ref[:, cols]).max() < 1e-6
+    ys, xs = np.array([0, 19, 7]), np.array([25, 0, 14])
+    assert np.allclose(foveate_exact(img, sigma, ys, xs), got[ys, xs], atol=1e-6)
+
+
+@pytest.mark.parametrize("max_sigma,rgb", [(2.6, False), (9.0, True)])
+def test_small_fast_foveation_against_the_exact_convolution(max_sigma, rgb):
+    """The blur stack on a 44 x 60 image (the same bounds as on 270 x 480: RMS < 0.002,
+    max < 0.02), sigma 0 bit for bit, the blur there elsewhere; float64 kept; the sigma map
+    asked for by blocks gives the same result."""
+    img = linearize(textured_image(44, 60, seed=6, rgb=rgb, flat_squares=False), 2.2)
+    sigma = _radial_sigma(44, 60, max_sigma)
+    fast = foveate(img, sigma)
+    rng = np.random.default_rng(2)
+    ys, xs = rng.integers(0, 44, 60), rng.integers(0, 60, 60)
+    err = fast[ys, xs] - foveate_exact(img, sigma, ys, xs)
+    assert np.sqrt(np.mean(err**2)) < 0.002 and np.abs(err).max() < 0.02
+    zero = sigma == 0
+    assert zero.sum() > 50 and np.array_equal(fast[zero], img[zero])
+    assert np.abs(fast[~zero] - img[~zero]).max() > 0.01
+    assert np.array_equal(foveate(img, sigma, skip=False), fast)
+    f64 = foveate(img.astype(np.float64), sigma)
+    assert f64.dtype == np.float64 and np.abs(f64 - fast).max() < 1e-5
+
+    def on_blocks(need, shift):
+        return sigma
+
+    assert np.array_equal(foveate(img, on_blocks, max_sigma_px=float(sigma.max())), fast)
+    with pytest.raises(ValueError, match="needs max_sigma_px"):
+        foveate(img, on_blocks)
+    flat = np.full((44, 60), 0.3, np.float32)
+    assert np.array_equal(foveate(flat, sigma), flat)  # a constant stays its constant
+    assert np.array_equal(foveate(img, np.zeros((44, 60), np.float32)), img)
+
+
+def test_the_sigma_map_of_some_blocks_on_a_small_frame():
+    """sigma_on_blocks on a 40 x 56 image in a 1920 x 1080 frame: on the 8 px blocks asked
+    for, sigma_px of the float32 maps bit for bit; elsewhere what ``out`` held; the whole
+    frame when no blocks are given; refused for another geometry model."""
+    from fovexp import load_display
+    from fovexp.foveation import sigma_on_blocks, sigma_px
+    from fovexp.geometry import ViewingGeometry
+
+    g = ViewingGeometry.for_image(load_display("lg-oled55cx"), 56, 40,
+                                  viewport=(1500, 900, 1920, 1080))
+    gaze = g.gaze_px((0.2, 0.3))
+    ecc, ppd = g.eccentricity_and_ppd_maps(gaze)
+    fovea = float(np.percentile(ecc, 30))
+    full = sigma_px(ecc, ppd, 1.7, fovea)
+    assert (full == 0).any() and (full > 0).any()
+    assert np.array_equal(sigma_on_blocks(g, gaze, 1.7, fovea).view(np.uint32),
+                          full.view(np.uint32))
+    need = np.zeros((5, 7), bool)
+    need[1, 2] = need[4, 6] = True
+    out = np.full((40, 56), -1.0, np.float32)
+    got = sigma_on_blocks(g, gaze, 1.7, fovea, need, 3, out)
+    assert got is out
+    mask = np.kron(need, np.ones((8, 8), bool))
+    assert np.array_equal(got[mask], full[mask]) and (got[~mask] == -1).all()
+    with pytest.raises(ValueError, match="exact geometry model"):
+        sigma_on_blocks(ViewingGeometry.for_image(load_display("lg-oled55cx"), 56, 40,
+                                                  "linear"), gaze, 1.7, fovea)
+
+
+def test_the_padded_copy_is_measured_exactly(monkeypatch):
+    """The guard's figure is the padded copy's size, (H + 2 pad)(W + 2 pad) C bytes-per-value
+    (pad: the blur stack's border), refused just above the limit and let through at it."""
+    from fovexp import FovexpError, foveation
+
+    img = textured_image(40, 56, seed=1, flat_squares=False)
+    sigma = np.full((40, 56), 30.0, np.float32)
+    pad = foveation.blur_stack_plan(30.0).pad_px
+    size = (40 + 2 * pad) * (56 + 2 * pad) * 3 * 4
+    monkeypatch.setattr(foveation, "MAX_PADDED_BYTES", size - 1)
+    with pytest.raises(FovexpError, match=f"would take {size / 2**30:.3g} GiB"):
+        foveate(img, sigma)
+    monkeypatch.setattr(foveation, "MAX_PADDED_BYTES", size)
+    assert foveate(img, sigma).shape == img.shape
+
+
+def test_the_pyramid_level_of_a_blur_and_a_run_of_blurred_columns():
+    """A stack level is blurred on the coarsest pyramid level where its residual blur is still
+    1.25 level px: sigma = sqrt(30) is the edge between levels 1 and 2 (the residual there
+    sqrt(sigma^2 - 5) / 4). Columns blurred next to columns left sharp: each blurred pixel as
+    the exact convolution gives it, to the stack's accuracy, to the last blurred column, and
+    bit for bit what it is when the run of blurred columns goes on farther."""
+    from fovexp.foveation import _pyramid_level_for
+
+    assert _pyramid_level_for(np.sqrt(30) - 0.01) == 1 and _pyramid_level_for(np.sqrt(30)) == 2
+    assert _pyramid_level_for(0.9) == 0
+    img = linearize(textured_image(44, 61, seed=8, rgb=False, flat_squares=False), 2.2)
+    for s in (3.0, 6.0):
+        sigma = np.zeros((44, 61), np.float32)
+        sigma[:, :30] = s  # the run ends mid-image, at column 29: off the levels' grids
+        fast = foveate(img, sigma)
+        ys, xs = np.nonzero(sigma[::3, [0, 7, 20, 27, 28, 29]])
+        ys, xs = ys * 3, np.array([0, 7, 20, 27, 28, 29])[xs]
+        err = fast[ys, xs] - foveate_exact(img, sigma, ys, xs)
+        assert np.abs(err).max() < 0.01, (s, np.abs(err).max())
+        assert np.array_equal(fast[:, 30:], img[:, 30:])
+        # a blurred pixel does not depend on how far the run of blurred columns goes on
+        wider = sigma.copy()
+        wider[:, :50] = s
+        assert np.array_equal(foveate(img, wider)[:, :30], fast[:, :30])

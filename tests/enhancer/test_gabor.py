@@ -58,3 +58,102 @@ def test_impulses_are_deterministic_from_the_seed():
     c = gabor.generate_impulses(300, 200, 12, 0.06, 2)
     assert np.array_equal(a.x_px, b.x_px) and np.array_equal(a.weight, b.weight)
     assert len(a) != len(c) or not np.array_equal(a.x_px, c.x_px)
+
+
+def test_the_impulses_of_a_seed_are_pinned():
+    """The first impulses of seed 1 on a 50 x 40 image, as this version generates them: a
+    trial log's seed gives the same noise in a later version (its hash, cell keys and
+    uniform draws unchanged; a change here must be deliberate and say so)."""
+    imp = gabor.generate_impulses(50, 40, 12, 0.06, 1)
+    assert len(imp) == 72 and imp.cell_px == gabor.kernel_radius_px(0.06)
+    want = [(-4.421754127861437, -8.488593421059363, 0.20083293318748474, 0.551043470023197),
+            (-18.025707016153785, -8.039788968838236, 0.3743612468242645, 0.5058563198010539),
+            (-7.59169169080764, -6.5811868411684715, 0.8309105634689331, 0.358509420662877)]
+    for i, (x, y, w, q) in enumerate(want):
+        assert (imp.x_px[i], imp.y_px[i], float(imp.weight[i]), imp.quantile[i]) == pytest.approx(
+            (x, y, w, q), rel=1e-15, abs=1e-15)
+
+
+def test_impulses_lie_in_their_cells_with_the_counts_asked_for():
+    """Cells of side r from -0.5 px, one cell past each edge; a Poisson count of mean
+    N s^2 / (pi r^2) = N / pi per cell, or jittered (floor or ceil of it); weights uniform in
+    (-1, 1), or their signs; quantiles in (0, 1)."""
+    w, h, n = 400, 300, 12
+    cell = gabor.cell_size_px(0.06)
+    assert gabor.cell_counts(w, h, cell) == (math.ceil(w / cell) + 2, math.ceil(h / cell) + 2)
+    assert gabor.cell_size_px(0.06, 0.5) == pytest.approx(0.5 * cell)
+    assert gabor.cell_index(np.array([-0.5, -0.6, cell - 0.51, cell - 0.5]), cell).tolist() == [
+        1, 0, 1, 2]
+    poisson = gabor.generate_impulses(w, h, n, 0.06, 3)
+    nx, ny = gabor.cell_counts(w, h, cell)
+    assert poisson.x_px.min() >= -cell - 0.5 and poisson.x_px.max() < (nx - 1) * cell - 0.5
+    assert poisson.y_px.min() >= -cell - 0.5 and poisson.y_px.max() < (ny - 1) * cell - 0.5
+    assert np.all(np.diff(gabor.cell_index(poisson.y_px, cell)) >= 0)  # sorted by cell row
+    key = gabor.cell_index(poisson.y_px, cell) * nx + gabor.cell_index(poisson.x_px, cell)
+    counts = np.bincount(key, minlength=nx * ny)
+    m = n / math.pi
+    assert counts.mean() == pytest.approx(m, rel=0.1)
+    assert counts.var() == pytest.approx(m, rel=0.35)  # Poisson: variance = mean
+    jit = gabor.generate_impulses(w, h, n, 0.06, 3, count="jittered", weights="sign")
+    jc = np.bincount(gabor.cell_index(jit.y_px, cell) * nx + gabor.cell_index(jit.x_px, cell),
+                     minlength=nx * ny)
+    # floor(m) or ceil(m), ceil with probability m - floor(m): the mean m within 3 of its
+    # standard errors (0.4 % with these 374 cells)
+    assert set(jc.tolist()) == {math.floor(m), math.ceil(m)}
+    assert jc.mean() == pytest.approx(m, abs=3 * math.sqrt((m % 1) * (1 - m % 1) / jc.size))
+    assert set(np.unique(jit.weight).tolist()) == {-1.0, 1.0}
+    assert -1 < poisson.weight.min() < -0.9 and 0.9 < poisson.weight.max() < 1
+    assert abs(poisson.weight.mean()) < 0.1
+    assert 0 < poisson.quantile.min() < 0.05 and 0.95 < poisson.quantile.max() < 1
+    with pytest.raises(ValueError, match="unknown impulse count"):
+        gabor.generate_impulses(w, h, n, 0.06, 3, count="grid")
+
+
+def test_the_normalisation_by_hand():
+    """1 / (6 sqrt(V)), V = lambda E[w^2] / (4 a^2) (1 + exp(-2 pi F^2 / a^2)) with F = 1/16
+    (docs/METHOD.md, 5.9), lambda = N / (pi r^2); a kernel cut elsewhere than at 0.01 keeps
+    erf(sqrt(2 pi) a r)^2 of its energy, relative to the 0.01 cut's."""
+    a, n = 0.06, 12
+    r = math.sqrt(-math.log(0.01) / math.pi) / a
+    lam = n / (math.pi * r * r)
+    assert gabor.impulse_density(n, a) == pytest.approx(lam, rel=1e-12)
+    for weights, msq in (("uniform", 1 / 3), ("sign", 1.0)):
+        v = lam * msq / (4 * a * a) * (1 + math.exp(-2 * math.pi * 0.0625**2 / a**2))
+        assert gabor.normalisation(n, a, weights) == pytest.approx(1 / (6 * math.sqrt(v)),
+                                                                    rel=1e-12)
+    r5 = math.sqrt(-math.log(0.05) / math.pi) / a
+    kept = (math.erf(math.sqrt(2 * math.pi) * a * r5) / math.erf(math.sqrt(2 * math.pi) * a * r))
+    assert gabor.normalisation(n, a, "uniform", 0.05) == pytest.approx(
+        gabor.normalisation(n, a) / kept, rel=1e-12)
+    assert gabor._window(r) == (48, 22)  # 2 ceil(r) + 2 = 44 columns, rounded up to 16s
+
+
+def test_synthesis_without_skipping_and_with_a_closer_cut():
+    """skip=False sums every impulse (zeros included): the same noise; a kernel cut at 0.5
+    is the direct sum of kernels truncated to the square of half-side r(0.5)."""
+    h, w = 40, 48
+    imp = gabor.generate_impulses(w, h, 3, 0.06, 4)
+    m = len(imp)
+    rng = np.random.default_rng(2)
+    k = np.where(rng.random(m) < 0.3, 0.0, rng.random(m))
+    f, t = rng.uniform(0.05, 0.45, m), rng.uniform(-np.pi, np.pi, m)
+    fast = gabor.synthesize((h, w), imp, k, f, t, 3, 0.06)
+    assert np.array_equal(fast, gabor.synthesize((h, w), imp, k, f, t, 3, 0.06, skip=False))
+    assert fast.dtype == np.float32
+    assert gabor.synthesize((h, w), imp, k, f, t, 3, 0.06, dtype=np.float64).dtype == np.float64
+    assert not gabor.synthesize((h, w), imp, np.zeros(m), f, t, 3, 0.06).any()
+    one = np.zeros(m)
+    one[np.argmin(np.hypot(imp.x_px - 24, imp.y_px - 20))] = 1.0  # one impulse, mid-image
+    assert gabor.synthesize((h, w), imp, one, f, t, 3, 0.06).any()
+    cut = gabor.synthesize((h, w), imp, k, f, t, 3, 0.06, 0.5, dtype=np.float64)
+    r, a = gabor.kernel_radius_px(0.06, 0.5), 0.06
+    norm = gabor.normalisation(3, 0.06, "uniform", 0.5)
+    yy, xx = np.mgrid[0:h, 0:w].astype(float)
+    ref = np.zeros((h, w))
+    for i in range(m):
+        dx, dy = xx - imp.x_px[i], yy - imp.y_px[i]
+        g = np.exp(-math.pi * a * a * (dx * dx + dy * dy)) * np.cos(
+            2 * math.pi * f[i] * (dx * math.cos(t[i]) + dy * math.sin(t[i])))
+        g[(np.abs(dx) > r) | (np.abs(dy) > r)] = 0
+        ref += imp.weight[i] * k[i] * norm * g
+    assert np.abs(cut - ref).max() < 1e-9 * max(1.0, np.abs(ref).max())

@@ -159,3 +159,113 @@ def test_the_largest_eccentricity_and_ppd_are_at_a_corner(model):
         ppd = np.broadcast_to(g.ppd(x, y), ecc.shape)
         e_max, p_max = g.max_eccentricity_and_ppd(gaze)
         assert e_max == ecc.max() and p_max == ppd.max()
+
+
+def _rays(display, viewport, width, height, x, y, gaze_norm):
+    """The exact model written out with vectors: the eye at the origin, the screen the plane
+    z = D, a frame pixel's centre at ((X + 0.5 - SW / 2) pitch_x, (Y + 0.5 - SH / 2) pitch_y, D)
+    with X, Y its frame coordinates; the angle between the rays to the pixel and to the gaze
+    point, and (pi / 180) |ray| / pitch (pitch: the geometric mean of the two axes')."""
+    x0, y0, sw, sh = viewport
+    px, py = display.width_cm / sw, display.height_cm / sh
+    d = display.distance_cm
+    u = np.stack([(x + x0 + 0.5 - sw / 2) * px, (y + y0 + 0.5 - sh / 2) * py,
+                  np.full(np.shape(x), d)], axis=-1)
+    gx, gy = gaze_norm[0] * sw, gaze_norm[1] * sh  # frame position of the gaze (px edges)
+    v = np.array([(gx - sw / 2) * px, (gy - sh / 2) * py, d])
+    cos = (u @ v) / (np.linalg.norm(u, axis=-1) * np.linalg.norm(v))
+    ecc = np.degrees(np.arccos(np.clip(cos, -1, 1)))
+    ppd = np.pi / 180 * np.linalg.norm(u, axis=-1) / math.sqrt(px * py)
+    return ecc, ppd
+
+
+@pytest.mark.parametrize("viewport,size", [(None, (96, 54)), ((700, 250, 1920, 1080), (300, 200))])
+def test_the_exact_model_is_the_angle_between_rays_written_out(viewport, size):
+    """Eccentricity and ppd of every pixel, for gazes anywhere (the maps and the points),
+    against the geometry written out with vectors; a display whose pixels are not square."""
+    from fovexp import Display
+
+    disp = Display(name="wide-pixels", width_px=1920, height_px=1080, width_cm=110.0,
+                   height_cm=50.0, distance_cm=65.0, refresh_hz=60, peak_luminance_cd_m2=100,
+                   gamma=2.2)
+    w, h = size
+    vp = viewport or (0, 0, w, h)
+    g = ViewingGeometry.for_image(disp, w, h, viewport=viewport)
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
+    for gaze in ((0.5, 0.5), (0.1, 0.9), (1.0, 0.0)):
+        ecc, ppd = _rays(disp, vp, w, h, xx, yy, gaze)
+        gp = g.gaze_px(gaze)
+        assert gp == pytest.approx((gaze[0] * vp[2] - 0.5 - vp[0], gaze[1] * vp[3] - 0.5 - vp[1]))
+        assert np.allclose(g.eccentricity_deg(xx, yy, gp), ecc, atol=1e-7)
+        assert np.allclose(g.ppd(xx, yy), ppd, rtol=1e-12)
+        e32, p32 = g.eccentricity_and_ppd_maps(gp)
+        assert e32.dtype == np.float32 and np.allclose(e32, ecc, atol=2e-5)
+        assert np.allclose(p32, ppd, rtol=1e-6)
+        e64, _ = g.eccentricity_and_ppd_maps(gp, np.float64)
+        assert np.allclose(e64, ecc, atol=1e-7)
+        emax, pmax = g.max_eccentricity_and_ppd(gp)
+        assert emax == pytest.approx(ecc.max(), abs=1e-7) and pmax == pytest.approx(ppd.max())
+    assert g.shape == (h, w)
+
+
+def test_the_linear_and_release_models_written_out():
+    """linear: on-screen distance (px) over the constant width / field; release: atan(R / D)
+    with R the on-screen distance (cm) on the release's 120 x 67 cm screen at 60 cm, and its
+    constant 3840 / 90 px/deg scaled to the frame width."""
+    lin = ViewingGeometry.for_image(LG, 400, 300, "linear", viewport=(100, 50, 1920, 1080))
+    assert lin.ppd_constant == pytest.approx(1920 / LG.horizontal_field_deg)
+    x, y = np.array([0.0, 399.0, 17.0]), np.array([0.0, 299.0, 200.0])
+    gaze = lin.gaze_px((0.3, 0.6))
+    assert np.allclose(lin.eccentricity_deg(x, y, gaze),
+                       np.hypot(x - gaze[0], y - gaze[1]) / lin.ppd_constant)
+    assert np.array_equal(lin.ppd(x, y), np.full(3, lin.ppd_constant))
+    e, p = lin.eccentricity_and_ppd_maps(gaze)
+    assert e.shape == (300, 400) and e[200, 17] == pytest.approx(
+        np.hypot(17 - gaze[0], 200 - gaze[1]) / lin.ppd_constant, rel=1e-6)
+    assert (p == np.float32(lin.ppd_constant)).all()
+    rel = ViewingGeometry.for_image(LG, 1920, 1080, "release")
+    assert rel.ppd_constant == pytest.approx(3840 / 90 * 1920 / 3840)
+    gaze = rel.gaze_px((0.5, 0.5))
+    r_cm = np.hypot((x - gaze[0]) * 120 / 1920, (y - gaze[1]) * 67 / 1080)
+    assert np.allclose(rel.eccentricity_deg(x, y, gaze), np.degrees(np.arctan(r_cm / 60.0)))
+    with pytest.raises(FovexpError, match="does not fit at"):
+        ViewingGeometry.for_image(LG, 400, 300, viewport=(1600, 0, 1920, 1080))
+    with pytest.raises(FovexpError, match="does not fit at"):
+        ViewingGeometry.for_image(LG, 400, 300, viewport=(-1, 0, 1920, 1080))
+    ViewingGeometry.for_image(LG, 400, 300, viewport=(1520, 780, 1920, 1080))  # just fits
+
+
+def test_the_display_schema_bounds_and_the_release_display():
+    """The profile's ranges at their edges (docs/DISPLAYS: 1 px to 32768 px, up to 10 m,
+    luminance above 0 up to 100000 cd/m2) and the release's display (docs/METHOD.md, 5);
+    geometries are values (frozen)."""
+    import dataclasses
+
+    from fovexp import Display
+    from fovexp.geometry import RELEASE_DISPLAY
+
+    ok = dict(name="x", width_px=32768, height_px=18432, width_cm=1000.0, height_cm=562.5,
+              distance_cm=0.5, refresh_hz=60, peak_luminance_cd_m2=0.5, gamma=2.2)
+    Display(**ok)
+    Display(**dict(ok, distance_cm=1000.0, peak_luminance_cd_m2=100000.0))
+    for field, bad in (("width_px", 32769), ("width_cm", 1000.5), ("distance_cm", 1000.5),
+                       ("distance_cm", 0.0), ("peak_luminance_cd_m2", 0.0),
+                       ("peak_luminance_cd_m2", 100001.0)):
+        with pytest.raises(ValueError):
+            Display(**dict(ok, **{field: bad}))
+    assert (RELEASE_DISPLAY.width_px, RELEASE_DISPLAY.height_px) == (3840, 2160)
+    assert (RELEASE_DISPLAY.width_cm, RELEASE_DISPLAY.height_cm,
+            RELEASE_DISPLAY.distance_cm) == (120.0, 67.0, 60.0)
+    assert (RELEASE_DISPLAY.refresh_hz, RELEASE_DISPLAY.peak_luminance_cd_m2,
+            RELEASE_DISPLAY.gamma) == (60.0, 100.0, 2.2)
+    g = ViewingGeometry.for_image(LG, 64, 48)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        g.distance_cm = 10.0  # type: ignore[misc]
+
+
+def test_a_viewport_fits_at_the_frames_edges_and_not_past_them():
+    for vp in ((0, 0, 1920, 1080), (1520, 0, 1920, 1080), (0, 780, 1920, 1080)):
+        assert ViewingGeometry.for_image(LG, 400, 300, viewport=vp).x0_px == vp[0]
+    for vp in ((1521, 0, 1920, 1080), (0, 781, 1920, 1080), (0, -1, 1920, 1080)):
+        with pytest.raises(FovexpError, match="does not fit"):
+            ViewingGeometry.for_image(LG, 400, 300, viewport=vp)

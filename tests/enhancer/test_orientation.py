@@ -85,3 +85,59 @@ def test_orientation_is_the_edge_direction():
     gx, gy = orient.sobel_gradients(level)
     omega = orient.orientation_at(gx, gy, np.array([float(X0)]), np.array([float(Y0)]))
     assert angle_error_deg(math.degrees(float(omega[0])) % 180.0, 30.0) < 2.0
+
+
+def test_sobel_gradients_by_hand_with_replicated_borders():
+    """G_x = [1 0 -1]-differences along x smoothed [1 2 1] along y, scaled as SciPy's Sobel
+    (x right, y down, positive where the image grows), the border replicated; float32 kept
+    as float32 and float64 as float64."""
+    rng = np.random.default_rng(3)
+    g = rng.random((6, 7))
+    p = np.pad(g, 1, mode="edge")
+    dx = p[:, 2:] - p[:, :-2]  # rows padded, columns interior
+    gx = dx[:-2] + 2 * dx[1:-1] + dx[2:]
+    dy = p[2:, :] - p[:-2, :]
+    gy = dy[:, :-2] + 2 * dy[:, 1:-1] + dy[:, 2:]
+    got_x, got_y = orient.sobel_gradients(g)
+    assert got_x.dtype == np.float64 and np.allclose(got_x, gx) and np.allclose(got_y, gy)
+    got_x32, _ = orient.sobel_gradients(g.astype(np.float32))
+    assert got_x32.dtype == np.float32 and np.allclose(got_x32, gx, atol=1e-5)
+    assert orient.sobel_gradients(g.astype(np.float16))[0].dtype == np.float32
+
+
+def test_orientation_at_is_atan2_less_a_quarter_turn_and_defined_where_flat():
+    """omega = atan2(G_y, G_x) - pi/2 where |G| >= GRADIENT_EPS, and -pi/2 where it is below
+    (a flat area), on constant gradient grids (their bicubic samples are the constant)."""
+    shape = (12, 12)
+    x = np.array([40.0, 41.5])
+    y = np.array([37.0, 44.25])
+    for gx, gy in ((1.0, 0.0), (0.0, 1.0), (-1.0, 1.0), (0.3, -0.4)):
+        om = orient.orientation_at(np.full(shape, gx), np.full(shape, gy), x, y)
+        assert om.dtype == np.float32
+        assert om == pytest.approx(math.atan2(gy, gx) - math.pi / 2, abs=1e-6)
+    eps = orient.GRADIENT_EPS
+    assert eps == 1e-5
+    just = orient.orientation_at(np.full(shape, eps), np.zeros(shape), x, y, dtype=np.float64)
+    below = orient.orientation_at(np.zeros(shape), np.full(shape, 0.9 * eps), x, y)
+    assert just.dtype == np.float64 and just == pytest.approx(-math.pi / 2)  # atan2(0, eps)
+    assert below == pytest.approx(-math.pi / 2)  # flat: not atan2(0.9 eps, 0) = 0
+    # the level: the same grid read at level 2 samples other points of a ramp
+    ramp = np.tile(np.arange(12.0), (12, 1))
+    at3 = orient.orientation_at(ramp, ramp.T, np.array([20.0]), np.array([60.0]))
+    at2 = orient.orientation_at(ramp, ramp.T, np.array([20.0]), np.array([60.0]), level=2)
+    assert abs(float(at3[0]) - float(at2[0])) > 0.1
+
+
+def test_the_orientation_threshold_and_level():
+    """|G| exactly GRADIENT_EPS is a direction (only below it is flat), read at a node of the
+    level grid (where the bicubic sample is the node's value exactly); the gradients are
+    taken on level 3, 1/8 of the resolution (docs/METHOD.md, 5.5)."""
+    assert orient.ORIENTATION_LEVEL == 3
+    eps = orient.GRADIENT_EPS
+    shape = (12, 12)
+    node = np.array([40.0]), np.array([48.0])  # level-3 node (5, 6)
+    at = orient.orientation_at(np.zeros(shape), np.full(shape, eps), *node, dtype=np.float64)
+    assert at[0] == pytest.approx(0.0, abs=1e-12)  # atan2(eps, 0) - pi/2
+    below = orient.orientation_at(np.zeros(shape), np.full(shape, np.nextafter(eps, 0)), *node,
+                                  dtype=np.float64)
+    assert below[0] == pytest.approx(-math.pi / 2)

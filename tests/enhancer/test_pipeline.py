@@ -200,22 +200,40 @@ def test_out_of_range_parameters_name_the_parameter(kw, field):
 
 def test_a_viewport_enhances_part_of_the_frame_as_the_whole_frame_would(frame):
     """The runner's split screen: enhancing only the right half, placed at (W/2, 0) of the
-    frame, gives the right half of the whole frame's result (away from the seam, where the
-    half misses the impulses of the left half, and where there is no noise anyway)."""
+    frame, gives the right half of the whole frame's result away from the seam (where the
+    half's border is replicated, not the left half): its maps, foveated and contrast images
+    and K, and the output without noise, to float rounding. The noise itself has impulses of
+    the half's own (generated over the image it is given), so it is compared by what it
+    should share: its strength relative to K (std K / 6)."""
     h, w = frame.shape[:2]
     p = EnhanceParams(blur_rate=0.57, impulses=12)
-    _, whole = _run(frame, blur_rate=0.57, impulses=12)
-    enh = Enhancer(LG)
-    enh.set_image(frame[:, w // 2 :], viewport=(w // 2, 0, w, h))
-    half = enh.enhance((0.5, 0.5), p)
-    assert np.allclose(half.map("eccentricity_deg"), whole.map("eccentricity_deg")[:, w // 2 :])
-    assert np.array_equal(half.map("sigma_px"), whole.map("sigma_px")[:, w // 2 :])
-    # past the blur's reach from the seam (the half's border is replicated, not the left half)
-    m = int(4 * whole.map("sigma_px").max()) + 2
-    assert np.abs(half.map("foveated")[:, m:] - whole.map("foveated")[:, w // 2 + m :]).max() < 1e-6
-    assert half.map("noise").std() > 0
+    names = ("eccentricity_deg", "sigma_px", "foveated", "contrast", "amplitude", "noise")
+    runs = []
+    for image, viewport in ((frame, None), (frame[:, w // 2:], (w // 2, 0, w, h))):
+        enh = Enhancer(LG)
+        enh.set_image(image, viewport=viewport)
+        res = enh.enhance((0.5, 0.5), p)
+        maps = {n: res.map(n) for n in names}
+        maps["output"] = enh.enhance((0.5, 0.5), p.model_copy(update={"method": "contrast"})
+                                     ).output
+        runs.append(maps)
+    whole, half = ({n: m[:, w // 2:] for n, m in runs[0].items()}, runs[1])
+    assert np.allclose(half["eccentricity_deg"], whole["eccentricity_deg"])
+    assert np.array_equal(half["sigma_px"], whole["sigma_px"])
+    # past the blur's reach from the seam (4 sigma), and for K the |L| pyramid's too
+    m = int(4 * runs[0]["sigma_px"].max()) + 2
+    for name in ("foveated", "contrast", "output"):
+        d = np.abs(half[name][:, m:] - whole[name][:, m:]).max()
+        assert d < 1e-6, (name, d)
+    mk = 64  # the coarsest |L| levels' reach (measured: equal from column 32 on)
+    assert np.abs(half["amplitude"][:, mk:] - whole["amplitude"][:, mk:]).max() < 1e-6
+    k = whole["amplitude"][:, mk:]
+    noisy = k > 0.01
+    assert noisy.mean() > 0.2
+    ratio = [np.std(r["noise"][:, mk:][noisy] / k[noisy]) for r in (half, whole)]
+    assert ratio[0] == pytest.approx(ratio[1], rel=0.1) and 0.1 < ratio[1] < 0.3, ratio
     with pytest.raises(FovexpError, match="does not fit"):
-        enh.set_image(frame, viewport=(10, 0, w, h))
+        Enhancer(LG).set_image(frame, viewport=(10, 0, w, h))
 
 
 def test_with_noise_composes_like_the_output_and_takes_another_layer():

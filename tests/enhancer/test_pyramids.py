@@ -2,6 +2,7 @@
 against brute force and against the paper's 2 x 2 construction."""
 
 import numpy as np
+import pytest
 
 from fovexp import pyramids
 
@@ -53,3 +54,156 @@ def test_constant_radius_answers_every_radius_as_the_window_filters_do():
     speck = flat.copy()
     speck[2, 3] = np.nan  # NaN is never one constant (SciPy's filters would skip it)
     assert (pyramids.constant_radius_blocks(speck, speck)[2, 3]) == -1
+
+
+# --- against independent implementations (issue 19: every formula of the stage checked) -----
+
+def _reduce_ref(img):
+    """Binomial [1 4 6 4 1] / 16 along both axes, borders replicated, every second sample."""
+    from scipy import ndimage
+
+    k = np.array([1, 4, 6, 4, 1]) / 16.0
+    a = ndimage.correlate1d(img.astype(np.float64), k, axis=0, mode="nearest")
+    a = ndimage.correlate1d(a, k, axis=1, mode="nearest")
+    return a[::2, ::2]
+
+
+def _expand_ref(a, shape):
+    """Zero insertion and the binomial kernel x 2, written as its two phases: even outputs
+    (a[i-1] + 6 a[i] + a[i+1]) / 8, odd outputs (a[i] + a[i+1]) / 2, borders replicated."""
+    def one_axis(v, n):
+        p = np.pad(v, [(1, 1)] + [(0, 0)] * (v.ndim - 1), mode="edge")
+        out = np.empty((n,) + v.shape[1:])
+        for y in range(n):
+            i = y // 2 + 1
+            out[y] = (p[i - 1] + 6 * p[i] + p[i + 1]) / 8 if y % 2 == 0 else (p[i] + p[i + 1]) / 2
+        return out
+
+    return one_axis(one_axis(a.astype(np.float64), shape[0]).T, shape[1]).T
+
+
+def test_reduce_and_expand_are_the_binomial_filters():
+    rng = np.random.default_rng(11)
+    for h, w in ((9, 14), (16, 7), (2, 3)):
+        img = rng.random((h, w))
+        red = pyramids.reduce(img)
+        assert red.dtype == np.float64 and red.shape == ((h + 1) // 2, (w + 1) // 2)
+        assert np.allclose(red, _reduce_ref(img), atol=1e-14)
+        assert np.allclose(pyramids.expand(red, (h, w)), _expand_ref(red, (h, w)), atol=1e-14)
+    rgb = rng.random((10, 12, 3)).astype(np.float32)
+    red = pyramids.reduce(rgb)
+    assert red.dtype == np.float32 and red.shape == (5, 6, 3)
+    assert np.allclose(red[..., 2], _reduce_ref(rgb[..., 2]), atol=1e-6)
+    assert pyramids.reduce(np.ones((4, 4), np.uint8)).dtype == np.float32
+    # a constant gives exactly its constant (the flat regions the enhancer skips)
+    c = np.full((13, 11), 0.3, np.float32)
+    assert (pyramids.reduce(c) == np.float32(0.3)).all()
+    assert (pyramids.expand(pyramids.reduce(c), (13, 11)) == np.float32(0.3)).all()
+
+
+def test_the_pyramids_levels_and_laplacian_bands():
+    img = np.random.default_rng(5).random((40, 24))
+    pyr = pyramids.gaussian_pyramid(img, 10)
+    assert pyr[0] is img and [p.shape for p in pyr] == [(40, 24), (20, 12), (10, 6), (5, 3),
+                                                        (3, 2), (2, 1)]
+    assert pyramids.pyramid_depth((40, 24), 10) == 5 and pyramids.pyramid_depth((40, 24), 2) == 2
+    assert len(pyramids.gaussian_pyramid(img, 2)) == 3
+    bands = pyramids.laplacian_levels(pyr, 3)
+    assert sorted(bands) == [1, 2, 3]
+    assert np.allclose(bands[2], pyr[1] - _expand_ref(pyr[2], pyr[1].shape), atol=1e-14)
+    assert [pyramids.level_scale(k) for k in (0, 1, 3)] == [1, 2, 8]
+    # each reduce adds a variance of 1 in its input's pixels: 4**j full-resolution px^2
+    assert pyramids.gaussian_sigma_px(3) == pytest.approx(np.sqrt(1 + 4 + 16))
+    assert pyramids.gaussian_sigma_px(0) == 0
+
+
+def test_the_smoothed_abs_laplacian_is_a_3x3_mean_of_abs_l():
+    """|G_{k-1} - expand(G_k)| averaged over 3 x 3 (borders replicated), on its own grid;
+    limited to the tiles asked for, the others 0, the computed ones unchanged."""
+    from scipy import ndimage
+
+    img = np.random.default_rng(6).random((70, 90))
+    pyr = pyramids.gaussian_pyramid(img, 3)
+    got = pyramids.smoothed_abs_laplacian(pyr, 3)
+    for k in (1, 2, 3):
+        band = np.abs(pyr[k - 1] - _expand_ref(pyr[k], pyr[k - 1].shape))
+        assert np.allclose(got[k], ndimage.uniform_filter(band, 3, mode="nearest"), atol=1e-13)
+    assert pyramids.tile_grid((70, 90)) == (3, 3) and pyramids.tile_grid((64, 65), 32) == (2, 3)
+    need = np.zeros((3, 3), bool)
+    need[1, 2] = True
+    part = pyramids.smoothed_abs_laplacian(pyr, 1, {1: need})[1]
+    assert np.array_equal(part[32:64, 64:90], got[1][32:64, 64:90])
+    part[32:64, 64:90] = 0
+    assert not part.any()
+    assert [pyramids.abs_laplacian_reach_px(k) for k in (1, 2, 3)] == [7, 16, 34]
+    assert pyramids.blocks_reaching(16, 8) == 3 and pyramids.blocks_reaching(17, 8) == 4
+
+
+def test_block_and_window_extremes_by_brute_force():
+    rng = np.random.default_rng(8)
+    img = rng.random((19, 21, 3))
+    add = rng.uniform(-0.2, 0.2, (19, 21))
+    lo, hi = pyramids.block_extremes(img, 2, add)
+    s = img + add[..., None]
+    assert lo[4, 5] == s[16:19, 20:21].min() and hi[1, 2] == s[4:8, 8:12].max()
+    assert lo.shape == (5, 6) and (lo <= hi).all()
+    clo, chi = pyramids.channel_block_extremes(img, 2)
+    assert clo.shape == (5, 6, 3)
+    assert clo[2, 3, 1] == img[8:12, 12:16, 1].min() and chi[4, 0, 2] == img[16:, 0:4, 2].max()
+    grey_lo, grey_hi = s.min(axis=2), s.max(axis=2)
+    x, y = np.array([0.0, 10.4, 20.0, 5.5]), np.array([0.0, 9.6, 18.0, 3.0])
+    wlo, whi = pyramids.window_extremes(grey_lo, grey_hi, 2.5, x, y)
+    for i in range(4):
+        xs = slice(max(int(np.ceil(x[i] - 2.5)), 0), min(int(np.floor(x[i] + 2.5)), 20) + 1)
+        ys = slice(max(int(np.ceil(y[i] - 2.5)), 0), min(int(np.floor(y[i] + 2.5)), 18) + 1)
+        assert wlo[i] == grey_lo[ys, xs].min() and whi[i] == grey_hi[ys, xs].max()
+    full_lo, full_hi = pyramids.window_extremes(grey_lo, grey_hi, 2.5)
+    for yy in range(19):  # every pixel: the 5 x 5 window around it, clipped
+        for xx in range(21):
+            win = np.s_[max(yy - 2, 0): yy + 3, max(xx - 2, 0): xx + 3]
+            assert full_lo[yy, xx] == grey_lo[win].min() and full_hi[yy, xx] == grey_hi[win].max()
+    # the partial blocks of the right and bottom edges (23 = 5 x 4 + 3 columns)
+    lo23, _ = pyramids.block_extremes(rng.random((9, 23)), 2)
+    assert lo23.shape == (3, 6)
+    clo23, _ = pyramids.channel_block_extremes(rng.random((9, 23, 2)), 2)
+    assert clo23.shape == (3, 6, 2)
+
+
+def _keys(t, a=-0.5):
+    t = abs(t)
+    if t <= 1:
+        return (a + 2) * t**3 - (a + 3) * t**2 + 1
+    if t < 2:
+        return a * t**3 - 5 * a * t**2 + 8 * a * t - 4 * a
+    return 0.0
+
+
+def test_sampling_a_level_at_full_resolution_coordinates():
+    """A level-k grid read at full-resolution (x, y): grid coordinates (x / 2**k, y / 2**k),
+    borders held; bilinear as scipy's map_coordinates (order 1, nearest), bicubic with Keys'
+    kernel a = -0.5 (MATLAB's imresize 'bicubic'), nearest as the block that holds the
+    pixel."""
+    from scipy import ndimage
+
+    rng = np.random.default_rng(9)
+    grid = rng.random((7, 9))
+    x = np.array([0.0, 3.3, 17.9, 40.0, -5.0, 12.0, 1.0, 16.9])
+    y = np.array([0.0, 5.2, 11.0, 30.0, 2.0, 27.5, 1.0, 12.9])  # and near the borders
+    s = 2.0
+    want = ndimage.map_coordinates(grid, [np.clip(y / s, 0, 6), np.clip(x / s, 0, 8)], order=1,
+                                   mode="nearest")
+    assert np.allclose(pyramids.sample_bilinear(grid, x, y, 1), want, atol=1e-12)
+    assert pyramids.sample_bilinear(grid.astype(np.float32), x, y, 1).dtype == np.float32
+    cubic = pyramids.sample_cubic(grid, x, y, 1)
+    for i in range(len(x)):
+        u, v = x[i] / s, y[i] / s
+        iu, iv = int(np.floor(u)), int(np.floor(v))
+        ref = sum(_keys(v - (iv - 1 + j)) * _keys(u - (iu - 1 + k))
+                  * grid[min(max(iv - 1 + j, 0), 6), min(max(iu - 1 + k, 0), 8)]
+                  for j in range(4) for k in range(4))
+        assert cubic[i] == pytest.approx(ref, abs=1e-12)
+    assert pyramids.sample_cubic(grid, np.array([6.0]), np.array([4.0]), 1)[0] == pytest.approx(
+        grid[2, 3])  # interpolating: a node gives its value
+    near = pyramids.sample_nearest(grid, np.array([0.0, 7.4, 7.6, 100.0]),
+                                   np.array([0.0, 3.0, 3.0, -3.0]), 4)
+    assert near.tolist() == [grid[0, 0], grid[0, 1], grid[0, 2], grid[0, 8]]

@@ -495,8 +495,10 @@ def test_synced_flush_waits_for_a_flush_under_way(tmp_path: Path,
     log.add((2, 2))
     synced = threading.Thread(target=log.flush, kwargs={"sync": True})
     synced.start()
+    # waits for the write under way: it cannot return before release.set(), however slow the
+    # machine (0.3 s is only how long a flush that does not wait has to show it)
     synced.join(0.3)
-    assert synced.is_alive()  # waits for the write under way
+    assert synced.is_alive()
     release.set()
     background.join(5)
     synced.join(5)

@@ -86,15 +86,32 @@ def test_dropped_render_never_reaches_the_screen(monkeypatch) -> None:
 
 
 def test_auto_says_why_it_chose_the_cpu() -> None:
+    """``auto`` takes the GPU on a hardware renderer and says why it took the CPU otherwise;
+    which one is expected comes from the renderer's name and a list written down
+    (tests/gpu_helpers.py), not from fovexp's own ``is_software`` (issue 19)."""
+    from gpu_helpers import renders_in_software
+
     assert make_enhancer(DISPLAY, backend="cpu").fallback_reason is None
     rel = make_enhancer(DISPLAY, preset="release", backend="auto")
     assert rel.backend == "cpu" and "release" in rel.fallback_reason
-    auto = make_enhancer(DISPLAY, backend="auto")
-    if auto.backend == "gpu":  # a hardware GPU: nothing to explain
-        assert auto.fallback_reason is None
-        auto.close()
+    moderngl = pytest.importorskip("moderngl")
+    try:
+        ctx = moderngl.create_standalone_context(backend="egl", require=450)
+    except Exception:
+        renderer = None  # no OpenGL 4.5 here: the CPU, for that reason
     else:
-        assert auto.fallback_reason  # llvmpipe here: "the OpenGL renderer is software (...)"
+        renderer = ctx.info["GL_RENDERER"]
+        ctx.release()
+    auto = make_enhancer(DISPLAY, backend="auto")
+    if renderer is not None and not renders_in_software(renderer):  # a hardware GPU
+        assert auto.backend == "gpu" and auto.fallback_reason is None
+        auto.close()
+    elif renderer is not None:  # llvmpipe here and in CI
+        assert auto.backend == "cpu"
+        assert auto.fallback_reason.startswith("the OpenGL renderer is software")
+        assert renderer in auto.fallback_reason
+    else:
+        assert auto.backend == "cpu" and auto.fallback_reason.startswith("no GPU")
 
 
 def test_write_output_to_is_the_enhance_output_on_the_gpu() -> None:

@@ -57,12 +57,36 @@ def test_step_values_stay_in_range() -> None:
     assert step_values(1.5, 0.02, 1.5) == (1.5, 1.48)  # at the top: one step down
 
 
+class GatedRenderer:
+    """Finishes a render only once the cross has been drawn ``polls`` times since it was
+    requested: what the test checks does not depend on the wall clock (issue 19: it had
+    counted the polls of a 0.12 s sleep, a timing assert)."""
+
+    def __init__(self, polls: int, seconds: float) -> None:
+        self.polls, self.seconds, self.requests, self.drawn = polls, seconds, [], 0
+        self._since = 0
+
+    def draw(self) -> None:
+        self.drawn += 1
+
+    def request(self, params) -> int:
+        self.requests.append(params)
+        self._since = self.drawn
+        return len(self.requests) - 1
+
+    def wait(self, serial: int, timeout: float = 120.0) -> Done:
+        if self.drawn - self._since < self.polls:
+            raise TimeoutError
+        return Done(serial, self.requests[serial], self.seconds)
+
+
 def test_renders_are_timed_with_the_cross_meanwhile() -> None:
-    r = SlowRenderer(0.12)
-    frames = []
-    got = time_renders(r, ["a", "b"], lambda: frames.append(1), poll_s=0.02)
+    """The renderer's own times come back, one render after the other, and the cross is drawn
+    at every poll while a render is under way (here 5 polls each)."""
+    r = GatedRenderer(polls=5, seconds=0.12)
+    got = time_renders(r, ["a", "b"], r.draw, poll_s=0.02)
     assert got == [0.12, 0.12] and r.requests == ["a", "b"]
-    assert len(frames) >= 6  # the cross drawn every poll while each render ran
+    assert r.drawn == 10
 
 
 def test_a_hung_render_is_one_line() -> None:

@@ -191,15 +191,19 @@ def test_tracker_disconnect_blanks_pauses_and_loses_nothing(tmp_path: Path,
     first = [f for f in frames if f["attempt"] == "0"]
     second = [f for f in frames if f["attempt"] == "1"]
     assert first and second and len(first) + len(second) == len(frames)
+    # The disconnection lasts 0.6 s (FlakyGaze's threading.Timer, which cannot fire early);
+    # the last frame before it was flipped one loop iteration before the drop (a frame, 17 ms
+    # under Xvfb): 0.5 s leaves 100 ms for a loaded machine, and a run that did not pause has
+    # gaps of a frame
     t = np.array([float(f["flip_time_s"]) for f in frames])
-    assert np.diff(t).max() >= 0.55
+    assert np.diff(t).max() >= 0.5
     assert all(math.isfinite(v) for v in t)
     # the gaze of the interrupted attempt is logged too; none while disconnected (0.6 s)
     with open(s.folder / f"gaze-{s.session_id}.csv") as fh:
         gaze_rows = list(csv.DictReader(fh))
     t_us = np.array([int(r["system_time_us"]) for r in gaze_rows])
     assert np.all(np.diff(t_us) > 0)
-    assert np.diff(t_us).max() >= 0.55e6
+    assert np.diff(t_us).max() >= 0.5e6  # the same 0.6 s pause in the gaze samples
     cut = int(np.argmax(np.diff(t_us)))  # the disconnection
     assert any(r["trial_index"] == "1" for r in gaze_rows[:cut + 1])  # attempt 0's samples
     assert any(r["trial_index"] == "1" for r in gaze_rows[cut + 1:])  # attempt 1's

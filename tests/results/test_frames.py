@@ -210,3 +210,103 @@ def test_a_file_that_is_not_a_frame_log(tmp_path: Path) -> None:
     (tmp_path / "x.csv").write_text("a,b\n1,2\n")
     with pytest.raises(FovexpError, match="not a frame log"):
         read_frame_log(tmp_path / "x.csv")
+
+
+def test_reading_a_log_torn_unreadable_or_not_csv(tmp_path: Path) -> None:
+    """A kill mid-write leaves a partial last line: dropped (complete lines are kept, the last
+    one included); an unreadable path or bytes that are no CSV: one error naming the file."""
+    path = tmp_path / "f.csv"
+    write(path, GOOD)
+    whole = path.read_bytes().replace(b"\r\n", b"\n")  # the runner's line ends
+    path.write_bytes(whole + b"1,0,3,20.02")  # torn
+    torn = read_frame_log(path)
+    assert len(torn) == len(GOOD) and torn["frame"].iloc[-1] == 2
+    last = GOOD[-1]  # every field of the last complete line kept, to its last character
+    assert torn["flip_system_time_us"].iloc[-1] == last["flip_system_time_us"]
+    assert torn["value"].iloc[-1] == last["value"]
+    path.write_bytes(whole)
+    pd.testing.assert_frame_equal(torn, read_frame_log(path))
+    with pytest.raises(FovexpError, match=r"f.csv: not a frame log"):
+        path.write_bytes(b'trial_index,attempt,frame,blanked\n"1,2\n')
+        read_frame_log(path)
+    with pytest.raises(FovexpError, match="cannot read"):
+        read_frame_log(tmp_path)  # a folder
+    old = tmp_path / "old.csv"  # a log written before the gaze columns existed
+    old.write_text("trial_index,attempt,frame,blanked\n0,0,0,1\n")
+    got = read_frame_log(old)
+    assert got["gaze_ecc_deg"].isna().all() and str(got["frame"].dtype) == "Int64"
+
+
+def test_latency_summary_and_trial_quality_by_hand(tmp_path: Path) -> None:
+    """Latencies 1..20 ms over 20 frames of trial 0 (one frame without a sample, two dropped):
+    median, 95th percentile (linear, NumPy's default), maximum; per trial of its last attempt;
+    NaN where no frame had a sample, and for no frames at all."""
+    from fovexp.results.frames import trial_quality
+
+    rows = [frame(0, n, 10.0 + n * PERIOD_S, 0.0, age_s=(n + 1) / 1000) for n in range(20)]
+    rows.append(frame(0, 20, 10.0 + 20 * PERIOD_S, 0.0, ecc=None, age_s=None))
+    rows[3]["dropped"] = rows[7]["dropped"] = 1
+    rows[9]["dropped"] = rows[10]["dropped"] = ""  # not recorded: not counted as dropped
+    rows += [frame(1, n, 30.0 + n * PERIOD_S, 0.0, ecc=None, age_s=None, attempt=1)
+             for n in range(4)]
+    rows += [frame(1, n, 20.0 + n * PERIOD_S, 0.0, age_s=0.5, attempt=0) for n in range(3)]
+    frames = write(tmp_path / "f.csv", rows)
+    lat = [n + 1.0 for n in range(20)]
+    s = latency_summary(frames[frames["trial_index"] == 0])
+    assert (s["frames"], s["with_gaze"]) == (21, 20)
+    assert s["median_ms"] == pytest.approx(10.5) and s["max_ms"] == pytest.approx(20.0)
+    assert s["p95_ms"] == pytest.approx(19.05)  # 1 + 0.95 * 19
+    assert s["dropped_fraction"] == pytest.approx(2 / 21)
+    empty = latency_summary(frames.iloc[:0])
+    assert empty["frames"] == 0 and all(np.isnan(empty[k]) for k in
+                                        ("median_ms", "p95_ms", "max_ms", "dropped_fraction"))
+    q = trial_quality(frames).set_index("trial_index")
+    assert q.loc[0, "frames"] == 21 and q.loc[0, "dropped_fraction"] == pytest.approx(2 / 21)
+    assert q.loc[0, "latency_p95_ms"] == pytest.approx(np.percentile(lat, 95))
+    assert q.loc[1, "frames"] == 4 and np.isnan(q.loc[1, "latency_p95_ms"])  # attempt 1 only
+    assert q.loc[1, "dropped_fraction"] == 0.0
+    assert list(trial_quality(frames.iloc[:0]).columns) == [
+        "trial_index", "frames", "dropped_fraction", "latency_p95_ms"]
+
+
+def test_a_frame_without_its_blanked_flag_counts_as_shown(tmp_path: Path) -> None:
+    rows = [frame(0, n, 10.0 + n * 0.02, 0.0) for n in range(3)]
+    rows[1]["blanked"] = ""
+    rows[1]["gaze_ecc_deg"] = 2.0  # outside: a violation if the frame was shown
+    frames = write(tmp_path / "c.csv", rows)
+    assert unblanked_violations(frames, RULE)["frame"].tolist() == [1]
+
+
+def test_final_value_after_a_trial_without_frames_and_at_the_tolerance(tmp_path: Path) -> None:
+    """A trial row without frames does not stop the next one being checked; the logged values
+    match within value_tol, the tolerance itself included (values 0.5 apart, exact in
+    binary)."""
+    rows = trial(0, 10.0, [0.0, 0.0, 0.02])
+    enter = 2 * PERIOD_S + 0.003
+    log = [{"trial_index": 7, "start_value": 0, "final_value": 0, "response_time_s": 1},
+           {"trial_index": 0, "start_value": 0.0, "final_value": 0.02, "response_time_s": enter}]
+    frames = write(tmp_path / "f.csv", rows)
+    assert final_value_violations(frames, log)["problem"].tolist() == ["no frames"]
+    wrong = [log[0], dict(log[1], start_value=0.5)]
+    assert final_value_violations(frames, wrong)["problem"].tolist() == [
+        "no frames", "first frame shows 0, start_value is 0.5"]
+    halves = write(tmp_path / "h.csv", trial(0, 10.0, [0.25, 0.25, 0.25]))
+    ok = [{"trial_index": 0, "start_value": 0.75, "final_value": 0.75, "response_time_s": enter}]
+    assert final_value_violations(halves, ok, value_tol=0.5).empty
+    assert len(final_value_violations(halves, ok, value_tol=0.4999)) == 2
+
+
+def test_a_frame_flipped_exactly_at_enter_plus_the_slack_is_before_it(tmp_path: Path) -> None:
+    from fovexp.results.frames import ENTER_SLACK_S
+
+    rows = trial(0, 10.0, [0.0, 0.0, 0.02])
+    frames = write(tmp_path / "f.csv", rows)
+    t = frames["flip_time_s"].to_numpy(float)
+    r = (t[2] - ENTER_SLACK_S) - t[0]
+    for _ in range(8):  # the response time whose Enter + slack lands on the flip exactly
+        if t[0] + r + ENTER_SLACK_S == t[2]:
+            break
+        r = np.nextafter(r, np.inf if t[0] + r + ENTER_SLACK_S < t[2] else -np.inf)
+    assert t[0] + r + ENTER_SLACK_S == t[2]
+    log = [{"trial_index": 0, "start_value": 0.0, "final_value": 0.02, "response_time_s": r}]
+    assert final_value_violations(frames, log).empty

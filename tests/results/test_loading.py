@@ -362,3 +362,84 @@ def test_trial_quality_without_frame_log_is_noted(tmp_path: Path) -> None:
     ds = load_results(tmp_path)
     assert len(ds.trials) == 15
     assert any("no frame log: rules R12 and R13 not applied" in n for n in ds.notes)
+
+
+# --- the details of the exclusion records (issue 19: the mutation runs' survivors)
+
+def test_the_records_of_r1_r5_and_an_empty_file(tmp_path: Path) -> None:
+    """R1 counts one trial; R5 names the trial index, the copies beyond the first and the
+    experiment; a header-only file is noted as having no trials (a file with rows is not)."""
+    r = rows(practice=0)
+    path = write_trials(tmp_path / "calibration-fe" / "P01", [*r, dict(r[3])])
+    text = path.read_text()
+    path.write_text(text[: len(text) - 40])
+    with pytest.warns(UserWarning):
+        ds = load_results(tmp_path)
+    torn = [e for e in ds.exclusions if e.rule == "R1 torn last row"]
+    assert [e.n_trials for e in torn] == [1]
+    write_trials(tmp_path / "calibration-fe" / "P01", [*r, dict(r[3]), dict(r[3])])
+    ds = load_results(tmp_path)
+    (dup,) = [e for e in ds.exclusions if e.rule == "R5 duplicated trial"]
+    assert dup.detail.startswith(f"trial_index {r[3]['trial_index']} appears 3 times")
+    assert (dup.n_trials, dup.experiment, dup.participant) == (2, "calibration-fe", "P01")
+    assert not [e for e in ds.exclusions if e.detail == "no trials"]
+    (tmp_path / "calibration-fe" / "P02").mkdir()
+    (tmp_path / "calibration-fe" / "P02" / "trials.csv").write_text(",".join(COLUMNS) + "\n")
+    ds = load_results(tmp_path)
+    assert [e.rule for e in ds.exclusions if e.detail == "no trials"] == ["note"]
+
+
+def test_each_experiment_apart_and_typed_columns(tmp_path: Path) -> None:
+    """Dataset.experiment gives one experiment's trials; parameters left empty by an
+    experiment (s_f in calibration-fe) are float columns of NaN, not objects."""
+    write_trials(tmp_path / "calibration-fe" / "P01", rows(practice=0))
+    write_trials(tmp_path / "calibration-sf" / "P01", rows("calibration-sf", k=1, practice=0))
+    ds = load_results(tmp_path)
+    fe = ds.experiment("calibration-fe")
+    assert len(fe) == 15 and (fe["experiment"] == "calibration-fe").all()
+    assert ds.experiments == ["calibration-fe", "calibration-sf"]
+    for col in ("f_e", "s_k", "s_f", "blur_rate", "final_value"):
+        assert ds.trials[col].dtype == np.float64, col
+    assert fe["s_f"].isna().all()
+
+
+def test_a_session_file_that_is_not_json_is_no_state(tmp_path: Path) -> None:
+    write_trials(tmp_path / "calibration-fe" / "P01", rows())
+    write_trials(tmp_path / "calibration-fe" / "P02", rows(pid="P02", k=1)[:8], completed=None)
+    (tmp_path / "calibration-fe" / "P02" / f"session-{session_id(1)}.json").write_text("{not")
+    ds = load_results(tmp_path)  # the state unknown: judged by its trial count (R10)
+    assert set(ds.trials["participant"]) == {"P01"}
+    kept = load_results(tmp_path, include_incomplete=True)
+    r10 = [e for e in kept.exclusions if e.rule == "R10 incomplete session"]
+    assert len(r10) == 1 and r10[0].n_trials == 0 and "kept" in r10[0].detail
+
+
+def test_r9_names_the_versions_by_twelve_characters(tmp_path: Path) -> None:
+    write_trials(tmp_path / "calibration-fe" / "P01", rows(sha="a" * 64))
+    write_trials(tmp_path / "calibration-fe" / "P02", rows(pid="P02", k=1, sha="b" * 64))
+    with pytest.raises(FovexpError, match=r"matches 0 of the logged versions "
+                                          r"\(a{12}, b{12}\)$"):
+        load_results(tmp_path, protocol={"calibration-fe": "c"})
+
+
+def test_the_frame_rules_check_every_session_and_the_error_names_the_first_reason(
+        tmp_path: Path) -> None:
+    """A session without a frame log does not stop the others' from being checked (R12);
+    with no trial left, the error names the first exclusion's file and reason."""
+    first = tmp_path / "calibration-fe" / "P01"  # sorted first: no frame log
+    write_trials(first, _as(rows(pid="P01"), tracker="tobii"))
+    second = tmp_path / "calibration-fe" / "P02"
+    rs = _as(rows(pid="P02", k=1), tracker="tobii")
+    write_trials(second, rs)
+    spec = {r["trial_index"]: {"n": 100, "dropped": 20, "latency_ms": 12.0} for r in rs}
+    _frame_log(second, rs[0]["session"], spec)
+    ds = load_results(tmp_path)
+    assert set(ds.trials["participant"]) == {"P01"}
+    assert [e.participant for e in ds.exclusions if e.rule == "R12 dropped frames"] == ["P02"]
+    only = tmp_path / "only"  # P01: practice only (R4); P02: the wrong parameter (R6)
+    write_trials(only / "calibration-fe" / "P01", [dict(r, practice=1) for r in rows()])
+    write_trials(only / "calibration-fe" / "P02",
+                 [dict(r, adjusted_parameter="s_k") for r in rows(pid="P02", practice=0)])
+    with pytest.raises(FovexpError, match=r"no trials left .*\(e\.g\. \S*P01\S*: practice "
+                                          r"trial\)$"):
+        load_results(only)

@@ -48,7 +48,7 @@ def draw_image(kind: str, h: int, w: int, channels: int, seed: int, level: float
         img = rng.random((h, w, colour_ch))
     elif kind == "ramp":
         img = np.repeat(((xx + yy) / max(h + w - 2, 1))[..., None], colour_ch, axis=2)
-    else:  # texture: smooth noise, flat squares, saturated colours
+    else:  # texture: smooth noise, flat squares, saturated colours (mid_texture: softened)
         from scipy import ndimage
 
         tex = sum(ndimage.gaussian_filter(rng.standard_normal((h, w)), s) * s**0.5
@@ -56,6 +56,8 @@ def draw_image(kind: str, h: int, w: int, channels: int, seed: int, level: float
         tex = (tex - tex.min()) / max(float(tex.max() - tex.min()), 1e-12)
         tex[(xx // 24 + yy // 24) % 4 == 0] = level
         img = tex[..., None] * (rng.random(colour_ch) if colour_ch == 3 else np.ones(1))
+        if kind == "mid_texture":  # inside [0.3, 0.7]: headroom for the noise everywhere
+            img = 0.3 + 0.4 * img
     if channels in (2, 4):
         img = np.concatenate([img, rng.random((h, w, 1))], axis=2)
     img = np.clip(img, 0.0, 1.0).astype(np.float32)
@@ -189,3 +191,42 @@ def noisy_setups(draw, presets=("paper", "release")):
     kw["blur_rate"] = draw(edge_floats(0.1, PARAMETER_RANGES["blur_rate"][1]))
     kw["s_k"] = draw(edge_floats(10.0, PARAMETER_RANGES["s_k"][1]))
     return case, kw, vp, draw(gazes)
+
+
+def sigma_at_centre(case: ImageCase, vp: tuple[int, int, int, int], gaze: tuple[float, float],
+                    preset_name: str, blur_rate: float = 1.0) -> float:
+    """The foveation sigma (px) at the image's centre on the paper's display (section 5.2):
+    what a strategy scales the blur-rate by to reach a case (sigma is linear in it)."""
+    from fovexp import ViewingGeometry
+    from fovexp.foveation import sigma_px
+    from fovexp.params import get_preset
+
+    preset = get_preset(preset_name)
+    geom = ViewingGeometry.for_image(load_display("lg-oled55cx"), case.width, case.height,
+                                     preset.geometry, vp)
+    x, y = np.array([case.width / 2]), np.array([case.height / 2])
+    ecc = geom.eccentricity_deg(x, y, geom.gaze_px(gaze))
+    return float(sigma_px(ecc, geom.ppd(x, y), blur_rate, preset.fovea_deg, np.float64)[0])
+
+
+@st.composite
+def peripheral_setups(draw, kinds=("texture", "random"), min_side: int = 64,
+                      sigma_px: tuple[float, float] = (2.5, 5.0), methods=("ours",)):
+    """(image case, params kwargs, viewport, gaze) built to reach a property's case in every
+    example, not by chance: an image of ``min_side`` px or more in a corner of a 4K frame on
+    the paper's display, the gaze in the opposite corner, and the blur-rate that puts the
+    foveation sigma at the image's centre in ``sigma_px`` (blurred, and the band open, across
+    the image)."""
+    side = st.integers(min_side, MAX_SIDE_PX)
+    case = draw(image_cases(kinds=kinds, channels=(1, 3)))
+    case = ImageCase(kind=case.kind, height=draw(side), width=draw(side), channels=case.channels,
+                     depth=case.depth, seed=case.seed, level=case.level)
+    kw = draw(param_kwargs(methods=methods))
+    right, bottom = draw(st.booleans()), draw(st.booleans())
+    vp = ((3840 - case.width) if right else 0, (2160 - case.height) if bottom else 0, 3840, 2160)
+    gaze = (0.0 if right else 1.0, 0.0 if bottom else 1.0)
+    target = draw(st.floats(*sigma_px))
+    kw["blur_rate"] = target / sigma_at_centre(case, vp, gaze, kw["preset"])
+    if "ours" in methods:
+        kw["s_k"] = draw(edge_floats(10.0, PARAMETER_RANGES["s_k"][1]))
+    return case, kw, vp, gaze

@@ -29,6 +29,7 @@ from stress.strategies import (
     image_cases,
     noisy_setups,
     param_kwargs,
+    peripheral_setups,
     viewports,
 )
 
@@ -75,8 +76,31 @@ def three_std_tail(impulses: int) -> float:
     return float((np.abs(noise[margin:-margin, margin:-margin]) > 0.5).mean())
 
 
+@st.composite
+def judged_noisy_setups(draw):
+    """(case, params kwargs, viewport, gaze, built): half the examples from
+    :func:`noisy_setups` (mostly small images, often too few noisy pixels to judge), half
+    built to have the noise over thousands of pixels (:func:`peripheral_setups`: 64 px or
+    more, textured, the band open across the image). Issue 19: 7 of CI's 12 examples had
+    been too small to judge."""
+    if draw(st.booleans()):
+        # values within [0.3, 0.7], the table's f_e, 12 impulses or more: headroom for K
+        # and noise over the image (a strong f_e or values at 0 and 1 leave K = 0). The
+        # table's s_f too: at the top of its range (50) about half the impulses draw F near
+        # 0 (eq. 5 truncates to (0, F_H)), kernels without a carrier whose variance is up to
+        # twice the normalisation's, and the 3-std headroom does not hold (found by the long
+        # profile: 3.4 % of noisy pixels out of range, the tail 0.35 %; benchmarks/MUTATION.md)
+        case, kw, vp, gaze = draw(peripheral_setups(kinds=("mid_texture",), methods=("ours",)))
+        kw.update(preset="paper",
+                  impulses=draw(st.sampled_from([12, 64, 512]) | st.integers(12, 512)))
+        kw.pop("f_e", None)
+        kw.pop("s_f", None)
+        return case, kw, vp, gaze, True
+    return (*draw(noisy_setups(presets=("paper",))), False)
+
+
 @settings(max_examples=examples(1.0))
-@given(setup=noisy_setups(presets=("paper",)))
+@given(setup=judged_noisy_setups())
 def test_the_noise_leaves_the_range_no_more_than_its_tail_before_clipping(setup):
     """The composed linear result, contrast + noise, before the encoding clips it. Where the
     noise pushes a channel out of [0, 1] beyond where the contrast image already was, it is in
@@ -84,7 +108,7 @@ def test_the_noise_leaves_the_range_no_more_than_its_tail_before_clipping(setup)
     own 3-std tail at this impulse count (measured beside it), within the sampling error of
     the image's clumps, whose size is set by the noise's frequency (4 standard errors). Paper
     preset: its headroom is over every channel."""
-    case, kw, vp, gaze = setup
+    case, kw, vp, gaze, built = setup
     img = case.image()
     enh = Enhancer(LG)
     enh.set_image(img, viewport=vp)
@@ -98,8 +122,10 @@ def test_the_noise_leaves_the_range_no_more_than_its_tail_before_clipping(setup)
     beyond = beyond.any(axis=2) if beyond.ndim == 3 else beyond
     noisy = noise != 0
     n = int(noisy.sum())
-    event(f"noisy pixels >= {NOISE_CLIP_MIN_PIXELS}" if n >= NOISE_CLIP_MIN_PIXELS else
-          "too few noisy pixels to judge")
+    event(f"noisy pixels >= {NOISE_CLIP_MIN_PIXELS}: judged" if n >= NOISE_CLIP_MIN_PIXELS
+          else "too few noisy pixels to judge")
+    if built:  # the case this example was made for
+        assert n >= NOISE_CLIP_MIN_PIXELS, n
     if n >= NOISE_CLIP_MIN_PIXELS:
         tail = three_std_tail(res.params.impulses)
         # the noise's typical frequency there: the centre of its log-normal, sqrt(F_L F_H)
@@ -177,24 +203,42 @@ def test_the_cli_refuses_images_too_small_in_one_line(tmp_path_factory, h, w, fl
     assert not out.exists()
 
 
+@st.composite
+def checker_setups(draw):
+    """(case, params kwargs, viewport, gaze, built): half the examples anywhere (any viewport,
+    any gaze: mostly little blur on a small image), half built to blur the checkerboard by
+    2.5 to 5 px with room inside the border (``built``: the property's case in every one of
+    them; issue 19: in CI's 6 examples the case had been reached in none)."""
+    if draw(st.booleans()):
+        setup = draw(peripheral_setups(kinds=("checker",),
+                                       methods=("foveated", "contrast", "ours")))
+        return (*setup, True)
+    case = draw(image_cases(kinds=("checker",), channels=(1, 3)))
+    return (case, draw(param_kwargs()), draw(viewports(case.height, case.width)), draw(gazes),
+            False)
+
+
 @settings(max_examples=examples(0.5))
-@given(case=image_cases(kinds=("checker",), channels=(1, 3)), kw=param_kwargs(),
-       data=st.data())
-def test_a_nyquist_checkerboard_foveates_towards_its_mean(case, kw, data):
+@given(setup=checker_setups())
+def test_a_nyquist_checkerboard_foveates_towards_its_mean(setup):
     """A checkerboard of 0 and 1 at Nyquist: its foveated linear luminance stays in [0, 1]
     and where the blur is wide (sigma >= 2 px) it is its mean 1/2 within 5 %: the blur stack
     does not alias the finest pattern into a coarser one."""
+    case, kw, vp, gaze, built = setup
     img = case.image()
-    vp = data.draw(viewports(case.height, case.width))
     enh = Enhancer(LG, preset=kw["preset"])
     enh.set_image(img, viewport=vp)
-    res = enh.enhance(data.draw(gazes), make_params(**kw))
+    res = enh.enhance(gaze, make_params(**kw))
     y = luminance(res.linear("foveated"))
+    assert y.min() >= -eps(y.dtype) and y.max() <= 1 + eps(y.dtype)
     sigma = res.map("sigma_px")
     h, w = sigma.shape
     yy, xx = np.mgrid[0:h, 0:w]
     to_border = np.minimum(np.minimum(yy, h - 1 - yy), np.minimum(xx, w - 1 - xx))
     # away from the borders, where the symmetric padding repeats a column of the pattern
     wide = (sigma >= 2.0) & (to_border >= np.ceil(3 * sigma.max()))
+    event("wide blur inside the border: judged" if wide.any() else "no wide blur: not judged")
+    if built:  # the case this example was made for
+        assert wide.mean() > 0.05, (wide.mean(), float(sigma.max()))
     if wide.any():
         assert np.abs(y[wide] - 0.5).max() <= 0.05, np.abs(y[wide] - 0.5).max()
