@@ -58,6 +58,8 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
+from fovexp.bench import machine_cpu
+
 ROOT = Path(__file__).resolve().parents[1]
 BEGIN, END = "<!-- mutation-run: begin -->", "<!-- mutation-run: end -->"
 
@@ -129,14 +131,7 @@ KEEP_OPERATORS = {
 
 
 def machine() -> str:
-    cpu = platform.machine()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
+    cpu = machine_cpu()
     return f"{cpu}, {os.cpu_count()} cores, {platform.platform()}, Python " \
            f"{platform.python_version()}"
 

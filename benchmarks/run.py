@@ -22,6 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
+from fovexp.bench import machine_cpu
+
 HERE = Path(__file__).resolve().parent
 SPONZA = HERE.parent.parent / "shared" / "stimuli" / "sponza-4k.jpg"
 # the authors' C++ noise generator, single-threaded, 4K, on a CI-class machine (docs/METHOD.md, 7)
@@ -220,14 +222,7 @@ def machine() -> dict:
     import numba
     import scipy
 
-    cpu = platform.processor() or ""
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
+    cpu = machine_cpu()
     mem_gb = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 2**30
     return {"cpu": cpu, "cores": os.cpu_count(), "memory_gb": round(mem_gb, 1),
             "python": platform.python_version(), "numpy": np.__version__,

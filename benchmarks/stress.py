@@ -19,19 +19,14 @@ import time
 from datetime import datetime, timezone
 from pathlib import Path
 
+from fovexp.bench import machine_cpu
+
 ROOT = Path(__file__).resolve().parents[1]
 BEGIN, END = "<!-- stress-run: begin -->", "<!-- stress-run: end -->"
 
 
 def machine() -> str:
-    cpu = platform.processor() or platform.machine()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
+    cpu = machine_cpu()
     return f"{platform.node()}: {cpu}, {os.cpu_count()} cores, {platform.platform()}, " \
            f"Python {platform.python_version()}"
 

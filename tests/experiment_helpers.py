@@ -13,8 +13,10 @@ import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
+import numpy as np
 import pytest
 
+import fovexp
 from fovexp.experiment.gaze import GazeSample, monotonic_us
 from fovexp.experiment.interfaces import FlipTimes
 from fovexp.experiment.trackers.simulated import ClockedGaze
@@ -253,3 +255,42 @@ class StubScreen:
 
     def close(self) -> None:
         self.closed = True
+
+
+class GreyEnhancer:
+    """Stands in for the enhancer where its pictures and speed are not under test: each render
+    takes ``delay_s`` and shows the f_e it was computed with as the test half's grey level (so
+    a test reads from the screen which render was shown); it keeps the viewports it was given,
+    and every instance made (``instances``: a test that reads them clears them first)."""
+
+    instances: list[GreyEnhancer] = []
+    backend = "fake"
+    delay_s = 0.0
+    fallback_reason: str | None = None
+
+    def __init__(self, display=None, preset="paper", geometry=None) -> None:
+        self.preset, self.geometry = preset, geometry
+        self.viewports: list[tuple[int, int, int, int] | None] = []
+        self.shape: tuple[int, ...] | None = None
+        GreyEnhancer.instances.append(self)
+
+    def set_image(self, image, foveated=False, sigma_px=None, viewport=None) -> None:
+        self.shape = image.shape
+        self.viewports.append(viewport)
+
+    def enhance(self, gaze, params):
+        if self.delay_s:
+            time.sleep(self.delay_s)
+
+        class Res:
+            output = np.full(self.shape, params.f_e, np.float32)
+
+        res = Res()
+        res.params = params  # what the renderer reports as shown
+        return res
+
+
+def use_enhancer(monkeypatch, cls: type = GreyEnhancer) -> None:
+    """The runner gets its enhancer from fovexp.make_enhancer (public API): hand it ``cls``."""
+    monkeypatch.setattr(fovexp, "make_enhancer", lambda display, preset="paper", geometry=None,
+                        table=None, backend="auto", ctx=None: cls(display, preset, geometry))

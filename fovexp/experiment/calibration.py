@@ -86,7 +86,8 @@ class CalibrationOutcome:
 
 
 class CalibrationBackend(Protocol):
-    """A tracker's own calibration (``tobii.TobiiCalibration``; :class:`SimulatedCalibration`).
+    """A tracker's own calibration (``tobii.TobiiCalibration``; :class:`SimulatedCalibration`
+    and the ioHub sources' on :class:`TrackerOwnCalibration`).
     The calls may block; the flow runs them on a worker thread."""
 
     def begin(self) -> None: ...
@@ -95,6 +96,30 @@ class CalibrationBackend(Protocol):
     def compute(self) -> CalibrationOutcome: ...
     def end(self) -> None: ...
     def user_position(self) -> tuple[Vec3 | None, Vec3 | None]: ...
+
+
+class TrackerOwnCalibration:
+    """The steps of a :class:`CalibrationBackend` for a tracker that collects nothing at
+    fovexp's targets (a simulated gaze, a tracker calibrated by its own software, a pointer):
+    the targets are shown and validated by fovexp; only :meth:`compute` differs."""
+
+    def begin(self) -> None:
+        pass
+
+    def collect(self, x: float, y: float) -> bool:
+        return True
+
+    def discard(self, x: float, y: float) -> None:
+        pass
+
+    def compute(self) -> CalibrationOutcome:
+        raise NotImplementedError
+
+    def end(self) -> None:
+        pass
+
+    def user_position(self) -> tuple[Vec3 | None, Vec3 | None]:
+        return None, None
 
 
 #: The track box assumed where a tracker gives no position guide (mm: width, height, depth around
@@ -124,7 +149,7 @@ def guide_from_origins(origins: Sequence[Vec3 | None], area: DisplayArea,
     return out[0], out[1]
 
 
-class SimulatedCalibration:
+class SimulatedCalibration(TrackerOwnCalibration):
     """The simulated tracker's calibration: it resets the simulated gaze's error at targets to
     the parameters' ``target_offset_deg`` (whatever drift was added since); its position guide
     comes from the simulated eyes' positions (:func:`guide_from_origins`)."""
@@ -132,22 +157,10 @@ class SimulatedCalibration:
     def __init__(self, gaze: SimulatedGaze) -> None:
         self.gaze = gaze
 
-    def begin(self) -> None:
-        pass
-
-    def collect(self, x: float, y: float) -> bool:
-        return True
-
-    def discard(self, x: float, y: float) -> None:
-        pass
-
     def compute(self) -> CalibrationOutcome:
         # a calibration removes any drift: what is left is the simulated calibration's error
         self.gaze.calibration_error_deg = tuple(self.gaze.p.target_offset_deg)
         return CalibrationOutcome(failed=False, status="simulated")
-
-    def end(self) -> None:
-        pass
 
     def user_position(self) -> tuple[Vec3 | None, Vec3 | None]:
         g = self.gaze

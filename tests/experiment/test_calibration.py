@@ -13,7 +13,6 @@ from pathlib import Path
 import pytest
 import yaml
 
-import fovexp
 from fovexp import load_display
 from fovexp.experiment.calibration import (
     CalibrationFlow,
@@ -35,7 +34,7 @@ from fovexp.experiment.quality import CENTRE, QualityLimits, target_points
 from fovexp.experiment.session import Session, SessionOptions
 from fovexp.experiment.trackers.simulated import SimGazeParams, SimulatedGaze
 
-from experiment_helpers import StubScreen, make_workspace
+from experiment_helpers import StubScreen, make_workspace, use_enhancer
 
 LG = load_display("lg-oled55cx")
 FIX = FixationGeometry(LG)
@@ -424,28 +423,8 @@ def test_drift_check() -> None:
 
 # -- in a session ---------------------------------------------------------------------------
 
-class FastEnhancer:
-    """Stands in for the enhancer (its speed is not under test)."""
-
-    backend = "fake"
-
-    def __init__(self, *a, **k) -> None:
-        self.shape = None
-
-    def set_image(self, image, foveated=False, sigma_px=None, viewport=None) -> None:
-        self.shape = image.shape
-
-    def enhance(self, gaze, params):
-        class Res:
-            output = __import__("numpy").zeros(self.shape, "float32")
-
-        res = Res()
-        res.params = params  # what the renderer reports as shown
-        return res
-
-
 def dry_session(tmp_path: Path, monkeypatch, n: int, **tracker) -> Session:
-    monkeypatch.setattr(fovexp, "make_enhancer", lambda *a, **k: FastEnhancer())
+    use_enhancer(monkeypatch)
     ws = make_workspace(tmp_path / "ws")
     path = ws / "protocols" / "calibration-fe.yaml"
     d = yaml.safe_load(path.read_text())

@@ -10,13 +10,10 @@ import json
 import os
 import shutil
 import subprocess
-import time
 from pathlib import Path
 
-import numpy as np
 import pytest
 
-import fovexp
 from fovexp import FovexpError
 from fovexp.experiment import diskspace
 from fovexp.experiment import session as session_module
@@ -32,9 +29,13 @@ from fovexp.experiment.session import Session, SessionOptions
 from fovexp.experiment.trial import Key
 from fovexp.results.frames import read_frame_log
 
-from experiment_helpers import REPO, ScriptedGaze, StubScreen
+from experiment_helpers import REPO, GreyEnhancer, ScriptedGaze, StubScreen, use_enhancer
 
 W, H = 480, 270
+
+
+class FakeEnhancer(GreyEnhancer):
+    delay_s = 0.005
 
 
 def test_the_estimate_and_the_refusal(tmp_path: Path, monkeypatch) -> None:
@@ -57,30 +58,8 @@ def test_the_estimate_and_the_refusal(tmp_path: Path, monkeypatch) -> None:
     assert 0 < free <= total
 
 
-class FakeEnhancer:
-    backend = "fake"
-    fallback_reason = None
-
-    def __init__(self, display, preset="paper", geometry=None) -> None:
-        self.shape = None
-
-    def set_image(self, image, foveated=False, sigma_px=None, viewport=None) -> None:
-        self.shape = image.shape
-
-    def enhance(self, gaze, params):
-        time.sleep(0.005)
-
-        class Res:
-            output = np.full(self.shape, params.f_e, np.float32)
-
-        res = Res()
-        res.params = params
-        return res
-
-
 def make_session(root: Path, monkeypatch, resume: bool = False, limit: int = 6) -> Session:
-    monkeypatch.setattr(fovexp, "make_enhancer", lambda display, preset="paper", geometry=None,
-                        table=None, backend="auto", ctx=None: FakeEnhancer(display))
+    use_enhancer(monkeypatch, FakeEnhancer)
     lp = load_protocol(REPO / "protocols" / "calibration-fe.yaml")
     opts = SessionOptions(participant="D01", results_root=root, tracker="mouse", dry_run=False,
                           window_size=(W, H), practice_trials=0, limit_trials=limit,

@@ -9,14 +9,12 @@ from __future__ import annotations
 import argparse
 import json
 import threading
-import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
 
-import fovexp
 from fovexp import FovexpError
 from fovexp.experiment import cli as run_cli_module
 from fovexp.experiment import logs as logs_module
@@ -32,38 +30,20 @@ from fovexp.experiment.protocol import load_protocol
 from fovexp.experiment.session import QUIT_TEXT, Session, SessionOptions
 from fovexp.experiment.trial import Key
 
-from experiment_helpers import REPO, ScriptedGaze, StubScreen, make_workspace
+from experiment_helpers import (
+    REPO,
+    GreyEnhancer,
+    ScriptedGaze,
+    StubScreen,
+    make_workspace,
+    use_enhancer,
+)
 
 W, H = 480, 270
 
 
-class QuickEnhancer:
-    """Stands in for the enhancer: each render takes ``delay_s`` and shows f_e as grey."""
-
-    backend = "fake"
+class QuickEnhancer(GreyEnhancer):
     delay_s = 0.01
-    fallback_reason: str | None = None
-
-    def __init__(self, display, preset="paper", geometry=None) -> None:
-        self.shape = None
-
-    def set_image(self, image, foveated=False, sigma_px=None, viewport=None) -> None:
-        self.shape = image.shape
-
-    def enhance(self, gaze, params):
-        time.sleep(self.delay_s)
-
-        class Res:
-            output = np.full(self.shape, params.f_e, np.float32)
-
-        res = Res()
-        res.params = params
-        return res
-
-
-def use(monkeypatch, cls) -> None:
-    monkeypatch.setattr(fovexp, "make_enhancer", lambda display, preset="paper", geometry=None,
-                        table=None, backend="auto", ctx=None: cls(display, preset, geometry))
 
 
 def options(tmp_path: Path, pid: str, **kw) -> SessionOptions:
@@ -136,7 +116,7 @@ def test_form_is_asked_once_per_participant(tmp_path: Path) -> None:
 
 
 def test_form_is_stored_and_kept_on_resume(tmp_path: Path, monkeypatch) -> None:
-    use(monkeypatch, QuickEnhancer)
+    use_enhancer(monkeypatch, QuickEnhancer)
     lp = load_protocol(REPO / "protocols" / "calibration-fe.yaml")
     form = {"age": 27, "sex": "female", "vision_correction": "glasses", "source": "form"}
     s = Session(lp, options(tmp_path, "F01", limit_trials=2, participant_info=form))
@@ -157,7 +137,7 @@ def test_form_is_stored_and_kept_on_resume(tmp_path: Path, monkeypatch) -> None:
 
 # -- the display checklist, --screen -------------------------------------------------------------
 def test_display_checklist_is_confirmed_and_recorded(tmp_path: Path, monkeypatch) -> None:
-    use(monkeypatch, QuickEnhancer)
+    use_enhancer(monkeypatch, QuickEnhancer)
     lp = load_protocol(REPO / "protocols" / "calibration-fe.yaml")
     screens: list[StubScreen] = []
 
@@ -192,7 +172,7 @@ def test_quit_key_on_a_message_asks_first(tmp_path: Path, monkeypatch, quit_key:
     """Escape or Q on the instructions opens the confirmation, the same as the calibration
     screens': Y quits (exit 3, everything kept), N or Escape goes back to the instructions and
     the session goes on."""
-    use(monkeypatch, QuickEnhancer)
+    use_enhancer(monkeypatch, QuickEnhancer)
     lp = load_protocol(REPO / "protocols" / "calibration-fe.yaml")
     seen: list[str] = []
 
@@ -230,7 +210,7 @@ def _break_protocol(tmp_path: Path, every: int) -> Path:
 def test_breaks_fall_on_the_plan_across_a_resume(tmp_path: Path, monkeypatch) -> None:
     """break_every = 2 with 5 main trials: breaks after the 2nd and 4th, also when the session
     was stopped after the 3rd and resumed (counted over the session, not the run)."""
-    use(monkeypatch, QuickEnhancer)
+    use_enhancer(monkeypatch, QuickEnhancer)
     lp = load_protocol(_break_protocol(tmp_path, 2))
     breaks: list[int] = []
 
@@ -258,7 +238,7 @@ def test_breaks_fall_on_the_plan_across_a_resume(tmp_path: Path, monkeypatch) ->
 
 
 def test_console_line_per_trial(tmp_path: Path, monkeypatch) -> None:
-    use(monkeypatch, QuickEnhancer)
+    use_enhancer(monkeypatch, QuickEnhancer)
     lines: list[str] = []
     lp = load_protocol(REPO / "protocols" / "calibration-fe.yaml")
     s = Session(lp, options(tmp_path, "L01", limit_trials=3, practice_trials=1,
@@ -289,7 +269,7 @@ def test_slow_backend_and_fallback_are_shown_and_recorded(tmp_path: Path, monkey
         delay_s = 0.25
         fallback_reason = "the OpenGL renderer is software (test), slower than the CPU backend"
 
-    use(monkeypatch, Slow)
+    use_enhancer(monkeypatch, Slow)
     lines: list[str] = []
     lp = load_protocol(REPO / "protocols" / "calibration-fe.yaml")
     assert lp.spec.render.max_step_ms == 100
@@ -321,7 +301,7 @@ def test_fast_backend_gives_no_warning(tmp_path: Path, monkeypatch) -> None:
     class Instant(QuickEnhancer):
         delay_s = 0.0
 
-    use(monkeypatch, Instant)
+    use_enhancer(monkeypatch, Instant)
     lines: list[str] = []
     lp = load_protocol(REPO / "protocols" / "calibration-fe.yaml")
     s = Session(lp, options(tmp_path, "S02", console=lines.append))
@@ -360,7 +340,7 @@ def test_events_in_the_frame_loop_are_written_by_the_writer_thread(tmp_path: Pat
     session file's own thread; while a frame loop runs, its thread never writes the file."""
     from fovexp.experiment import frameloop
 
-    use(monkeypatch, QuickEnhancer)
+    use_enhancer(monkeypatch, QuickEnhancer)
     writes: list[tuple[str, bool, str]] = []
     in_loop = threading.Event()
     real_write, real_run = logs_module.write_json_atomic, frameloop.TrialLoop.run

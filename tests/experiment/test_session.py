@@ -6,14 +6,11 @@ from __future__ import annotations
 
 import csv
 import json
-import time
 from pathlib import Path
 
-import numpy as np
 import pytest
 import yaml
 
-import fovexp
 from fovexp import FovexpError
 from fovexp.experiment.logs import read_trials
 from fovexp.experiment.protocol import load_protocol
@@ -21,43 +18,22 @@ from fovexp.experiment.session import Session, SessionOptions
 from fovexp.experiment.trial import Key, Wheel
 
 from analysis_fixtures import write_study
-from experiment_helpers import REPO, ScriptedGaze, StubScreen, make_workspace
+from experiment_helpers import (
+    REPO,
+    GreyEnhancer,
+    ScriptedGaze,
+    StubScreen,
+    make_workspace,
+    use_enhancer,
+)
 
 W, H = 480, 270
 
 
-class FakeEnhancer:
-    """Stands in for the enhancer (its speed is not under test): each render takes 0.2 s and
-    shows the f_e it was computed with as the grey level of the test half."""
+class FakeEnhancer(GreyEnhancer):
+    """Each render takes 0.2 s (its speed is not under test)."""
 
-    instances: list[FakeEnhancer] = []
-    backend = "fake"
-
-    def __init__(self, display, preset="paper", geometry=None) -> None:
-        self.preset, self.geometry = preset, geometry
-        self.viewports: list[tuple[int, int, int, int]] = []
-        self.shape = None
-        FakeEnhancer.instances.append(self)
-
-    def set_image(self, image, foveated=False, sigma_px=None, viewport=None) -> None:
-        self.shape = image.shape
-        self.viewports.append(viewport)
-
-    def enhance(self, gaze, params):
-        time.sleep(0.2)
-
-        class Res:
-            output = np.full(self.shape, params.f_e, np.float32)
-
-        res = Res()
-        res.params = params
-        return res
-
-
-def use_enhancer(monkeypatch, cls) -> None:
-    """The runner gets its enhancer from fovexp.make_enhancer (public API): hand it ``cls``."""
-    monkeypatch.setattr(fovexp, "make_enhancer", lambda display, preset="paper", geometry=None,
-                        table=None, backend="auto", ctx=None: cls(display, preset, geometry))
+    delay_s = 0.2
 
 
 def options(tmp_path: Path, pid: str, **kw) -> SessionOptions:
@@ -79,7 +55,7 @@ def test_logged_value_is_the_one_on_screen(tmp_path: Path, monkeypatch, enter_po
     answer. Enter pressed once it is shown (poll 150): its value. Per frame and as
     final_value, what is logged is what was on screen."""
     use_enhancer(monkeypatch, FakeEnhancer)
-    FakeEnhancer.instances.clear()
+    GreyEnhancer.instances.clear()
     lp = load_protocol(REPO / "protocols" / "calibration-fe.yaml")
     _, plan = lp.plan("V01", limit=1, practice=0)
     start = plan[0].start_value
@@ -115,7 +91,7 @@ def test_logged_value_is_the_one_on_screen(tmp_path: Path, monkeypatch, enter_po
         frames[0]["flip_time_s"]) + 0.05
     # Only the processed half reaches the enhancer, as the right half of the full frame, with
     # the protocol's preset and geometry.
-    enh = FakeEnhancer.instances[-1]
+    enh = GreyEnhancer.instances[-1]
     assert enh.shape[:2] == (H, W // 2) and enh.viewports[-1] == (W // 2, 0, W, H)
     assert (enh.preset, enh.geometry) == ("paper", "exact")
 

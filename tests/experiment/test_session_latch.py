@@ -7,12 +7,8 @@ frame logs that keep the blanking rule exactly (the rule's one definition) and t
 from __future__ import annotations
 
 import json
-import time
 from pathlib import Path
 
-import numpy as np
-
-import fovexp
 from fovexp.experiment.logs import read_trials
 from fovexp.experiment.protocol import load_protocol
 from fovexp.experiment.session import Session, SessionOptions
@@ -20,38 +16,18 @@ from fovexp.experiment.trial import Key
 from fovexp.results.blanking import BlankingRule
 from fovexp.results.frames import final_value_violations, read_frame_log, unblanked_violations
 
-from experiment_helpers import REPO, ScriptedGaze, StubScreen
+from experiment_helpers import REPO, GreyEnhancer, ScriptedGaze, StubScreen, use_enhancer
 
 W, H = 480, 270
 
 
-class FakeEnhancer:
-    """Each render takes 10 ms and shows f_e as grey."""
-
-    backend = "fake"
-    fallback_reason = None
-
-    def __init__(self, display, preset="paper", geometry=None) -> None:
-        self.shape = None
-
-    def set_image(self, image, foveated=False, sigma_px=None, viewport=None) -> None:
-        self.shape = image.shape
-
-    def enhance(self, gaze, params):
-        time.sleep(0.01)
-
-        class Res:
-            output = np.full(self.shape, params.f_e, np.float32)
-
-        res = Res()
-        res.params = params
-        return res
+class FakeEnhancer(GreyEnhancer):
+    delay_s = 0.01
 
 
 def run_session(tmp_path: Path, monkeypatch, pid: str, screen_cls=StubScreen,
                 lines: list[str] | None = None) -> Session:
-    monkeypatch.setattr(fovexp, "make_enhancer", lambda display, preset="paper", geometry=None,
-                        table=None, backend="auto", ctx=None: FakeEnhancer(display))
+    use_enhancer(monkeypatch, FakeEnhancer)
     lp = load_protocol(REPO / "protocols" / "calibration-fe.yaml")
     opts = SessionOptions(participant=pid, results_root=tmp_path / "results", tracker="mouse",
                           dry_run=False, window_size=(W, H), practice_trials=0, limit_trials=2,

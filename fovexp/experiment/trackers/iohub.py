@@ -63,8 +63,8 @@ from typing import Any
 
 from fovexp import FovexpError
 
-from ..calibration import CalibrationOutcome
-from ..gaze import GAZE_BUFFER_S, GazeSample, SampleBuffer, SourceEvent, Vec3
+from ..calibration import CalibrationOutcome, TrackerOwnCalibration
+from ..gaze import GAZE_BUFFER_S, GazeSample, SampleBuffer, SourceEvent
 from .families import IoHubConfig, check_plugin, hub_config
 
 #: ioHub's status flags of a binocular sample (its plugins' convention)
@@ -703,7 +703,7 @@ def _own_socket_sender(io: Any, timeout_s: float) -> _OwnSocketRPC:
     return _OwnSocketRPC(io, timeout_s)
 
 
-class IoHubCalibration:
+class IoHubCalibration(TrackerOwnCalibration):
     """The tracker's own set-up (``runSetupProcedure``) as the calibration flow's backend
     (``fovexp.experiment.calibration.CalibrationBackend`` with ``own_procedure``): the flow
     runs it on its worker thread, shows what is going on meanwhile, then validates on fovexp's
@@ -715,15 +715,6 @@ class IoHubCalibration:
         self.own_procedure = (
             "the EyeLink's camera set-up and calibration (on its host PC's screen and this one)"
             if fam.key == "eyelink" else f"the {fam.label}'s own calibration")
-
-    def begin(self) -> None:
-        pass
-
-    def collect(self, x: float, y: float) -> bool:
-        return True
-
-    def discard(self, x: float, y: float) -> None:
-        pass
 
     def compute(self) -> CalibrationOutcome:
         result = self.gaze.run_setup()
@@ -737,34 +728,13 @@ class IoHubCalibration:
                                   reason=f"the tracker's set-up ended with {text}"
                                   if failed else "")
 
-    def end(self) -> None:
-        pass
 
-    def user_position(self) -> tuple[Vec3 | None, Vec3 | None]:
-        return None, None
-
-
-class PointerCalibration:
+class PointerCalibration(TrackerOwnCalibration):
     """A dry run's MouseGaze: nothing to calibrate (the pointer is where :meth:`IoHubGaze.
     look_at` puts it); fovexp's screen shows its targets and validates."""
 
-    def begin(self) -> None:
-        pass
-
-    def collect(self, x: float, y: float) -> bool:
-        return True
-
-    def discard(self, x: float, y: float) -> None:
-        pass
-
     def compute(self) -> CalibrationOutcome:
         return CalibrationOutcome(failed=False, status="MouseGaze: nothing to calibrate")
-
-    def end(self) -> None:
-        pass
-
-    def user_position(self) -> tuple[Vec3 | None, Vec3 | None]:
-        return None, None
 
 
 def stop_orphan_servers() -> list[int]:
