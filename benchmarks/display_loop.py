@@ -157,6 +157,25 @@ class ThreadedSimulatedGaze:
         return True
 
 
+def wheel_participant(adjuster, every_s: float = 0.1):
+    """A participant turning the wheel one notch every ``every_s`` seconds, turning back
+    before the next notch would leave the adjuster's range (the benchmark's load: a render
+    every 100 ms)."""
+    from fovexp.experiment.trial import Wheel
+
+    state = {"next": every_s, "dir": 1}
+
+    def participant(t: float, value: float, judgeable: bool) -> list:
+        if t < state["next"]:
+            return []
+        state["next"] += every_s
+        if not adjuster.lo < adjuster.value + state["dir"] * adjuster.step < adjuster.hi:
+            state["dir"] *= -1
+        return [Wheel(state["dir"])]
+
+    return participant
+
+
 def run_block(screen, backend: str, parameter: str, seconds: float, frame_file: Path,
               latch, seed: int = 1) -> dict:
     """The session's frame loop for ``seconds`` with wheel steps every 100 ms, late-latched
@@ -167,7 +186,7 @@ def run_block(screen, backend: str, parameter: str, seconds: float, frame_file: 
     from fovexp.experiment.gaze import BlankingMonitor, FixationGeometry
     from fovexp.experiment.render import TestRenderer
     from fovexp.experiment.trackers.simulated import SimulatedGaze
-    from fovexp.experiment.trial import TrialState, ValueAdjuster, Wheel
+    from fovexp.experiment.trial import TrialState, ValueAdjuster
 
     load = load_average()
     display = load_display("lg-oled55cx")
@@ -186,15 +205,7 @@ def run_block(screen, backend: str, parameter: str, seconds: float, frame_file: 
     gaze = ThreadedSimulatedGaze(SimulatedGaze(fix, seed=seed))
     gaze.start()
     monitor = BlankingMonitor(fix)
-    ticks = {"next": 0.1, "dir": 1}
-
-    def participant(t: float, value: float, judgeable: bool) -> list:
-        if t < ticks["next"]:
-            return []
-        ticks["next"] += 0.1
-        if not lo < adjuster.value + ticks["dir"] * step < hi:
-            ticks["dir"] *= -1
-        return [Wheel(ticks["dir"])]
+    participant = wheel_participant(adjuster)
 
     def params_for(v: float):
         kw = {"f_e": v} if parameter == "f_e" else {"f_e": 0.23, "s_k": v, "s_f": 2.21}
@@ -371,7 +382,7 @@ def run_monitor_ab(screen, seconds: float, blocks: int, browser: bool, seed: int
     from fovexp.experiment.render import TestRenderer
     from fovexp.experiment.rows import gaze_items, gaze_row
     from fovexp.experiment.trackers.simulated import SimulatedGaze
-    from fovexp.experiment.trial import TrialState, ValueAdjuster, Wheel
+    from fovexp.experiment.trial import TrialState, ValueAdjuster
 
     display = load_display("lg-oled55cx")
     fix = FixationGeometry(display)
@@ -410,16 +421,7 @@ def run_monitor_ab(screen, seconds: float, blocks: int, browser: bool, seed: int
                 time.sleep(2.0)  # its start-up is over
             adjuster = ValueAdjuster(lo, hi, step, step / 4, (lo + hi) / 2)
             st = TrialState(adjuster, REFRESH_HZ)
-            ticks = {"next": 0.1, "dir": 1}
-
-            def participant(t: float, value: float, judgeable: bool, ticks: dict = ticks,
-                            adjuster: ValueAdjuster = adjuster) -> list:
-                if t < ticks["next"]:
-                    return []
-                ticks["next"] += 0.1
-                if not lo < adjuster.value + ticks["dir"] * step < hi:
-                    ticks["dir"] *= -1
-                return [Wheel(ticks["dir"])]
+            participant = wheel_participant(adjuster)
 
             def params_for(v: float):
                 return make_params(method="contrast", blur_rate=0.34, f_e=v, impulses=12,

@@ -12,11 +12,13 @@ import sys
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import pytest
 
 import fovexp
+from fovexp.experiment import scenes
 from fovexp.experiment.gaze import GazeSample, monotonic_us
 from fovexp.experiment.interfaces import FlipTimes
 from fovexp.experiment.trackers.simulated import ClockedGaze
@@ -294,3 +296,38 @@ def use_enhancer(monkeypatch, cls: type = GreyEnhancer) -> None:
     """The runner gets its enhancer from fovexp.make_enhancer (public API): hand it ``cls``."""
     monkeypatch.setattr(fovexp, "make_enhancer", lambda display, preset="paper", geometry=None,
                         table=None, backend="auto", ctx=None: cls(display, preset, geometry))
+
+
+# -- commands in this process, and images for them ------------------------------------------------
+def pattern(h: int, w: int, seed: int, dtype=np.uint8, channels: int = 3) -> np.ndarray:
+    """Random pixels over every code of ``dtype`` (an image no flat-region shortcut applies to)."""
+    hi = np.iinfo(dtype).max
+    shape = (h, w, channels) if channels > 1 else (h, w)
+    return np.random.default_rng(seed).integers(0, hi + 1, size=shape, dtype=np.int64).astype(
+        dtype)
+
+
+def write_png(path: Path, pixels: np.ndarray) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_bytes(scenes.png_bytes(pixels))
+    return path
+
+
+class Result(NamedTuple):
+    returncode: int
+    stdout: str
+    stderr: str
+
+
+def cli(capsys, args: list[str]) -> Result:
+    """``fovexp ARGS`` in this process (a new Python for each would take seconds; the
+    subprocess tests cover the installed command): exit status, stdout, stderr."""
+    from fovexp.cli import main
+
+    capsys.readouterr()
+    try:
+        rc = main(args)
+    except SystemExit as exc:  # argparse's errors
+        rc = int(exc.code or 0)
+    out = capsys.readouterr()
+    return Result(rc, out.out, out.err)

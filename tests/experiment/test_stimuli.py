@@ -8,7 +8,6 @@ from __future__ import annotations
 import hashlib
 import json
 from pathlib import Path
-from typing import NamedTuple
 
 import numpy as np
 import pytest
@@ -31,7 +30,15 @@ from fovexp.experiment.stimuli import (
     size_text,
 )
 
-from experiment_helpers import REPO, make_workspace, run_cli, xvfb_display  # noqa: F401
+from experiment_helpers import (  # noqa: F401
+    REPO,
+    cli,
+    make_workspace,
+    pattern,
+    run_cli,
+    write_png,
+    xvfb_display,
+)
 
 PINS = load_scene_pins()
 
@@ -54,39 +61,6 @@ def protocol_with(folder: Path, images: list[str], **changes) -> Path:
     path = folder / "proto.yaml"
     path.write_text(yaml.safe_dump(data))
     return path
-
-
-def write_png(path: Path, pixels: np.ndarray) -> Path:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_bytes(scenes.png_bytes(pixels))
-    return path
-
-
-class Result(NamedTuple):
-    returncode: int
-    stdout: str
-    stderr: str
-
-
-def cli(capsys, args: list[str]) -> Result:
-    """``fovexp ARGS`` in this process (a new Python for each would take seconds; the
-    subprocess tests cover the installed command): exit status, stdout, stderr."""
-    from fovexp.cli import main
-
-    capsys.readouterr()
-    try:
-        rc = main(args)
-    except SystemExit as exc:  # argparse's errors
-        rc = int(exc.code or 0)
-    out = capsys.readouterr()
-    return Result(rc, out.out, out.err)
-
-
-def pattern(h: int, w: int, seed: int, dtype=np.uint8, channels: int = 3) -> np.ndarray:
-    hi = np.iinfo(dtype).max
-    shape = (h, w, channels) if channels > 1 else (h, w)
-    return np.random.default_rng(seed).integers(0, hi + 1, size=shape, dtype=np.int64).astype(
-        dtype)
 
 
 # -- the generated scenes ------------------------------------------------------------------------

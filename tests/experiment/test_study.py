@@ -9,20 +9,17 @@ import hashlib
 import os
 import re
 from pathlib import Path
-from typing import NamedTuple
 
-import numpy as np
 import pytest
 import yaml
 
 from fovexp import FovexpError
-from fovexp.experiment import scenes
 from fovexp.experiment.protocol import limit_order, load_protocol
 from fovexp.experiment.stimuli import STUDY_FILE, StimulusSet, find_folder
 from fovexp.experiment.study import init_study, study_name
 from fovexp.experiment.xscreen import check_window_fits, x_screen_size
 
-from experiment_helpers import REPO, xvfb_display  # noqa: F401
+from experiment_helpers import REPO, cli, pattern, write_png, xvfb_display  # noqa: F401
 
 
 def tiny_display(folder: Path, w: int, h: int) -> Path:
@@ -33,32 +30,6 @@ def tiny_display(folder: Path, w: int, h: int) -> Path:
     path = folder / f"tiny-{w}x{h}.yaml"
     path.write_text(yaml.safe_dump(data))
     return path
-
-
-def write_png(path: Path, h: int, w: int, seed: int) -> Path:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    pixels = np.random.default_rng(seed).integers(0, 256, (h, w, 3), dtype=np.uint8)
-    path.write_bytes(scenes.png_bytes(pixels))
-    return path
-
-
-class Result(NamedTuple):
-    returncode: int
-    stdout: str
-    stderr: str
-
-
-def cli(capsys, args: list[str]) -> Result:
-    """``fovexp ARGS`` in this process: exit status, stdout, stderr."""
-    from fovexp.cli import main
-
-    capsys.readouterr()
-    try:
-        rc = main(args)
-    except SystemExit as exc:  # argparse's errors
-        rc = int(exc.code or 0)
-    out = capsys.readouterr()
-    return Result(rc, out.out, out.err)
 
 
 def _key(path: Path, key: str) -> str | None:
@@ -170,7 +141,7 @@ def test_stimuli_add_inside_a_study_writes_to_its_stimuli(tmp_path: Path, capsys
     assert os.environ.get("FOVEXP_STIMULI")
     init_study(tmp_path / "s")
     disp = tiny_display(tmp_path, 64, 36)
-    frame = write_png(tmp_path / "f.png", 36, 64, 3)
+    frame = write_png(tmp_path / "f.png", pattern(36, 64, 3))
     monkeypatch.chdir(tmp_path / "s" / "protocols")
     folder, _, how = find_folder()
     assert folder == (tmp_path / "s" / "stimuli").resolve() and "study folder" in how
@@ -194,7 +165,7 @@ def _lab_study(tmp_path: Path) -> Path:
     frames = tmp_path / "s" / "stimuli" / "frames"
     entries = []
     for name, (w, h) in (("lab-01", (64, 36)), ("lab-02", (32, 18))):
-        f = write_png(frames / f"{name}.png", h, w, len(entries))
+        f = write_png(frames / f"{name}.png", pattern(h, w, len(entries)))
         entries.append({"id": name, "path": f"frames/{name}.png", "source": "test",
                         "licence": "CC0-1.0", "sha256": hashlib.sha256(f.read_bytes()).hexdigest()})
     (tmp_path / "s" / "stimuli" / "manifest.yaml").write_text(yaml.safe_dump({"images": entries}))
