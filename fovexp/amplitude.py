@@ -18,7 +18,22 @@ same thing (the noise's local std is K / 6, see :mod:`fovexp.gabor`).
 
 Clipping control (section 4.2): with local minimum ``N_min`` and maximum ``N_max`` of the image
 the noise is added to, ``K`` is reduced so that ``N_max + K / 2 <= 1`` and
-``N_min - K / 2 >= 0`` (K / 2 is three noise standard deviations), and never below 0.
+``N_min - K / 2 >= 0`` (K / 2 is three noise standard deviations), and never below 0. Where
+``N_min`` and ``N_max`` are taken is a rule of its own (:data:`CLIPPING_RULES`,
+:func:`clipping_extremes`; docs/METHOD.md, 6.6; measured side by side in
+benchmarks/CLIPPING.md):
+
+``"paper"``
+    Section 4.2 as written: the level-3 min/max pyramids, one 8 x 8 block, of the luminance
+    the method processes (section 4.5).
+``"widened"``
+    Every level-3 block the kernel reaches, over the colour channels.
+``"release"``
+    The release's 25 x 25 px box of grey (docs/METHOD.md, 5.8).
+``"exact"``
+    The true extremes over the channels of the pixels each impulse's kernel covers.
+``"off"``
+    No clipping control (the uncapped K of eq. 9): a reference, not a method.
 
 References
 ----------
@@ -30,9 +45,25 @@ References
 
 from __future__ import annotations
 
-import numpy as np
+import math
+from dataclasses import dataclass
+from typing import Literal, get_args
 
-from .pyramids import abs_laplacian_reach_px, sample_bilinear
+import numpy as np
+from scipy import ndimage
+
+from .params import ClippingRule
+from .pyramids import (
+    abs_laplacian_reach_px,
+    block_extremes,
+    level_scale,
+    sample_bilinear,
+    sample_nearest,
+    window_extremes,
+)
+
+#: Where the clipping control takes N_min and N_max (module docstring).
+CLIPPING_RULES: tuple[str, ...] = get_args(ClippingRule)
 
 #: The release's amplitude gain (docs/METHOD.md, 5.7); part of what Table 2's s_k means.
 RELEASE_AMPLITUDE_GAIN = 3.5722
@@ -106,3 +137,69 @@ MAX_LAPLACIAN_LEVEL = 8
 def headroom_limit(n_min: np.ndarray, n_max: np.ndarray) -> np.ndarray:
     """Largest K that keeps ``N_max + K/2 <= 1`` and ``N_min - K/2 >= 0``; never negative."""
     return np.maximum(2.0 * np.minimum(1.0 - np.asarray(n_max), np.asarray(n_min)), 0.0)
+
+
+@dataclass(frozen=True)
+class Extremes:
+    """N_min and N_max of a clipping rule, as :func:`headroom_at` reads them: on a grid of
+    ``block`` x ``block`` px cells (``kind="blocks"``; 1: per pixel), per pixel to be reduced
+    over each kernel's square (``kind="window"``), or none (``kind="off"``)."""
+
+    kind: Literal["blocks", "window", "off"]
+    lo: np.ndarray | None = None
+    hi: np.ndarray | None = None
+    block: int = 1
+
+
+def clipping_extremes(
+    rule: str, foveated: np.ndarray, luma: np.ndarray, delta: np.ndarray, *,
+    kernel_radius_px: float, level: int = 3, box_px: int = 25,
+) -> Extremes:
+    """N_min and N_max under ``rule`` (section 4.2; module docstring) of the image the noise
+    is added to: the linear ``foveated`` image (H, W) or (H, W, C) plus the grey contrast
+    change ``delta`` (H, W), whose luminance is ``luma + delta`` (the luma weights sum to 1).
+    ``level``: the min/max pyramids' level (the paper's third: 8 x 8 blocks);
+    ``kernel_radius_px``: the Gabor kernel's reach (the widened rule's and the exact rule's
+    neighbourhood); ``box_px``: the release's box."""
+    if rule == "paper":
+        lo, hi = block_extremes(luma, level, add=delta)
+        return Extremes("blocks", lo, hi, level_scale(level))
+    if rule == "widened":
+        block = level_scale(level)
+        reach = 2 * math.ceil(kernel_radius_px / block) + 1
+        lo, hi = block_extremes(foveated, level, add=delta)
+        return Extremes("blocks", ndimage.minimum_filter(lo, reach, mode="nearest"),
+                        ndimage.maximum_filter(hi, reach, mode="nearest"), block)
+    if rule == "release":
+        grey = luma + delta
+        return Extremes("blocks", ndimage.minimum_filter(grey, box_px, mode="nearest"),
+                        ndimage.maximum_filter(grey, box_px, mode="nearest"), 1)
+    if rule == "exact":
+        lo, hi = block_extremes(foveated, 0, add=delta)
+        return Extremes("window", lo, hi, 1)
+    if rule == "off":
+        return Extremes("off")
+    raise ValueError(f"unknown clipping rule {rule!r} (choose from {', '.join(CLIPPING_RULES)})")
+
+
+def headroom_at(
+    ext: Extremes, kernel_radius_px: float, x_px: np.ndarray | None = None,
+    y_px: np.ndarray | None = None, shape: tuple[int, int] | None = None,
+) -> np.ndarray:
+    """The clipping control's largest K (:func:`headroom_limit`) at the points
+    ``(x_px, y_px)``, or, with ``shape`` instead, at every pixel of an (H, W) map; +inf
+    everywhere under the rule ``"off"``."""
+    if x_px is None:
+        if shape is None:
+            raise ValueError("headroom_at needs points or a shape")
+        if ext.kind == "window":  # every pixel's square: the separable filter
+            return headroom_limit(*window_extremes(ext.lo, ext.hi, kernel_radius_px))
+        yy, xx = np.mgrid[0:shape[0], 0:shape[1]].astype(np.float64)
+        return headroom_at(ext, kernel_radius_px, xx.ravel(), yy.ravel()).reshape(shape)
+    if ext.kind == "off":
+        return np.full(np.shape(x_px), np.inf)
+    if ext.kind == "window":
+        return headroom_limit(*window_extremes(ext.lo, ext.hi, kernel_radius_px, x_px, y_px))
+    xc, yc = np.clip(x_px, 0, None), np.clip(y_px, 0, None)
+    return headroom_limit(sample_nearest(ext.lo, xc, yc, ext.block),
+                          sample_nearest(ext.hi, xc, yc, ext.block))

@@ -35,6 +35,8 @@ from .errors import FovexpError, validation_error
 from .geometry import GeometryModel
 
 Method = Literal["foveated", "contrast", "ours"]
+#: Where the clipping control takes N_min and N_max (section 4.2; fovexp.amplitude).
+ClippingRule = Literal["paper", "widened", "release", "exact", "off"]
 PresetName = Literal["paper", "release"]
 
 METHODS: tuple[str, ...] = ("foveated", "contrast", "ours")
@@ -52,8 +54,9 @@ class Preset:
     attenuation: float
     #: Gabor kernel frequency width a, cycles/px (paper section 4.4: 0.06; release: 0.08)
     gabor_a_cpp: float
-    #: headroom neighbourhood: min/max pyramid level (paper) or a square box (release)
-    minmax: Literal["pyramid", "box"]
+    #: where the clipping control takes its extremes (section 4.2; fovexp.amplitude's
+    #: CLIPPING_RULES), the min/max pyramids' level and the release's box
+    clipping: ClippingRule
     minmax_level: int
     minmax_box_px: int
     #: per-impulse exact truncated draw (paper) or the release's rejection with fallback
@@ -64,12 +67,12 @@ class Preset:
 
 PAPER = Preset(
     name="paper", fovea_deg=8.0, geometry="exact", attenuation=0.25, gabor_a_cpp=0.06,
-    minmax="pyramid", minmax_level=3, minmax_box_px=25, frequency_draw="truncated",
+    clipping="paper", minmax_level=3, minmax_box_px=25, frequency_draw="truncated",
     transfer="power",
 )
 RELEASE = Preset(
     name="release", fovea_deg=12.0, geometry="release", attenuation=0.1, gabor_a_cpp=0.08,
-    minmax="box", minmax_level=3, minmax_box_px=25, frequency_draw="release-rejection",
+    clipping="release", minmax_level=3, minmax_box_px=25, frequency_draw="release-rejection",
     transfer="release",
 )
 PRESETS: dict[str, Preset] = {"paper": PAPER, "release": RELEASE}
@@ -98,11 +101,13 @@ class EngineOptions(BaseModel):
         ``"pyramid"``: the blur stack (:func:`fovexp.foveation.foveate`); ``"exact"``: the
         per-pixel spatially varying convolution (:func:`fovexp.foveation.foveate_exact`,
         slow: the reference).
-    ``extremes``
-        Clipping control's N_min, N_max (section 4.2). ``"pyramid"``: the min/max pyramid's
-        level-3 blocks, widened to every block the kernel reaches (the preset's neighbourhood);
-        ``"exact"``: the true min and max over the pixels each impulse's truncated kernel
-        covers. Paper preset only (the release preset keeps its 25 x 25 box).
+    ``clipping``
+        Where the clipping control takes N_min and N_max (section 4.2;
+        :mod:`fovexp.amplitude`, benchmarks/CLIPPING.md): ``None`` (default), the preset's
+        rule; ``"paper"``, one level-3 min/max block of luminance; ``"widened"``, every
+        level-3 block the kernel reaches, over the channels; ``"release"``, the release's
+        25 x 25 box of grey; ``"exact"``, the true extremes over the channels of the pixels
+        each impulse's kernel covers; ``"off"``, none (K uncapped: a reference).
     ``dtype``
         Floating-point type of every image stage (``"float64"``: the reference; the result's
         arrays then are float64 too).
@@ -126,7 +131,7 @@ class EngineOptions(BaseModel):
 
     skip: bool = True
     foveation: Literal["pyramid", "exact"] = "pyramid"
-    extremes: Literal["pyramid", "exact"] = "pyramid"
+    clipping: ClippingRule | None = None
     dtype: Literal["float32", "float64"] = "float32"
     kernel_truncation: float = Field(default=0.01, ge=1e-6, le=0.5)
     impulse_count: Literal["poisson", "jittered"] = "poisson"

@@ -44,7 +44,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy import ndimage
 
 from . import amplitude as amp
 from . import colour, frequency, gabor, orientation, pyramids
@@ -361,11 +360,8 @@ class Enhancer:
         self.options: EngineOptions = options if options is not None else EngineOptions()
         if not isinstance(self.options, EngineOptions):
             raise FovexpError(f"options must be EngineOptions, not {type(options).__name__}")
-        if self.options.extremes == "exact" and self.preset.minmax != "pyramid":
-            raise FovexpError(
-                f"extremes='exact' replaces the min/max pyramid of the paper preset; the "
-                f"{self.preset.name} preset uses its own {self.preset.minmax_box_px} px box"
-            )
+        #: where the clipping control takes its extremes (the option, else the preset's rule)
+        self.clipping: str = self.options.clipping or self.preset.clipping
         self._dtype = np.dtype(self.options.dtype).type
         if self.preset.name == "release" and geometry not in (None, "release"):
             raise FovexpError(
@@ -603,35 +599,13 @@ class Enhancer:
     def _sigma_blocks(self, geom: ViewingGeometry, gaze, blur_rate: float) -> _SigmaBlocks:
         return _SigmaBlocks(geom, gaze, blur_rate, self.preset.fovea_deg)
 
-    def _headroom(self, foveated, luma, delta) -> tuple[str, np.ndarray, np.ndarray, int]:
-        """Local minimum and maximum of the image the noise is added to (section 4.2).
-
-        Paper preset: two departures from the release, both measured (docs/STATUS.md). The
-        noise is added to every colour channel, so the extremes are taken over the channels
-        too (on grey, saturated colours clip: 5 % of the noisy Sponza pixels). And an
-        impulse's kernel reaches r = 20 px, past its own 8 x 8 block, so the level-3 min/max
-        blocks are widened to every block the kernel can reach (the paper chose level 3 to
-        match the kernel's support). What is left is the noise's tail beyond 3 std.
-        ``EngineOptions(extremes="exact")``: per pixel over the channels, reduced later over
-        exactly the pixels each impulse's kernel covers (:func:`fovexp.pyramids.
-        window_extremes`). Release preset: grey and a 25 x 25 box, as the release does
-        (docs/METHOD.md, 5.8)."""
+    def _headroom(self, foveated, luma, delta) -> amp.Extremes:
+        """N_min and N_max of the image the noise is added to (section 4.2), under
+        :attr:`clipping` (:func:`fovexp.amplitude.clipping_extremes`; docs/METHOD.md, 6.6)."""
         p = self.preset
-        if p.minmax == "pyramid" and self.options.extremes == "exact":
-            lo, hi = pyramids.block_extremes(foveated, 0, add=delta)
-            return "exact", lo, hi, 1
-        if p.minmax == "pyramid":
-            block = pyramids.level_scale(p.minmax_level)
-            reach = 2 * int(np.ceil(self._kernel_radius_px() / block)) + 1
-            lo, hi = pyramids.block_extremes(foveated, p.minmax_level, add=delta)
-            lo = ndimage.minimum_filter(lo, reach, mode="nearest")
-            hi = ndimage.maximum_filter(hi, reach, mode="nearest")
-        else:  # the release: grey, a 25 x 25 box (docs/METHOD.md, 5.8), kept for comparison
-            grey = luma + delta  # the luma weights sum to 1
-            lo = ndimage.minimum_filter(grey, p.minmax_box_px, mode="nearest")
-            hi = ndimage.maximum_filter(grey, p.minmax_box_px, mode="nearest")
-            block = 1
-        return "blocks", lo, hi, block
+        return amp.clipping_extremes(self.clipping, foveated, luma, delta,
+                                     kernel_radius_px=self._kernel_radius_px(),
+                                     level=p.minmax_level, box_px=p.minmax_box_px)
 
     def _kernel_radius_px(self) -> float:
         """The Gabor kernel's truncation radius (section 4.4; the option's truncation)."""
@@ -730,16 +704,8 @@ class Enhancer:
         f[o] = frequency.draw_release(normals[band.index[o]], mu, sig_n, band.f_high_cpp[o])
         return f
 
-    def _headroom_at(self, headroom, x, y) -> np.ndarray:
-        kind, lo, hi, block = headroom
-        if kind == "exact":
-            lo_w, hi_w = pyramids.window_extremes(lo, hi, self._kernel_radius_px(), x, y)
-            return amp.headroom_limit(lo_w, hi_w)
-        xc = np.clip(x, 0, None)
-        yc = np.clip(y, 0, None)
-        return amp.headroom_limit(
-            pyramids.sample_nearest(lo, xc, yc, block), pyramids.sample_nearest(hi, xc, yc, block)
-        )
+    def _headroom_at(self, headroom: amp.Extremes, x, y) -> np.ndarray:
+        return amp.headroom_at(headroom, self._kernel_radius_px(), x, y)
 
     def _amplitude(self, band: ImpulseParams, lap_amp, limit, s_k) -> np.ndarray:
         """K (eq. 9, with the release's gain), reduced by the clipping control; 0 where the
@@ -824,12 +790,8 @@ class Enhancer:
             return f_hi.reshape(h, w).astype(self._dtype)
         # amplitude, with the method "ours" (Enhancer._map)
         lap = c.get("abs_laplacian_full" if self.options.skip else "abs_laplacian")
-        kind, lo, hi, _ = head = c.get("headroom")
-        if kind == "exact":  # every pixel's window: the separable filter
-            limit = amp.headroom_limit(*pyramids.window_extremes(
-                lo, hi, self._kernel_radius_px())).ravel()
-        else:
-            limit = self._headroom_at(head, x, y)
+        limit = amp.headroom_at(c.get("headroom"), self._kernel_radius_px(),
+                                shape=(h, w)).ravel()
         level = amp.laplacian_level(s, self.preset.attenuation)
         pixels = ImpulseParams(np.arange(x.size), x, y, s, f_lo, f_hi, f_lo < f_hi, level)
         k = self._amplitude(pixels, amp.laplacian_amplitude_at(lap, level, x, y), limit,

@@ -83,8 +83,8 @@ def _exercise() -> None:
     enh.set_image(mixed)
     enh.enhance((0.5, 0.5), EnhanceParams(impulses=4))
     # The engine options' other paths (fovexp bench, the reference configuration): float64
-    # stages, exact extremes, the noise variants.
-    for options in (EngineOptions(dtype="float64", extremes="exact"),
+    # stages, the exact clipping extremes, the noise variants.
+    for options in (EngineOptions(dtype="float64", clipping="exact"),
                     EngineOptions(impulse_count="jittered", weights="sign", cell_scale=0.5)):
         enh = Enhancer(display, options=options)
         for img, vp in ((frame, viewport), (mixed, None)):

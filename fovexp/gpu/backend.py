@@ -162,12 +162,17 @@ class GpuEnhancer(Enhancer):
 
     backend = "gpu"
     #: The :class:`EngineOptions` this backend implements other than at their defaults.
-    SUPPORTED_OPTIONS: frozenset[str] = frozenset({"skip"})
+    SUPPORTED_OPTIONS: frozenset[str] = frozenset({"skip", "clipping"})
+    #: The clipping rules (``EngineOptions.clipping``) its shaders implement.
+    SUPPORTED_CLIPPING: frozenset[str] = frozenset({"paper", "widened"})
 
     @classmethod
     def unsupported(cls, options: EngineOptions) -> dict[str, object]:
         """The options (name: value) this backend does not implement."""
-        return {k: v for k, v in options.non_default().items() if k not in cls.SUPPORTED_OPTIONS}
+        bad = {k: v for k, v in options.non_default().items() if k not in cls.SUPPORTED_OPTIONS}
+        if options.clipping is not None and options.clipping not in cls.SUPPORTED_CLIPPING:
+            bad["clipping"] = options.clipping
+        return bad
 
     def __init__(
         self, display: Display, preset: str = "paper", geometry: GeometryModel | None = None,
@@ -613,18 +618,21 @@ class GpuEnhancer(Enhancer):
         return delta
 
     def _gpu_headroom(self, fov: Any, delta: Any) -> dict[str, Any]:
-        """Enhancer._headroom (paper preset): level-3 block extremes over the channels of the
-        image the noise is added to, widened to every block a kernel reaches."""
+        """Enhancer._headroom (amplitude.clipping_extremes): level-3 block extremes of the
+        image the noise is added to, of its luminance (rule "paper") or over its channels and
+        widened to every block a kernel reaches (rule "widened")."""
         h, w, c = self._hwc()
         p = self.preset
         block = level_scale(p.minmax_level)
-        radius = int(np.ceil(gabor.kernel_radius_px(p.gabor_a_cpp) / block))
+        paper = self.clipping == "paper"
+        radius = 0 if paper else int(np.ceil(gabor.kernel_radius_px(p.gabor_a_cpp) / block))
         bh, bw = -(-h // block), -(-w // block)
         ext = self._buffer("EXTREMES", 2 * bh * bw * _F4)
         head = self._buffer("HEADROOM", 2 * bh * bw * _F4)
         self._run("pyramids.glsl", "BLOCK_EXTREMES", self._groups_2d(bh, bw),
-                  {"FOVEATED": fov, "CONTRAST": delta, "EXTREMES": ext},
-                  image_hwc=(h, w, c), block=block, grid_hw=(bh, bw))
+                  {"FOVEATED": fov, "LUMA_PYR": self._buffers["LUMA_PYR"], "CONTRAST": delta,
+                   "EXTREMES": ext},
+                  image_hwc=(h, w, c), block=block, grid_hw=(bh, bw), over_luma=int(paper))
         self._run("pyramids.glsl", "EXTREMES_FILTER", self._groups_2d(bh, bw),
                   {"EXTREMES": ext, "HEADROOM": head}, grid_hw=(bh, bw), radius=radius)
         return dict(headroom_size_wh=(bw, bh), headroom_block=block)

@@ -102,3 +102,46 @@ def test_the_coarsest_level_is_the_one_a_blur_of_94_px_selects():
     2**-8.5 cycles/px (amplitude's docstring)."""
     assert amp.MAX_LAPLACIAN_LEVEL == 8
     assert amp.laplacian_level(np.array([94.0]), 0.25)[0] == pytest.approx(8.0, abs=0.05)
+
+
+def test_each_clipping_rule_takes_its_own_neighbourhood():
+    """The clipping control's rules (section 4.2; docs/METHOD.md, 6.6) on a grey 40 x 48 image
+    holding one saturated red pixel at (x 20, y 12) and one white pixel at (x 37, y 12), 17 px
+    to its right: worked out by hand at the red pixel (block (2, 1) of the level-3 grid)."""
+    h, w = 40, 48
+    fov = np.full((h, w, 3), 0.4, np.float32)
+    fov[12, 20] = (0.9, 0.0, 0.0)
+    fov[12, 37] = (1.0, 1.0, 1.0)
+    luma = (fov @ np.array([0.299, 0.587, 0.114], np.float32)).astype(np.float32)
+    delta = np.zeros((h, w), np.float32)
+    r = 20.2
+    x, y = np.array([20.0]), np.array([12.0])
+
+    def at(rule):
+        ext = amp.clipping_extremes(rule, fov, luma, delta, kernel_radius_px=r)
+        return float(amp.headroom_at(ext, r, x, y)[0])
+
+    # paper: one 8 x 8 block of luminance; the red pixel's luma 0.2691 is the block's minimum
+    assert at("paper") == pytest.approx(2 * 0.299 * 0.9, rel=1e-6)
+    # widened: its channels (green 0) over every block the kernel reaches: no headroom
+    assert at("widened") == 0.0
+    # release: a 25 px box of grey: the white pixel 17 px away is outside it (half-side 12)
+    assert at("release") == pytest.approx(2 * 0.299 * 0.9, rel=1e-6)
+    # exact: the channels of the kernel's square: green 0 again
+    assert at("exact") == 0.0
+    assert at("off") == np.inf
+    # one block further right (x 28) the paper rule no longer sees the red pixel, the widened
+    # rule still does (and reaches the white pixel: no room above either)
+    ext = amp.clipping_extremes("paper", fov, luma, delta, kernel_radius_px=r)
+    assert float(amp.headroom_at(ext, r, np.array([28.0]), y)[0]) == pytest.approx(0.8)
+    ext = amp.clipping_extremes("widened", fov, luma, delta, kernel_radius_px=r)
+    assert float(amp.headroom_at(ext, r, np.array([28.0]), y)[0]) == 0.0
+    # the map at every pixel is the same function as at the points
+    for rule in amp.CLIPPING_RULES:
+        ext = amp.clipping_extremes(rule, fov, luma, delta, kernel_radius_px=r)
+        full = amp.headroom_at(ext, r, shape=(h, w))
+        ys, xs = np.array([0, 12, 12, 39]), np.array([0, 20, 28, 47])
+        pts = amp.headroom_at(ext, r, xs.astype(float), ys.astype(float))
+        assert np.array_equal(full[ys, xs], pts), rule
+    with pytest.raises(ValueError, match="clipping rule"):
+        amp.clipping_extremes("widest", fov, luma, delta, kernel_radius_px=r)

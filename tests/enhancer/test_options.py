@@ -18,6 +18,7 @@ from fovexp import (
     make_options,
     pyramids,
 )
+from fovexp.params import PAPER
 
 from engine_helpers import textured_image
 
@@ -26,7 +27,7 @@ LG = load_display("lg-oled55cx")
 
 def test_defaults_are_the_method_and_bad_values_are_named():
     o = EngineOptions()
-    assert (o.skip, o.foveation, o.extremes, o.dtype) == (True, "pyramid", "pyramid", "float32")
+    assert (o.skip, o.foveation, o.clipping, o.dtype) == (True, "pyramid", None, "float32")
     assert (o.kernel_truncation, o.impulse_count, o.weights, o.cell_scale) == (
         0.01, "poisson", "uniform", 1.0)
     assert o.non_default() == {}
@@ -35,8 +36,13 @@ def test_defaults_are_the_method_and_bad_values_are_named():
                       ({"kernel_truncation": 0.0}, "kernel_truncation"), ({"skipp": 1}, "skipp")):
         with pytest.raises(FovexpError, match=field):
             make_options(**kw)
-    with pytest.raises(FovexpError, match="box"):
-        Enhancer(LG, preset="release", options=EngineOptions(extremes="exact"))
+    with pytest.raises(FovexpError, match="clipping"):
+        make_options(clipping="widest")
+    # the rule: the option's, else the preset's (every rule runs under either preset)
+    assert Enhancer(LG).clipping == PAPER.clipping
+    assert Enhancer(LG, preset="release").clipping == "release"
+    assert Enhancer(LG, preset="release", options=EngineOptions(clipping="exact")).clipping == (
+        "exact")
     enh = make_enhancer(LG, backend="cpu", options=EngineOptions(dtype="float64"))
     assert enh.options.dtype == "float64"
     # the GPU implements skip only: "auto" takes the CPU for the rest
@@ -173,21 +179,22 @@ def test_the_exact_foveation_option_runs_the_exact_convolution():
     assert np.abs(fast - exact).max() > 1e-5  # the fast one is not it
 
 
-def test_the_exact_extremes_option_takes_the_kernel_s_own_neighbourhood():
+def test_the_exact_clipping_rule_takes_the_kernel_s_own_neighbourhood():
     """N_min, N_max over exactly the pixels an impulse's truncated kernel covers: a brute-force
     check at the impulses, and never less headroom than the widened level-3 blocks (whose
     neighbourhood contains the kernel's), so K is never smaller."""
     image = textured_image(270, 480, seed=6)
     p = EnhanceParams(blur_rate=0.57, impulses=24)
     enh = {}
-    for ex in ("pyramid", "exact"):
-        e = Enhancer(LG, options=EngineOptions(extremes=ex, skip=False))
+    for ex in ("widened", "exact"):
+        e = Enhancer(LG, options=EngineOptions(clipping=ex, skip=False))
         e.set_image(image)
         e.enhance((0.5, 0.5), p)
         enh[ex] = e
     e = enh["exact"]
-    kind, lo, hi, _ = e._c.get("headroom")
-    assert kind == "exact"
+    ext = e._c.get("headroom")
+    assert ext.kind == "window"
+    lo, hi = ext.lo, ext.hi
     band = e._c.get("imp_active")
     r = gabor.kernel_radius_px(0.06)
     img = e._c.get("foveated") + e._c.get("contrast")[..., None]
@@ -201,9 +208,9 @@ def test_the_exact_extremes_option_takes_the_kernel_s_own_neighbourhood():
         ys = slice(max(math.ceil(y - r), 0), min(math.floor(y + r), 269) + 1)
         assert lo_w[i] == img[ys, xs].min() and hi_w[i] == img[ys, xs].max()
     h_exact = e._c.get("imp_headroom")
-    h_pyr = enh["pyramid"]._c.get("imp_headroom")
+    h_pyr = enh["widened"]._c.get("imp_headroom")
     assert (h_exact >= h_pyr).all() and (h_exact > h_pyr).mean() > 0.3
-    k_exact, k_pyr = e._c.get("imp_amplitude"), enh["pyramid"]._c.get("imp_amplitude")
+    k_exact, k_pyr = e._c.get("imp_amplitude"), enh["widened"]._c.get("imp_amplitude")
     assert (k_exact >= k_pyr).all() and (k_exact > k_pyr).any()
     # the amplitude map evaluates the same windows at every pixel (a separable filter)
     lo_map, hi_map = pyramids.window_extremes(lo, hi, r)

@@ -6,7 +6,7 @@ import time
 import numpy as np
 import pytest
 
-from fovexp import MAP_NAMES, EnhanceParams, Enhancer, FovexpError, load_display
+from fovexp import MAP_NAMES, EngineOptions, EnhanceParams, Enhancer, FovexpError, load_display
 from fovexp.contrast import sat_pad_px
 from fovexp.pyramids import reduce
 
@@ -27,12 +27,13 @@ def frame():
     return textured_image(270, 480, seed=5)
 
 
-def _pair(ctx, image, gaze=(0.5, 0.5), geometry=None, set_kw=None, **params):
+def _pair(ctx, image, gaze=(0.5, 0.5), geometry=None, set_kw=None, options=None, **params):
     from fovexp.gpu import GpuEnhancer
 
     p = EnhanceParams(**{"blur_rate": 0.57, "impulses": 12, "seed": 2, **params})
     out = []
-    for enh in (Enhancer(LG, geometry=geometry), GpuEnhancer(LG, geometry=geometry, ctx=ctx)):
+    for enh in (Enhancer(LG, geometry=geometry, options=options),
+                GpuEnhancer(LG, geometry=geometry, ctx=ctx, options=options)):
         enh.set_image(image, **(set_kw or {}))
         out.append((enh, enh.enhance(gaze, p)))
     return out
@@ -78,9 +79,33 @@ def test_grey_viewport_and_given_sigma_inputs_match(ctx, frame):
     assert np.abs(c2.map("noise") - g2.map("noise")).max() < 1e-3
 
 
-def test_the_fovea_is_untouched_and_the_noise_almost_never_clips(ctx):
+@pytest.mark.parametrize("rule", ["paper", "widened"])
+def test_every_map_matches_the_cpu_reference_under_each_clipping_rule(ctx, frame, rule):
+    """The two clipping rules the shaders implement (docs/GPU.md): the extremes of one
+    level-3 block of luminance, and of every block the kernel reaches over the channels."""
+    (cpu_enh, cpu), (gpu_enh, gpu) = _pair(ctx, frame, options=EngineOptions(clipping=rule))
+    assert cpu_enh.clipping == gpu_enh.clipping == rule
+    assert_maps_match(cpu_enh, cpu, gpu)
+
+
+def test_the_rules_the_shaders_lack_are_refused_by_name(ctx):
+    from fovexp.gpu import GpuEnhancer
+
+    for rule in ("release", "exact", "off"):
+        with pytest.raises(FovexpError, match=f"clipping='{rule}'"):
+            GpuEnhancer(LG, ctx=ctx, options=EngineOptions(clipping=rule))
+
+
+@pytest.mark.parametrize("rule,pushed_max,residual_db_max", [
+    ("paper", 1e-2, -20.0), ("widened", 5e-4, -40.0)])
+def test_the_fovea_is_untouched_and_the_noise_almost_never_clips(ctx, rule, pushed_max,
+                                                                 residual_db_max):
+    """The clipping control (section 4.2) keeps the noise's spectrum: what the display's clip
+    would take from the noisy image is a small share of the noise's power (the paper's one
+    block of luminance lets more through than the widened rule: benchmarks/CLIPPING.md; the
+    uncapped K, rule "off", pushes 12 % of the values out at -9.9 dB on this image)."""
     image = textured_image(540, 960, seed=4)
-    _, (_, res) = _pair(ctx, image, impulses=64)
+    _, (_, res) = _pair(ctx, image, impulses=64, options=EngineOptions(clipping=rule))
     fovea = res.map("sigma_px") == 0
     assert fovea.mean() > 0.03
     assert np.abs(res.output[fovea] - image[fovea]).max() < 2e-6
@@ -93,7 +118,11 @@ def test_the_fovea_is_untouched_and_the_noise_almost_never_clips(ctx):
     inside = (c >= 0) & (c <= 1)
     noisy = inside & (n != 0)
     pushed = inside & ((c + n < 0) | (c + n > 1))
-    assert noisy.mean() > 0.2 and pushed.sum() / noisy.sum() < 5e-4
+    assert noisy.mean() > 0.2 and pushed.sum() / noisy.sum() < pushed_max
+    v = c + n
+    excess = np.maximum(v - 1, 0) + np.maximum(-v, 0)
+    residual_db = 10 * np.log10((excess**2).sum() / (np.broadcast_to(n, c.shape) ** 2).sum())
+    assert residual_db < residual_db_max, residual_db
 
 
 def test_noise_power_lies_in_its_band(ctx):
@@ -143,9 +172,15 @@ def test_a_parameter_change_recomputes_only_what_depends_on_it(ctx, frame):
 
 def test_the_real_frame_matches_the_cpu_reference(ctx, sponza):
     small = np.clip(reduce(reduce(sponza)), 0.0, 1.0)  # 960 x 540
-    (_, cpu), (_, gpu) = _pair(ctx, small, blur_rate=0.34)
+    (cpu_enh, cpu), (gpu_enh, gpu) = _pair(ctx, small, blur_rate=0.34)
+    # K itself agrees to float32 rounding; the noise's float32 sums round in proportion to
+    # K, which the paper's clipping rule lets reach 0.9 on this dark frame (the widened rule
+    # capped it near 0.03): the largest difference stays under one 8-bit code
+    k_cpu = cpu_enh._c.get("imp_amplitude")
+    k_gpu = gpu_enh.impulse_params()["K"][cpu_enh._c.get("imp_active").index]
+    assert np.abs(k_cpu - k_gpu).max() < 2e-5 and k_cpu.max() > 0.5
     d = np.abs(cpu.output - gpu.output)
-    assert d.max() < 2e-3 and np.sqrt((d**2).mean()) < 2e-5
+    assert d.max() < 1 / 255 and np.sqrt((d**2).mean()) < 2e-5
 
 
 def test_the_release_preset_is_refused_with_a_clear_message(ctx):

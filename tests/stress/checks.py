@@ -96,15 +96,16 @@ def check_result(enh: Enhancer, res: EnhanceResult, image: np.ndarray) -> dict[s
 
     # K: non-negative, 0 where the band is empty (section 4.1), and within the headroom of
     # the image it is added to: contrast +- K/2 (3 noise std) in [0, 1] (section 4.2's
-    # clipping control; over every channel in the paper preset, on grey in the release's)
+    # clipping control; over every channel under the widened and exact rules, on luminance
+    # under the paper's and the release's, none with the rule off)
     k = maps["amplitude"]
     assert (k >= 0).all()
     assert (k[maps["f_low_cpp"] >= maps["f_high_cpp"]] == 0).all(), "K > 0 where the band is empty"
     if res.params.method != "ours":
         assert not k.any() and not maps["noise"].any()
     noisy = k > 0
-    if noisy.any():
-        base = con if enh.preset.name == "paper" else y
+    if noisy.any() and enh.clipping != "off":
+        base = con if enh.clipping in ("widened", "exact") else y
         lo = base if base.ndim == 2 else base.min(axis=2)
         hi = base if base.ndim == 2 else base.max(axis=2)
         half = 0.5 * k[noisy]

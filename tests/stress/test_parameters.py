@@ -20,6 +20,7 @@ from fovexp import (
     make_params,
     write_image,
 )
+from fovexp.amplitude import CLIPPING_RULES
 
 from stress.checks import check_result
 from stress.strategies import examples, gazes, image_cases, noisy_setups, param_kwargs, viewports
@@ -45,7 +46,7 @@ option_kwargs = st.fixed_dictionaries({
     "impulse_count": st.sampled_from(["poisson", "jittered"]),
     "weights": st.sampled_from(["uniform", "sign"]),
     "cell_scale": st.sampled_from([0.25, 1.0]) | st.floats(0.25, 1.0),
-    "extremes": st.sampled_from(["pyramid", "exact"]),
+    "clipping": st.sampled_from([None, *CLIPPING_RULES]),
 })
 
 

@@ -195,12 +195,15 @@ void main() {
 
 #ifdef ENTRY_BLOCK_EXTREMES
 // pyramids.block_extremes: min and max of each block x block block of the image the noise is
-// added to (foveated + contrast change), over every channel (paper section 4.2)
+// added to (foveated + contrast change), over every channel, or of its luminance (luma + change)
+// with over_luma (amplitude.clipping_extremes' "paper" rule; paper section 4.2)
 LOCAL_2D
 uniform ivec3 image_hwc;
 uniform int block;
 uniform ivec2 grid_hw;
+uniform int over_luma;
 layout(std430, binding = B_FOVEATED) readonly buffer Foveated { float foveated[]; };
+layout(std430, binding = B_LUMA_PYR) readonly buffer Luma { float luma[]; };  // level 0 first
 layout(std430, binding = B_CONTRAST) readonly buffer Contrast { float delta[]; };
 layout(std430, binding = B_EXTREMES) writeonly buffer Extremes { float extremes[]; };
 void main() {
@@ -211,6 +214,12 @@ void main() {
     for (int y = b.y * block; y < min(b.y * block + block, h); ++y) {
         for (int x = b.x * block; x < min(b.x * block + block, w); ++x) {
             int i = y * w + x;
+            if (over_luma != 0) {
+                float v = luma[i] + delta[i];
+                lo = min(lo, v);
+                hi = max(hi, v);
+                continue;
+            }
             for (int ch = 0; ch < c; ++ch) {
                 float v = foveated[i * c + ch] + delta[i];
                 lo = min(lo, v);
