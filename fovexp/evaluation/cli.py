@@ -62,9 +62,11 @@ def add_evaluate_parser(sub: Any) -> argparse.ArgumentParser:
         description="Per method (foveated, contrast, ours), blur-rate and eccentricity ring: "
         "the radially averaged power spectrum of the output over windowed patches in the "
         "ring, relative to the full-resolution image's, in dB against cycles/deg, with T_L "
-        "and T_H of the ring marked. The paper's figure averages the 5 calibration scenes "
-        "(fovexp stimuli generate; stimuli/generated/3840x2160/scene-00.png ... scene-04.png) "
-        "at three blur-rates.")
+        "and T_H of the ring marked. The paper's figure averages 5 scenes at three "
+        "blur-rates and does not say which scenes; the scenes are this command's IMAGEs (the "
+        "record, benchmarks/EVALUATION.md, assumes the 5 calibration scenes: fovexp stimuli "
+        "generate; stimuli/generated/3840x2160/scene-00.png ... scene-04.png). A ring whose "
+        "band lies above the image's Nyquist frequency is said in one warning line.")
     s.add_argument("images", nargs="+", type=Path, metavar="IMAGE",
                    help="full-resolution images (or folders of them), one size")
     _common(s, "blur-rates, comma-separated (default 0.11,0.34,0.57: Table 2's)",
@@ -84,13 +86,18 @@ def add_evaluate_parser(sub: Any) -> argparse.ArgumentParser:
         "licensed CC BY-NC 4.0) of foveated, contrast and ours against the full-resolution "
         "image, with a display model built from the display profile (size, resolution, "
         "distance, peak luminance, gamma), fixation at the gaze; JOD per scene and the "
-        "paper's three paired t-tests across scenes.")
+        "paper's three paired t-tests across scenes, in the foveated mode (the paper's) and "
+        "beside it the non-foveated one, with the per-scene differences in both. A blur-rate "
+        "beyond Table 2 (the paper's 0.68) clamps f_e, s_k, s_f to its last row: said in one "
+        "warning line.")
     f.add_argument("images", nargs="+", type=Path, metavar="IMAGE")
     _common(f, "the blur-rate (the paper's figure: 0.68)", None)
     f.add_argument("--contrast-ratio", type=float, default=1000.0,
                    help="the display's contrast ratio for FovVDP's display model "
                    "(default 1000, pyfvvdp's)")
     f.add_argument("--device", default="cpu", help="PyTorch device (default cpu)")
+    f.add_argument("--foveated-only", action="store_true",
+                   help="leave out the non-foveated mode (half the metric's time)")
     f.set_defaults(func=fovvdp_command)
 
     t = ev.add_parser(
@@ -114,11 +121,22 @@ def add_evaluate_parser(sub: Any) -> argparse.ArgumentParser:
         description="For each validation scene: the foveated image at the blur-rate where "
         "participants judged contrast enhancement invisible and at the one for ours (their "
         "means), each encoded as JPEG quality 90 with Pillow (4:2:0 chroma subsampling); the "
-        "file sizes and the saving of ours over contrast in %.")
+        "file sizes and the saving of ours over contrast in %. The paper took the blur-rates "
+        "of its 12-impulse experiment (Figure 16 right), and so does this command by default "
+        "(the validation whose recorded protocol has 12 impulses, else validation-12; "
+        "validation with a warning where neither is there). It also prints the saving "
+        "against the blur-rate ratio and at Table 2's pair, 0.34 against 0.57.")
     c.add_argument("results", type=Path, metavar="RESULTS",
                    help="results folder holding a validation experiment's trial logs")
-    c.add_argument("--experiment", default="validation",
-                   help="the experiment (default validation)")
+    c.add_argument("--experiment", default=None,
+                   help="the experiment (default: the 12-impulse validation, the paper's; "
+                   "see above)")
+    c.add_argument("--ratios", default=None,
+                   help="blur-rate ratios (ours / contrast) of the saving-against-ratio table, "
+                   "comma-separated (default 1,1.25,...,2.5; 'none': no table)")
+    c.add_argument("--pair", default=None, metavar="LO,HI",
+                   help="the blur-rates of contrast and ours compared as a pair (default "
+                   "0.34,0.57: Table 2's; 'none': not compared)")
     c.add_argument("--images", type=Path, default=None, metavar="DIR",
                    help="folder of the scenes as <image id>.png at the display's resolution "
                    "(default: the files the sessions recorded)")
@@ -167,9 +185,11 @@ def fovvdp_command(args: argparse.Namespace) -> int:
     if not args.contrast_ratio > 1:
         raise FovexpError(f"--contrast-ratio {args.contrast_ratio}: must be a number above 1")
     res = fovvdp.run(args.images, _setup(args), rates[0], args.out,
-                     contrast_ratio=args.contrast_ratio, device=args.device)
-    print(f"fovexp evaluate fovvdp: {len(res.images)} image(s) at blur-rate {rates[0]:g}; "
-          f"wrote {args.out}/fovvdp.csv, fovvdp-tests.csv, fovvdp.png, fovvdp.md")
+                     contrast_ratio=args.contrast_ratio, device=args.device,
+                     nonfoveated=not args.foveated_only)
+    print(f"fovexp evaluate fovvdp: {len(res.images)} image(s) at blur-rate {rates[0]:g}, "
+          f"{' and '.join(res.modes)} mode; wrote {args.out}/fovvdp.csv, fovvdp-tests.csv, "
+          "fovvdp.png, fovvdp.md")
     return 0
 
 
@@ -192,7 +212,8 @@ def temporal_command(args: argparse.Namespace) -> int:
     res = temporal.run(args.frames, _setup(args), parse_blur_rates(args.blur_rate), args.out,
                        _slices(args.slices), reseed=not args.no_reseed)
     print(f"fovexp evaluate temporal: {res.n_frames} frames x {len(res.blur_rates)} "
-          f"blur-rate(s); wrote {args.out}/temporal.csv, slices.csv, temporal.png, temporal.md")
+          f"blur-rate(s); wrote {args.out}/temporal.csv, slices.csv, pairs.csv, temporal.png, "
+          "temporal.md")
     return 0
 
 
@@ -204,13 +225,37 @@ def compression_command(args: argparse.Namespace) -> int:
 
     if not 1 <= args.quality <= 100:
         raise FovexpError(f"--quality {args.quality}: must be 1 to 100")
+    ratios = (list(compression.RATIOS) if args.ratios is None else
+              _numbers("--ratios", args.ratios, lambda r: 0 < r <= 10, "ratios in (0, 10]"))
+    pair = (list(compression.TABLE2_PAIR) if args.pair is None else
+            _numbers("--pair", args.pair, lambda b: 0 <= b <= 5, "two blur-rates in [0, 5]"))
+    if len(pair) not in (0, 2):
+        raise FovexpError(f"--pair {args.pair!r}: give two blur-rates, LO,HI")
     setup = Setup.make(args.display, args.backend, gaze=args.gaze)
     res = compression.run(args.results, setup, args.out, experiment=args.experiment,
-                          images=args.images, quality=args.quality)
-    print(f"fovexp evaluate compression: {len(res.table)} scene(s); largest saving "
-          f"{res.max_saving_pct:.1f} %; wrote {args.out}/compression.csv, compression.png, "
-          "compression.md")
+                          images=args.images, quality=args.quality, ratios=tuple(ratios),
+                          pair=(pair[0], pair[1]) if pair else None)
+    print(f"fovexp evaluate compression: {len(res.table)} scene(s) of "
+          f"{res.experiment_line()}; largest saving {res.max_saving_pct:.1f} %")
+    print("\n".join(compression.ratio_lines(res)))
+    print(f"wrote {args.out}/compression.csv, compression-ratios.csv, compression-table2.csv, "
+          "compression.png, compression.md")
     return 0
+
+
+def _numbers(option: str, text: str, ok: Any, what: str) -> list[float]:
+    """``"1,1.5"`` -> [1.0, 1.5]; ``"none"`` -> []; each checked by ``ok``."""
+    from fovexp import FovexpError
+
+    if text.strip().lower() == "none":
+        return []
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        raise FovexpError(f"{option} {text!r}: expected {what}, comma-separated") from None
+    if not all(ok(v) for v in values):  # NaN fails too
+        raise FovexpError(f"{option} {text!r}: expected {what}")
+    return values
 
 
 # -------------------------------------------------------------------------------- stereo

@@ -16,6 +16,17 @@ smaller than the display is shown full screen, as everywhere in fovexp).
 The paper's three paired t-tests across scenes: foveated against contrast and against ours
 (there p < 0.001: foveation is worse), and ours against contrast (p = 0.07: FovVDP barely
 tells them apart, which the paper attributes to its CSF's low sensitivity in the aliasing band).
+The paper reports these p-values only: no mean differences, effect sizes or per-scene JODs, so
+a record can compare its p-values and signs with the paper's, nothing more.
+
+Beside the foveated mode, the metric is also run non-foveated (``foveated=False``: every pixel
+judged as if fixated), and the note gives the per-scene differences in both modes: whether a
+difference between the methods comes from the model of the periphery or is there anyway.
+
+The parameters (f_e, s_k, s_f) come from Table 2 at the blur-rate; Table 2 stops at 0.57 and
+the paper's FovVDP figure is at 0.68, where ``fovexp.ParameterTable`` holds the 0.57 row (the
+paper does not say what it used there). Such a clamp is said in one warning line and in the
+note (:func:`.outputs.table2_clamp`).
 
 References
 ----------
@@ -30,6 +41,7 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -39,10 +51,22 @@ import numpy as np
 
 from fovexp import Display, FovexpError
 
-from .outputs import METHODS3, OutFolder, Setup, colour_of, outputs, pyplot, read_images, table_md
+from .outputs import (
+    METHODS3,
+    OutFolder,
+    Setup,
+    colour_of,
+    outputs,
+    pyplot,
+    read_images,
+    table2_clamp,
+    table_md,
+)
 
 #: The paper's t-tests: (a, b) of each paired test a - b.
 TESTS = (("foveated", "contrast"), ("foveated", "ours"), ("ours", "contrast"))
+#: The blur-rate of the paper's FovVDP figure (section 6.1).
+PAPER_BLUR_RATE = 0.68
 #: What the paper reports for them (section 6.1).
 PAPER_P = {("foveated", "contrast"): "< 0.001", ("foveated", "ours"): "< 0.001",
            ("ours", "contrast"): "0.07"}
@@ -65,7 +89,8 @@ class Metric:
     one size."""
 
     def __init__(self, display: Display, width_px: int, height_px: int,
-                 contrast_ratio: float = 1000.0, device: str = "cpu") -> None:
+                 contrast_ratio: float = 1000.0, device: str = "cpu",
+                 foveated: bool = True) -> None:
         torch, pyfvvdp = _import()
         from pyfvvdp.fvvdp_display_model import (
             fvvdp_display_geometry,
@@ -85,7 +110,8 @@ class Metric:
         except RuntimeError as exc:
             raise FovexpError(f"--device {device!r}: {exc}") from None
         self.metric = pyfvvdp.fvvdp(display_photometry=photometry, display_geometry=geometry,
-                                    foveated=True, heatmap=None, quiet=True, device=self.device)
+                                    foveated=foveated, heatmap=None, quiet=True,
+                                    device=self.device)
         self.ppd = float(geometry.get_ppd())
         self.shape = (height_px, width_px)
 
@@ -102,10 +128,20 @@ class Metric:
         return float(q)
 
 
+#: FovVDP's modes: with its model of the periphery around the fixation (the paper's), and
+#: without (every pixel as if fixated).
+MODES = ("foveated", "non-foveated")
+#: Each mode's JOD and timing columns in :attr:`FovvdpResult.jod`.
+JOD_COLUMN = {"foveated": "jod", "non-foveated": "jod_nonfoveated"}
+SECONDS_COLUMN = {"foveated": "seconds", "non-foveated": "seconds_nonfoveated"}
+
+
 @dataclass
 class FovvdpResult:
-    """``jod``: image, method, jod, seconds; ``tests``: a, b, n, mean_a, mean_b, mean_diff,
-    t, df, p, paper_p."""
+    """``jod``: image, method, jod (foveated mode), seconds, and with the non-foveated mode
+    jod_nonfoveated, seconds_nonfoveated; ``tests``: mode, a, b, n, mean_a, mean_b,
+    mean_diff, t, df, p, paper_p; ``clamp``: the line saying Table 2 was clamped ("" if
+    not)."""
 
     jod: object  # pandas.DataFrame
     tests: object  # pandas.DataFrame
@@ -113,43 +149,65 @@ class FovvdpResult:
     images: list[str]
     ppd: float
     setup_line: str = ""
+    clamp: str = ""
+
+    @property
+    def modes(self) -> list[str]:
+        return [m for m in MODES if JOD_COLUMN[m] in self.jod.columns]  # type: ignore[attr-defined]
 
 
-def analyse(paths: Sequence[Path], setup: Setup, blur_rate: float,
-            contrast_ratio: float = 1000.0, device: str = "cpu") -> FovvdpResult:
+def paired_tests(jod: Any, modes: Sequence[str]) -> Any:
+    """The paper's three paired t-tests across scenes (section 6.1) in each mode: a DataFrame
+    of mode, a, b, n, mean_a, mean_b, mean_diff, t, df, p, paper_p."""
     import pandas as pd
 
     from fovexp.analysis.stats import paired_ttest
 
+    tests = []
+    for mode in modes:
+        wide = jod.pivot(index="image", columns="method", values=JOD_COLUMN[mode])
+        for a, b in TESTS:
+            r = paired_ttest(wide[a].to_numpy(), wide[b].to_numpy())
+            tests.append({"mode": mode, "a": a, "b": b, "n": r.n, "mean_a": r.mean_a,
+                          "mean_b": r.mean_b, "mean_diff": r.mean_diff, "t": r.t, "df": r.df,
+                          "p": r.p, "paper_p": PAPER_P[(a, b)] if mode == "foveated" else "-"})
+    return pd.DataFrame(tests)
+
+
+def analyse(paths: Sequence[Path], setup: Setup, blur_rate: float,
+            contrast_ratio: float = 1000.0, device: str = "cpu",
+            nonfoveated: bool = True) -> FovvdpResult:
+    """JOD of each method's output against the full-resolution image, per scene, in the
+    foveated mode (fixation at the gaze) and, with ``nonfoveated``, the non-foveated one;
+    the paper's t-tests in each mode (module docstring)."""
+    import pandas as pd
+
     _import()  # the extra's absence as one line, before any enhancement
+    modes = MODES if nonfoveated else MODES[:1]
     enh = setup.enhancer()
-    metric: Metric | None = None
+    metrics: dict[str, Metric] = {}
     rows, names = [], []
     for name, image in read_images(paths):
         h, w = image.shape[:2]
-        if metric is None:
-            metric = Metric(setup.display, w, h, contrast_ratio, device)
-        elif metric.shape != (h, w):
+        if not metrics:
+            metrics = {m: Metric(setup.display, w, h, contrast_ratio, device,
+                                 foveated=m == "foveated") for m in modes}
+        elif metrics["foveated"].shape != (h, w):
             raise FovexpError(f"{name}: {w}x{h} px; the images of one run must share one size")
         names.append(name)
         gaze_px = (setup.gaze[0] * w - 0.5, setup.gaze[1] * h - 0.5)
         for method, out in outputs(enh, setup, image, blur_rate).items():
-            t0 = time.perf_counter()
-            q = metric.jod(out, image, gaze_px)
-            rows.append({"image": name, "method": method, "jod": q,
-                         "seconds": time.perf_counter() - t0})
-    if metric is None:
+            row: dict[str, Any] = {"image": name, "method": method}
+            for mode, metric in metrics.items():
+                t0 = time.perf_counter()
+                row[JOD_COLUMN[mode]] = metric.jod(out, image, gaze_px)
+                row[SECONDS_COLUMN[mode]] = time.perf_counter() - t0
+            rows.append(row)
+    if not metrics:
         raise FovexpError("no images given")
     jod = pd.DataFrame(rows)
-    wide = jod.pivot(index="image", columns="method", values="jod")
-    tests = []
-    for a, b in TESTS:
-        r = paired_ttest(wide[a].to_numpy(), wide[b].to_numpy())
-        tests.append({"a": a, "b": b, "n": r.n, "mean_a": r.mean_a, "mean_b": r.mean_b,
-                      "mean_diff": r.mean_diff, "t": r.t, "df": r.df, "p": r.p,
-                      "paper_p": PAPER_P[(a, b)]})
-    return FovvdpResult(jod, pd.DataFrame(tests), blur_rate, names, metric.ppd,
-                        setup.describe(enh))
+    return FovvdpResult(jod, paired_tests(jod, modes), blur_rate, names,
+                        metrics["foveated"].ppd, setup.describe(enh), table2_clamp(blur_rate))
 
 
 def figure(res: FovvdpResult):  # noqa: ANN201
@@ -172,33 +230,93 @@ def figure(res: FovvdpResult):  # noqa: ANN201
     return fig
 
 
+#: What the paper states about the FovVDP result (section 6.1): the three p-values, nothing
+#: else (no mean differences, effect sizes or per-scene JODs).
+PAPER_STATES = ("The paper reports only the three p-values (foveated mode): foveated - "
+                "contrast and foveated - ours p < 0.001, ours - contrast p = 0.07; it gives no "
+                "mean differences, effect sizes or per-scene JODs, so only the p-values and "
+                "the signs can be compared with it.")
+
+
+def per_scene(res: FovvdpResult) -> list[tuple[Any, ...]]:
+    """Per scene and mode: the three JODs, ours - contrast and foveated - contrast."""
+    rows = []
+    for image in res.images:
+        sel = res.jod[res.jod["image"] == image].set_index("method")  # type: ignore[index]
+        for mode in res.modes:
+            q = sel[JOD_COLUMN[mode]]
+            rows.append((image, mode, *(float(q[m]) for m in METHODS3),
+                         float(q["ours"] - q["contrast"]), float(q["foveated"] - q["contrast"])))
+    return rows
+
+
+def sign_agreement(res: FovvdpResult, a: str = "ours", b: str = "contrast") -> str:
+    """In how many scenes ``a - b`` has the same sign in both modes ("" with one mode)."""
+    if len(res.modes) < 2:
+        return ""
+    wide = {m: res.jod.pivot(index="image", columns="method",  # type: ignore[attr-defined]
+                             values=JOD_COLUMN[m]) for m in res.modes}
+    d = {m: np.sign((w[a] - w[b]).to_numpy()) for m, w in wide.items()}
+    same = int((d["foveated"] == d["non-foveated"]).sum())
+    return (f"{a} - {b} has the same sign in both modes in {same} of {len(res.images)} "
+            "scene(s).")
+
+
 def note(res: FovvdpResult) -> str:
+    """The Markdown note: a clamp of Table 2 in one line, the mean JODs and t-tests in each
+    mode, what the paper states, the per-scene differences in both modes."""
     jod = res.jod
-    means = jod.groupby("method")["jod"].mean()  # type: ignore[attr-defined]
-    rows = [(f"{r.a} - {r.b}", r.n, r.mean_diff, r.t, r.p, r.paper_p)
-            for r in res.tests.itertuples()]  # type: ignore[attr-defined]
+    means = [(mode, *(float(jod.loc[jod["method"] == m, JOD_COLUMN[mode]].mean())  # type: ignore[attr-defined,index]
+                      for m in METHODS3)) for mode in res.modes]
+    tests = [(r.mode, f"{r.a} - {r.b}", r.n, r.mean_diff, r.t, r.p, r.paper_p)
+             for r in res.tests.itertuples()]  # type: ignore[attr-defined]
     secs = float(jod["seconds"].mean())  # type: ignore[index]
+    clamp = ([f"**Parameters clamped**: {res.clamp}. The paper's FovVDP figure is at "
+              f"{PAPER_BLUR_RATE:g}, beyond Table 2, and does not say which parameters it "
+              "used there.", ""] if res.clamp else [])
+    agreement = sign_agreement(res)
     return "\n".join([
         "# FovVDP (paper section 6.1, Figure \"FovVDP outputs\")",
         "",
         f"Images: {', '.join(res.images)}; blur-rate {res.blur_rate:g}. {res.setup_line}.",
-        f"pyfvvdp, foveated mode, fixation at the gaze; display model from the profile "
-        f"({res.ppd:.1f} px/deg at the centre). {secs:.1f} s per JOD on average.",
         "",
-        "Mean JOD: " + ", ".join(f"{m} {means[m]:.3f}" for m in METHODS3) + ".",
+        *clamp,
+        f"pyfvvdp in {' and '.join(res.modes)} mode (foveated: fixation at the gaze, the "
+        "paper's; non-foveated: every pixel as if fixated); display model from the profile "
+        f"({res.ppd:.1f} px/deg at the centre). {secs:.1f} s per foveated JOD on average.",
+        "",
+        "Mean JOD:",
+        "",
+        table_md(means, ["mode", *METHODS3]),
         "",
         "Paired t-tests across scenes (two-sided):",
         "",
-        table_md(rows, ["test", "n", "mean diff (JOD)", "t", "p", "paper's p"]),
+        table_md(tests, ["mode", "test", "n", "mean diff (JOD)", "t", "p", "paper's p"]),
         "",
-        "Files: `fovvdp.csv` (JOD per scene and method), `fovvdp-tests.csv`, `fovvdp.png`.",
+        PAPER_STATES,
+        "",
+        "Per scene (JOD, and the differences between the methods) in each mode:",
+        "",
+        table_md(per_scene(res), ["scene", "mode", *METHODS3, "ours - contrast",
+                                  "foveated - contrast"]),
+        "",
+        *([agreement, ""] if agreement else []),
+        "Files: `fovvdp.csv` (JOD per scene and method: `jod` foveated, `jod_nonfoveated`), "
+        "`fovvdp-tests.csv` (per mode), `fovvdp.png` (foveated mode).",
         "",
     ])
 
 
 def run(paths: Sequence[Path], setup: Setup, blur_rate: float, out: Path,
-        contrast_ratio: float = 1000.0, device: str = "cpu") -> FovvdpResult:
-    res = analyse(paths, setup, blur_rate, contrast_ratio, device)
+        contrast_ratio: float = 1000.0, device: str = "cpu",
+        nonfoveated: bool = True) -> FovvdpResult:
+    """:func:`analyse`, then ``fovvdp.csv``, ``fovvdp-tests.csv``, ``fovvdp.png`` and
+    ``fovvdp.md`` into ``out``; a clamp of Table 2 is also a warning (one line)."""
+    _import()  # the extra's absence first, as the only line
+    clamp = table2_clamp(blur_rate)
+    if clamp:  # said before the (long) run, not after it
+        warnings.warn(f"fovvdp: {clamp}", UserWarning, stacklevel=2)
+    res = analyse(paths, setup, blur_rate, contrast_ratio, device, nonfoveated)
     folder = OutFolder(out)
     folder.csv("fovvdp.csv", res.jod)
     folder.csv("fovvdp-tests.csv", res.tests)

@@ -83,6 +83,23 @@ def outputs(enh: Any, setup: Setup, image: np.ndarray, blur_rate: float,
     return {m: enh.enhance(setup.gaze, setup.params(m, blur_rate)).output for m in methods}
 
 
+def table2_clamp(blur_rate: float) -> str:
+    """One line when Table 2 (paper section 5.3, ``fovexp.PAPER_TABLE2``: blur-rates 0.11 to
+    0.57) does not reach ``blur_rate``: the paper preset's f_e, s_k and s_f are then its
+    nearest row's (``ParameterTable.at`` clamps outside the table), which must not pass
+    silently (the paper's FovVDP figure is at 0.68). "" inside the table's range."""
+    from fovexp import PAPER_TABLE2
+
+    rates = [r.blur_rate for r in PAPER_TABLE2.rows]
+    lo, hi = min(rates), max(rates)
+    if lo <= blur_rate <= hi:
+        return ""
+    edge = lo if blur_rate < lo else hi
+    f_e, s_k, s_f = PAPER_TABLE2.at(edge)
+    return (f"blur-rate {blur_rate:g} lies outside Table 2's rows ({lo:g} to {hi:g}): f_e, s_k "
+            f"and s_f are clamped to its {edge:g} row (f_e {f_e:g}, s_k {s_k:g}, s_f {s_f:g})")
+
+
 def parse_blur_rates(text: str) -> list[float]:
     """``"0.11,0.34"`` -> [0.11, 0.34], each checked against the blur-rate's range."""
     from fovexp import check_parameter

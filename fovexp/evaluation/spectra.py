@@ -14,7 +14,14 @@ frequency adds nothing rather than an infinite dB).
 The band of a ring is [T_L(e), min(T_H(e), Nyquist)] at the ring's centre eccentricity e
 (Thibos et al. 1996, as the method uses it: ``fovexp.t_low_cpd``, ``t_high_cpd``), Nyquist
 being half the ring's mean pixels per degree; its power ratio is the power-weighted ratio over
-the frequencies in it.
+the frequencies in it. Where Nyquist is at or below T_L (small images: at 960 x 540 on the
+paper's display the 10-14 deg ring's Nyquist is 5 cycles/deg, T_L 9.5) the image holds no
+frequency of the band: the ring's rows are marked ``above Nyquist`` and the run says so in one
+warning, rather than showing a ratio of nothing.
+
+Which scenes: the paper's figure is "averaged over 5 scenes" and does not say which; the
+scenes averaged here are the caller's choice (the record uses the five calibration scenes),
+and the note says so.
 
 References
 ----------
@@ -24,7 +31,8 @@ References
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import warnings
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -124,11 +132,46 @@ def patch_power(image_grey: np.ndarray, patches: Patches, side_px: int,
     return power, count
 
 
+#: A method's outputs of one image at one blur-rate: ``(image, blur_rate) -> {method: output}``
+#: (default: the enhancer's, :func:`.outputs.outputs`; tests pass outputs of known spectra).
+OutputsFn = Callable[[np.ndarray, float], dict[str, np.ndarray]]
+#: ``band_status`` of a ring whose band holds frequencies of the image, and of one whose band
+#: lies above the image's Nyquist frequency.
+BAND_OPEN = "open"
+BAND_ABOVE_NYQUIST = "above Nyquist"
+BAND_BETWEEN_BINS = "no frequency bin in the band"
+
+
+def ring_band_cpd(ring: Ring, ppd: float) -> tuple[float, float]:
+    """The band of ``ring`` in cycles/deg (paper sections 4.1 and 6.1): ``(T_L(e_c),
+    min(T_H(e_c), Nyquist))`` at the ring's centre eccentricity e_c, Nyquist being half the
+    ring's mean pixels per degree ``ppd``. ``lo >= hi`` when Nyquist is at or below T_L."""
+    e_c_deg = ring.centre_deg
+    return float(t_low_cpd(e_c_deg)), min(float(t_high_cpd(e_c_deg)), 0.5 * ppd)
+
+
+def band_status(lo_cpd: float, hi_cpd: float, in_band: np.ndarray) -> str:
+    """Whether a band can be measured: :data:`BAND_OPEN`, :data:`BAND_ABOVE_NYQUIST` (the
+    image's Nyquist frequency at or below T_L) or :data:`BAND_BETWEEN_BINS`."""
+    if not lo_cpd < hi_cpd:
+        return BAND_ABOVE_NYQUIST
+    return BAND_OPEN if bool(np.any(in_band)) else BAND_BETWEEN_BINS
+
+
+def band_ratio_db(power: np.ndarray, ref_power: np.ndarray, in_band: np.ndarray) -> float:
+    """Power in the band relative to the reference's (dB): the ratio of the sums over the
+    frequency bins ``in_band``; NaN for an empty band."""
+    if not np.any(in_band):
+        return float("nan")
+    return float(_ratio_db(np.array(power[in_band].sum()), np.array(ref_power[in_band].sum())))
+
+
 @dataclass
 class SpectraResult:
     """``curves``: image (or ``all``), blur_rate, ring, method, f_cpd, power, ratio_db;
     ``bands``: image (or ``all``), blur_rate, ring, method, band_lo_cpd, band_hi_cpd,
-    ratio_db; ``patches``: ring -> patch count per image."""
+    nyquist_cpd, band_status, ratio_db (NaN unless ``band_status`` is ``open``);
+    ``n_patches``: ring -> patch count per image."""
 
     curves: object  # pandas.DataFrame
     bands: object  # pandas.DataFrame
@@ -140,6 +183,25 @@ class SpectraResult:
     blur_rates: list[float]
     setup_line: str = ""
 
+    def closed_rings(self) -> list[Ring]:
+        """The rings whose band lies above the image's Nyquist frequency."""
+        return [r for r in self.rings
+                if not ring_band_cpd(r, self.ppd[r.label])[0] < 0.5 * self.ppd[r.label]]
+
+    def nyquist_warning(self) -> str:
+        """One line naming the rings whose band lies above Nyquist ("" when none does)."""
+        closed = self.closed_rings()
+        if not closed:
+            return ""
+        parts = []
+        for r in closed:
+            lo, _hi = ring_band_cpd(r, self.ppd[r.label])
+            parts.append(f"{r.label} (T_L {lo:.3g} cpd, Nyquist {0.5 * self.ppd[r.label]:.3g} "
+                         f"cpd at {self.ppd[r.label]:.1f} px/deg)")
+        return ("spectra: the band lies above the image's Nyquist frequency in ring(s) "
+                + "; ".join(parts) + ": no frequency of this resolution is in the band, its "
+                "rows are marked 'above Nyquist' (use a larger image or other --rings)")
+
 
 def _ratio_db(num: np.ndarray, den: np.ndarray) -> np.ndarray:
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -147,66 +209,95 @@ def _ratio_db(num: np.ndarray, den: np.ndarray) -> np.ndarray:
     return np.where(np.isfinite(r), r, np.nan)
 
 
-def analyse(paths: Sequence[Path], setup: Setup, blur_rates: Sequence[float],
-            rings: Sequence[Ring] | None = None, side_px: int | None = None) -> SpectraResult:
-    """The spectra of every method's output for each image and blur-rate (module docstring)."""
-    import pandas as pd
+@dataclass
+class _Grid:
+    """The patches of every ring, fixed by the first image's size."""
 
+    shape: tuple[int, int]
+    side_px: int
+    per_ring: dict[str, Patches]
+    edges_cpd: np.ndarray
+
+    @classmethod
+    def make(cls, setup: Setup, shape: tuple[int, int], rings: Sequence[Ring],
+             side_px: int | None) -> _Grid:
+        h, w = shape
+        side_px = side_px or patch_px(w)
+        geom = ViewingGeometry.for_image(setup.display, w, h, "exact")
+        per_ring = {r.label: ring_patches(geom, setup.gaze, r, side_px) for r in rings}
+        for r in rings:
+            if not len(per_ring[r.label]):
+                raise FovexpError(
+                    f"ring {r.label}: no {side_px} px patch of a {w}x{h} image on display "
+                    f"{setup.display.name} has its centre there (gaze {setup.gaze}); "
+                    "choose rings the image reaches (--rings)")
+        edges = bin_edges_cpd(0.5 * max(float(p.ppd.max()) for p in per_ring.values()))
+        return cls(shape, side_px, per_ring, edges)
+
+    def power(self, image_grey: np.ndarray, ring: Ring) -> tuple[np.ndarray, np.ndarray]:
+        return patch_power(image_grey, self.per_ring[ring.label], self.side_px, self.edges_cpd)
+
+
+def analyse(paths: Sequence[Path], setup: Setup, blur_rates: Sequence[float],
+            rings: Sequence[Ring] | None = None, side_px: int | None = None,
+            outputs_fn: OutputsFn | None = None) -> SpectraResult:
+    """The spectra of every method's output for each image and blur-rate (module docstring).
+    ``outputs_fn``: each method's output of an image at a blur-rate (default: the
+    enhancer's)."""
     rings = list(rings or default_rings())
-    enh = setup.enhancer()
+    setup_line = "outputs given by the caller"
+    if outputs_fn is None:
+        enh = setup.enhancer()
+        setup_line = setup.describe(enh)
+
+        def outputs_fn(image: np.ndarray, br: float) -> dict[str, np.ndarray]:
+            return outputs(enh, setup, image, br)
+
     # (image, blur_rate, ring, method) -> (power, count); method "full" is the reference
     acc: dict[tuple[str, float, str, str], tuple[np.ndarray, np.ndarray]] = {}
-    edges: np.ndarray | None = None
     names: list[str] = []
-    n_patches: dict[str, int] = {}
-    ring_ppd: dict[str, float] = {}
-    shape: tuple[int, int] | None = None
+    grid: _Grid | None = None
     for name, image in read_images(paths):
         names.append(name)
         h, w = image.shape[:2]
-        if shape is None:
-            shape = (h, w)
-            side_px = side_px or patch_px(w)
-            geom = ViewingGeometry.for_image(setup.display, w, h, "exact")
-            per_ring = {r.label: ring_patches(geom, setup.gaze, r, side_px) for r in rings}
-            for r in rings:
-                pt = per_ring[r.label]
-                if not len(pt):
-                    raise FovexpError(
-                        f"ring {r.label}: no {side_px} px patch of a {w}x{h} image on display "
-                        f"{setup.display.name} has its centre there (gaze {setup.gaze}); "
-                        "choose rings the image reaches (--rings)")
-                n_patches[r.label] = len(pt)
-                ring_ppd[r.label] = float(pt.ppd.mean())
-            edges = bin_edges_cpd(0.5 * max(float(p.ppd.max()) for p in per_ring.values()))
-        elif (h, w) != shape:
+        if grid is None:
+            grid = _Grid.make(setup, (h, w), rings, side_px)
+        elif (h, w) != grid.shape:
             raise FovexpError(f"{name}: {w}x{h} px; the images of one run must share one size "
-                              f"(the first was {shape[1]}x{shape[0]})")
-        assert edges is not None and side_px is not None
+                              f"(the first was {grid.shape[1]}x{grid.shape[0]})")
         full = grey(image)
         for r in rings:
-            acc[(name, 0.0, r.label, "full")] = patch_power(full, per_ring[r.label], side_px,
-                                                            edges)
+            acc[(name, 0.0, r.label, "full")] = grid.power(full, r)
         for br in blur_rates:
-            outs = outputs(enh, setup, image, br)
-            for method, out in outs.items():
+            for method, out in outputs_fn(image, br).items():
                 g = grey(out)
                 for r in rings:
-                    acc[(name, br, r.label, method)] = patch_power(g, per_ring[r.label],
-                                                                   side_px, edges)
-    if not names:
+                    acc[(name, br, r.label, method)] = grid.power(g, r)
+    if grid is None:
         raise FovexpError("no images given")
-    assert edges is not None and side_px is not None
-    centres = np.sqrt(edges[:-1] * edges[1:])
+    n_patches = {r.label: len(grid.per_ring[r.label]) for r in rings}
+    ring_ppd = {r.label: float(grid.per_ring[r.label].ppd.mean()) for r in rings}
+    curves, bands = _tables(acc, names, rings, list(blur_rates), grid.edges_cpd, ring_ppd)
+    return SpectraResult(curves, bands, grid.side_px, rings, n_patches, ring_ppd, names,
+                         list(blur_rates), setup_line)
+
+
+def _tables(acc: dict, names: list[str], rings: list[Ring], blur_rates: list[float],
+            edges_cpd: np.ndarray, ring_ppd: dict[str, float]) -> tuple[object, object]:
+    """The curves and the band table from the accumulated powers (over each image and over
+    all of them: power summed before the ratio)."""
+    import pandas as pd
+
+    centres = np.sqrt(edges_cpd[:-1] * edges_cpd[1:])
     curves, bands = [], []
     for scope in [*names, "all"]:
         imgs = names if scope == "all" else [scope]
         for r in rings:
             ref_p = sum(acc[(i, 0.0, r.label, "full")][0] for i in imgs)
             cnt = acc[(imgs[0], 0.0, r.label, "full")][1] * len(imgs)
-            lo = float(t_low_cpd(r.centre_deg))
-            hi = min(float(t_high_cpd(r.centre_deg)), 0.5 * ring_ppd[r.label])
+            lo, hi = ring_band_cpd(r, ring_ppd[r.label])
             in_band = (centres >= lo) & (centres <= hi) & (cnt > 0)
+            status = band_status(lo, hi, in_band)
             for br in blur_rates:
                 for method in METHODS3:
                     p = sum(acc[(i, br, r.label, method)][0] for i in imgs)
@@ -215,14 +306,12 @@ def analyse(paths: Sequence[Path], setup: Setup, blur_rates: Sequence[float],
                         curves.append({"image": scope, "blur_rate": br, "ring": r.label,
                                        "method": method, "f_cpd": centres[k],
                                        "power": p[k] / cnt[k], "ratio_db": ratio[k]})
-                    band_db = (float(_ratio_db(np.array(p[in_band].sum()),
-                                               np.array(ref_p[in_band].sum())))
-                               if in_band.any() else float("nan"))
                     bands.append({"image": scope, "blur_rate": br, "ring": r.label,
                                   "method": method, "band_lo_cpd": lo, "band_hi_cpd": hi,
-                                  "ratio_db": band_db})
-    return SpectraResult(pd.DataFrame(curves), pd.DataFrame(bands), side_px, rings, n_patches,
-                         ring_ppd, names, list(blur_rates), setup.describe(enh))
+                                  "nyquist_cpd": 0.5 * ring_ppd[r.label],
+                                  "band_status": status,
+                                  "ratio_db": band_ratio_db(p, ref_p, in_band)})
+    return pd.DataFrame(curves), pd.DataFrame(bands)
 
 
 COLOURS = {"foveated": "tab:grey", "contrast": "tab:blue", "ours": "tab:orange"}
@@ -247,7 +336,8 @@ def figure(res: SpectraResult):  # noqa: ANN201  (a matplotlib Figure)
                 ax.semilogx(m["f_cpd"], m["ratio_db"], label=method, color=COLOURS[method])
             lo, hi = float(t_low_cpd(r.centre_deg)), float(t_high_cpd(r.centre_deg))
             nyq = 0.5 * res.ppd[r.label]
-            ax.axvspan(lo, min(hi, nyq), color="tab:orange", alpha=0.08)
+            if lo < min(hi, nyq):  # no band above Nyquist
+                ax.axvspan(lo, min(hi, nyq), color="tab:orange", alpha=0.08)
             ax.axvline(lo, color="k", ls="--", lw=0.8)
             ax.axvline(hi, color="k", ls=":", lw=0.8)
             ax.axhline(0.0, color="k", lw=0.5)
@@ -262,8 +352,34 @@ def figure(res: SpectraResult):  # noqa: ANN201  (a matplotlib Figure)
     return fig
 
 
+#: The paper's words on the figure's scenes (section 6.1, the caption of Figure "Fourier
+#: analysis"): five, unnamed.
+PAPER_SCENES = "averaged over 5 scenes"
+
+
+def scenes_line(res: SpectraResult) -> str:
+    """Which scenes are averaged, marked as this run's choice: the paper's figure is
+    "averaged over 5 scenes" without naming them (section 6.1)."""
+    return (f"Scenes (an assumption: the paper's figure is \"{PAPER_SCENES}\" and does not "
+            f"say which): {len(res.images)} image(s) chosen for this run, "
+            f"{', '.join(res.images)}.")
+
+
+def _band_cells(band: object, ratios: dict[str, float]) -> tuple[str, ...]:
+    """The band and the three methods' ratios of one table row; a band above Nyquist or
+    between two frequency bins is said as such, never left as NaN."""
+    lo, hi, status = band["band_lo_cpd"], band["band_hi_cpd"], band["band_status"]  # type: ignore[index]
+    if status == BAND_ABOVE_NYQUIST:
+        return (f"none: T_L {lo:.3g} >= Nyquist {band['nyquist_cpd']:.3g}",  # type: ignore[index]
+                *([BAND_ABOVE_NYQUIST] * len(METHODS3)))
+    if status != BAND_OPEN:
+        return (f"{lo:.3g}-{hi:.3g}", *([status] * len(METHODS3)))
+    return (f"{lo:.3g}-{hi:.3g}", *(f"{ratios[m]:.4g}" for m in METHODS3))
+
+
 def note(res: SpectraResult) -> str:
-    """The Markdown note: settings, rings and patches, the band ratios averaged over images."""
+    """The Markdown note: settings, scenes (an assumption), rings and patches, the band ratios
+    over the images, a band above Nyquist in one line."""
     b = res.bands
     allb = b[b["image"] == "all"]  # type: ignore[index]
     rows = []
@@ -271,27 +387,30 @@ def note(res: SpectraResult) -> str:
         for r in res.rings:
             sel = allb[(allb["blur_rate"] == br) & (allb["ring"] == r.label)]
             vals = {m: float(sel[sel["method"] == m]["ratio_db"].iloc[0]) for m in METHODS3}
-            band = sel.iloc[0]
-            rows.append((br, r.label, f"{band['band_lo_cpd']:.3g}-{band['band_hi_cpd']:.3g}",
-                         vals["foveated"], vals["contrast"], vals["ours"]))
+            rows.append((br, r.label, *_band_cells(sel.iloc[0], vals)))
     rings = "; ".join(f"{r.label}: {res.n_patches[r.label]} patches, "
                       f"{res.ppd[r.label]:.1f} px/deg" for r in res.rings)
+    warning = res.nyquist_warning()
     return "\n".join([
         "# Output spectra (paper section 6.1, Figure \"Fourier analysis\")",
         "",
-        f"Images: {', '.join(res.images)}. {res.setup_line}.",
+        scenes_line(res),
+        "",
+        f"{res.setup_line}.",
         f"Rings: {rings} (per image). Patches: {res.side_px} x {res.side_px} px, Hann window, "
         "mean removed, non-overlapping grid, a patch counted in the ring its centre lies in. "
         "Spectra of the display-encoded grey (BT.601 luma); power summed over patches and "
         "images before the ratio to full resolution.",
         "",
-        "Power in the band [T_L, min(T_H, Nyquist)] relative to full resolution (dB; 0 = "
-        "restored), over all images:",
+        "Power in the band [T_L, min(T_H, Nyquist)] at the ring's centre eccentricity, "
+        "relative to full resolution (dB; 0 = restored), over all images:",
         "",
         table_md(rows, ["blur-rate", "ring", "band (cpd)", "foveated", "contrast", "ours"]),
         "",
+        *([f"**Warning**: {warning}.", ""] if warning else []),
         "Files: `spectra.csv` (curves per image and over all: image = all), `bands.csv` (the "
-        "table above per image), `spectra.png` (rows: blur-rates, columns: rings).",
+        "table above per image, with `band_status`), `spectra.png` (rows: blur-rates, "
+        "columns: rings).",
         "",
     ])
 
@@ -299,11 +418,14 @@ def note(res: SpectraResult) -> str:
 def run(paths: Sequence[Path], setup: Setup, blur_rates: Sequence[float], out: Path,
         rings: Sequence[Ring] | None = None, side_px: int | None = None) -> SpectraResult:
     """:func:`analyse`, then write ``spectra.csv``, ``bands.csv``, ``spectra.png`` and
-    ``spectra.md`` into ``out``."""
+    ``spectra.md`` into ``out``; a band above Nyquist is also a warning (one line)."""
     res = analyse(paths, setup, blur_rates, rings, side_px)
     folder = OutFolder(out)
     folder.csv("spectra.csv", res.curves)
     folder.csv("bands.csv", res.bands)
     folder.figure("spectra.png", figure(res))
     folder.note("spectra.md", note(res))
+    warning = res.nyquist_warning()
+    if warning:
+        warnings.warn(warning, UserWarning, stacklevel=2)
     return res

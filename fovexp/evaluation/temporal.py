@@ -9,8 +9,13 @@ enhancement brings some change back, the noise more.
 A control shows why section 4.4 fixes the impulses for a whole sequence: ``ours-reseeded``
 draws new impulses every frame (seed + frame index), and its inter-frame SSIM drops.
 
-SSIM is :func:`fovexp.ssim` (scikit-image's definition, checked against it in the tests) on
-the display-encoded grey (BT.601 luma). Frames are streamed: one frame and one previous grey
+SSIM is :func:`fovexp.ssim` (scikit-image's default definition: a 7 x 7 uniform window, sample
+covariances; checked against it in the tests) on the display-encoded grey (BT.601 luma), and,
+beside it, the standard SSIM of Wang et al. 2004 (:func:`standard_ssim`: an 11 x 11 Gaussian
+window of sigma 1.5 px, population covariances). The paper does not say which it used. Where
+two conditions differ by less than the two variants differ from each other, their order is
+not established by the measure, and the note flags it (:func:`close_margins`). Frames are
+streamed: one frame and one previous grey
 image per condition are held at a time, whatever the length; each blur-rate is a pass over the
 sequence with its own enhancers, whose stage caches keep what does not depend on the frame.
 
@@ -22,10 +27,14 @@ References
    G. (2019). DeepFovea: Neural Reconstruction for Foveated Rendering and Video Compression
    using Learned Statistics of Natural Videos. ACM Transactions on Graphics 38(6).
    doi:10.1145/3355089.3356557
+.. [wang] Wang, Z., Bovik, A. C., Sheikh, H. R., Simoncelli, E. P. (2004). Image Quality
+   Assessment: From Error Visibility to Structural Similarity. IEEE Trans. Image Processing
+   13(4), 600-612. doi:10.1109/TIP.2003.819861
 """
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -42,29 +51,54 @@ CONDITIONS = ("full", *METHODS3, "ours-reseeded")
 #: at mid-height, one right and below it (on the paper's display with a central gaze, about
 #: 22 and 27 deg out).
 DEFAULT_SLICES: tuple[tuple[float, float], ...] = ((0.25, 0.5), (0.8, 0.7))
+#: The SSIM variants: fovexp's (:func:`fovexp.ssim`) and the standard one
+#: (:func:`standard_ssim`).
+VARIANTS = ("fovexp", "standard")
+#: Pairs of conditions in the paper's order (section 6.2: foveated > contrast > ours > full
+#: resolution) whose margins are compared with the difference between the SSIM variants.
+ORDERED_PAIRS = (("foveated", "contrast"), ("contrast", "ours"), ("ours", "full"))
+
+
+def standard_ssim(a: np.ndarray, b: np.ndarray, data_range: float = 1.0) -> float:
+    """Wang et al. 2004's SSIM as published: an 11 x 11 Gaussian window of sigma 1.5 px,
+    population (not sample) covariances, K1 = 0.01, K2 = 0.03, the map averaged without its
+    5 px border. It is scikit-image's ``structural_similarity(gaussian_weights=True,
+    sigma=1.5, use_sample_covariance=False)``, called here."""
+    from skimage.metrics import structural_similarity
+
+    return float(structural_similarity(np.asarray(a, np.float64), np.asarray(b, np.float64),
+                                       data_range=data_range, gaussian_weights=True, sigma=1.5,
+                                       use_sample_covariance=False))
 
 
 class _Running:
-    """Mean SSIM between consecutive grey frames."""
+    """The SSIM between each frame and the one before it (section 6.2), under both variants."""
 
     def __init__(self) -> None:
         self.prev: np.ndarray | None = None
-        self.values: list[float] = []
+        self.values: dict[str, list[float]] = {v: [] for v in VARIANTS}
 
     def add(self, g: np.ndarray) -> None:
         if self.prev is not None:
-            self.values.append(ssim(self.prev, g))
+            self.values["fovexp"].append(ssim(self.prev, g))
+            self.values["standard"].append(standard_ssim(self.prev, g))
         self.prev = g
 
-    @property
-    def mean(self) -> float:
-        return float(np.mean(self.values)) if self.values else float("nan")
+    def mean(self, variant: str = "fovexp") -> float:
+        v = self.values[variant]
+        return float(np.mean(v)) if v else float("nan")
+
+
+#: The column of each SSIM variant's mean in :attr:`TemporalResult.ssim`.
+MEAN_COLUMN = {"fovexp": "mean_ssim", "standard": "mean_ssim_standard"}
 
 
 @dataclass
 class TemporalResult:
-    """``ssim``: condition, blur_rate (NaN for full), mean_ssim, n_pairs; ``slices``: frame,
-    pixel (index), x_px, y_px, condition, blur_rate, value."""
+    """``ssim``: condition, blur_rate (NaN for full), mean_ssim (fovexp's SSIM),
+    mean_ssim_standard (Wang et al. 2004's), n_pairs; ``pairs``: condition, blur_rate, pair
+    (k: frames k and k + 1), ssim, ssim_standard; ``slices``: frame, pixel (index), x_px,
+    y_px, condition, blur_rate, value."""
 
     ssim: object  # pandas.DataFrame
     slices: object  # pandas.DataFrame
@@ -74,18 +108,67 @@ class TemporalResult:
     slice_px: list[tuple[int, int]]
     setup_line: str = ""
     notes: list[str] = field(default_factory=list)
+    pairs: object = None  # pandas.DataFrame
 
-    def mean(self, condition: str, blur_rate: float | None = None) -> float:
+    def mean(self, condition: str, blur_rate: float | None = None,
+             variant: str = "fovexp") -> float:
         df = self.ssim
         sel = df[df["condition"] == condition]  # type: ignore[index]
         if condition != "full":
             sel = sel[sel["blur_rate"] == blur_rate]
-        return float(sel["mean_ssim"].iloc[0])
+        return float(sel[MEAN_COLUMN[variant]].iloc[0])
 
-    def order_holds(self, blur_rate: float) -> bool:
+    def order_holds(self, blur_rate: float, variant: str = "fovexp") -> bool:
         """The paper's order at ``blur_rate``: foveated > contrast > ours."""
-        f, c, o = (self.mean(m, blur_rate) for m in METHODS3)
+        f, c, o = (self.mean(m, blur_rate, variant) for m in METHODS3)
         return f > c > o
+
+
+@dataclass(frozen=True)
+class Margin:
+    """The margin ``a - b`` between two conditions' mean SSIM under each variant, and the
+    difference between the variants (the larger of the two conditions')."""
+
+    a: str
+    b: str
+    blur_rate: float
+    margin: float
+    margin_standard: float
+    variant_gap: float
+
+    @property
+    def close(self) -> bool:
+        """The margin is smaller than the difference between the SSIM variants."""
+        return abs(self.margin) < self.variant_gap
+
+
+def margins(res: TemporalResult, blur_rate: float) -> list[Margin]:
+    """The margins of :data:`ORDERED_PAIRS` at ``blur_rate`` (conditions present only)."""
+    have = set(res.ssim["condition"])  # type: ignore[index]
+    out = []
+    for a, b in ORDERED_PAIRS:
+        if not {a, b} <= have:
+            continue
+        m = {v: (res.mean(a, blur_rate, v), res.mean(b, blur_rate, v)) for v in VARIANTS}
+        gap = max(abs(m["fovexp"][0] - m["standard"][0]), abs(m["fovexp"][1] - m["standard"][1]))
+        out.append(Margin(a, b, blur_rate, m["fovexp"][0] - m["fovexp"][1],
+                          m["standard"][0] - m["standard"][1], gap))
+    return out
+
+
+def close_margins(res: TemporalResult) -> list[str]:
+    """One line per margin (section 6.2's order) smaller than the difference between the two
+    SSIM variants: such an order is not established by the measure."""
+    lines = []
+    for br in res.blur_rates:
+        for m in margins(res, br):
+            if m.close:
+                lines.append(
+                    f"blur-rate {br:g}: {m.a} - {m.b} = {m.margin:+.4f} under fovexp's SSIM "
+                    f"({m.margin_standard:+.4f} under the standard SSIM) is smaller than the "
+                    f"difference between the two SSIM variants ({m.variant_gap:.4f}): the "
+                    f"order of {m.a} and {m.b} is within the choice of SSIM")
+    return lines
 
 
 def slice_pixels(size: tuple[int, int], slices: Sequence[tuple[float, float]]
@@ -102,6 +185,7 @@ def analyse(source: Path, setup: Setup, blur_rates: Sequence[float],
     import pandas as pd
 
     rows: list[dict] = []
+    pair_rows: list[dict] = []
     slice_rows: list[dict] = []
     n_frames = 0
     size: tuple[int, int] | None = None
@@ -146,11 +230,16 @@ def analyse(source: Path, setup: Setup, blur_rates: Sequence[float],
             raise FovexpError(f"{source}: {n} frame(s); the inter-frame SSIM needs 2 or more")
         n_frames = n
         for c, r in run.items():
-            rows.append({"condition": c, "blur_rate": float("nan") if c == "full" else br,
-                         "mean_ssim": r.mean, "n_pairs": len(r.values)})
+            rate = float("nan") if c == "full" else br
+            rows.append({"condition": c, "blur_rate": rate, "mean_ssim": r.mean("fovexp"),
+                         "mean_ssim_standard": r.mean("standard"),
+                         "n_pairs": len(r.values["fovexp"])})
+            pair_rows += [{"condition": c, "blur_rate": rate, "pair": k, "ssim": v,
+                           "ssim_standard": w}
+                          for k, (v, w) in enumerate(zip(*r.values.values(), strict=True))]
     assert size is not None
     return TemporalResult(pd.DataFrame(rows), pd.DataFrame(slice_rows), n_frames, size,
-                          list(blur_rates), pix, setup_line)
+                          list(blur_rates), pix, setup_line, pairs=pd.DataFrame(pair_rows))
 
 
 COLOURS = {"full": "k", "foveated": "tab:grey", "contrast": "tab:blue", "ours": "tab:orange",
@@ -196,8 +285,18 @@ def figure(res: TemporalResult):  # noqa: ANN201
     return fig
 
 
+def _order_cell(res: TemporalResult, condition: str, blur_rate: float) -> str:
+    """"yes"/"no" per SSIM variant in the row of ``ours``: does the paper's order hold."""
+    if condition != "ours":
+        return ""
+    return " / ".join("yes" if res.order_holds(blur_rate, v) else "no" for v in VARIANTS)
+
+
 def note(res: TemporalResult, source: str) -> str:
-    rows = [("full resolution", "-", res.mean("full"), "-")]
+    """The Markdown note: both SSIM variants per condition, the paper's order under each, the
+    margins within the variants' difference, the re-seeding control."""
+    rows = [("full resolution", "-", res.mean("full"), res.mean("full", variant="standard"),
+             "-")]
     for br in res.blur_rates:
         for c in (*METHODS3, "ours-reseeded"):
             sel = res.ssim[(res.ssim["condition"] == c)  # type: ignore[index]
@@ -205,21 +304,33 @@ def note(res: TemporalResult, source: str) -> str:
             if sel.empty:
                 continue
             rows.append((c, br, float(sel["mean_ssim"].iloc[0]),
-                         "yes" if c == "ours" and res.order_holds(br) else
-                         ("no" if c == "ours" else "")))
+                         float(sel["mean_ssim_standard"].iloc[0]), _order_cell(res, c, br)))
+    close = close_margins(res)
     lines = [
         "# Temporal coherence (paper section 6.2)",
         "",
         f"Sequence: {source}, {res.n_frames} frames of {res.size[0]}x{res.size[1]} px. "
         f"{res.setup_line}.",
-        "Mean SSIM between consecutive frames (fovexp.ssim: scikit-image's definition, 7 x 7 "
-        "window, on the display-encoded BT.601 grey). `ours-reseeded`: ours with new impulses "
-        "every frame (seed + frame index), the control for section 4.4's fixed impulses.",
+        "Mean SSIM between consecutive frames on the display-encoded BT.601 grey, under two "
+        "variants (the paper does not say which it used): fovexp's (fovexp.ssim: "
+        "scikit-image's default, 7 x 7 uniform window, sample covariances) and the standard "
+        "SSIM (Wang et al. 2004: 11 x 11 Gaussian window, sigma 1.5 px, population "
+        "covariances). `ours-reseeded`: ours with new impulses every frame (seed + frame "
+        "index), the control for section 4.4's fixed impulses.",
         "",
-        table_md(rows, ["condition", "blur-rate", "mean SSIM",
-                        "foveated > contrast > ours"]),
+        table_md(rows, ["condition", "blur-rate", "mean SSIM (fovexp)",
+                        "mean SSIM (standard)", "foveated > contrast > ours (fovexp / standard)"]),
         "",
     ]
+    if close:
+        lines += ["Margins smaller than the difference between the two SSIM variants (the order "
+                  "of these conditions depends on the choice of SSIM):", ""]
+        lines += [f"- {c}." for c in close]
+    else:
+        lines.append("Every margin between neighbours in the paper's order (foveated, "
+                     "contrast, ours, full resolution) is larger in size than the difference "
+                     "between the two SSIM variants.")
+    lines.append("")
     for br in res.blur_rates:
         if (res.ssim["condition"] == "ours-reseeded").any():  # type: ignore[index]
             drop = res.mean("ours", br) - res.mean("ours-reseeded", br)
@@ -229,19 +340,28 @@ def note(res: TemporalResult, source: str) -> str:
     lines += ["",
               "Temporal slices (`slices.csv`, right of `temporal.png`): the grey value of "
               + " and ".join(f"pixel ({x}, {y})" for x, y in res.slice_px)
-              + " in every frame, per condition.", ""]
+              + " in every frame, per condition. Each pair's SSIM under both variants: "
+              "`pairs.csv`.", ""]
     return "\n".join(lines)
 
 
 def run(source: Path, setup: Setup, blur_rates: Sequence[float], out: Path,
         slices: Sequence[tuple[float, float]] = DEFAULT_SLICES,
         reseed: bool = True) -> TemporalResult:
-    """:func:`analyse`, then ``temporal.csv``, ``slices.csv``, ``temporal.png`` and
-    ``temporal.md`` into ``out``."""
+    """:func:`analyse`, then ``temporal.csv``, ``slices.csv``, ``pairs.csv``, ``temporal.png``
+    and ``temporal.md`` into ``out``; a margin within the SSIM variants' difference is also a
+    warning (:func:`close_margins`)."""
     res = analyse(source, setup, blur_rates, slices, reseed)
     folder = OutFolder(out)
     folder.csv("temporal.csv", res.ssim)
     folder.csv("slices.csv", res.slices)
+    folder.csv("pairs.csv", res.pairs)
     folder.figure("temporal.png", figure(res))
     folder.note("temporal.md", note(res, str(source)))
+    close = close_margins(res)
+    if close:
+        warnings.warn(f"temporal: {len(close)} margin(s) of the paper's order are smaller than "
+                      "the difference between fovexp's and the standard SSIM (listed in "
+                      f"{out / 'temporal.md'}), the first: {close[0]}", UserWarning,
+                      stacklevel=2)
     return res

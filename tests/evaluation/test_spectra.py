@@ -34,11 +34,18 @@ def inputs(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def result(inputs):
+def run_and_warnings(inputs):
     d, display, images = inputs
     setup = Setup.make(str(display), backend="cpu")
-    return spectra.run(images, setup, [0.57], d / "out",
-                       rings=spectra.default_rings((11.0, 17.0), 2.0))
+    with pytest.warns(UserWarning) as caught:
+        res = spectra.run(images, setup, [0.57], d / "out",
+                          rings=spectra.default_rings((11.0, 17.0), 2.0))
+    return res, [str(w.message) for w in caught]
+
+
+@pytest.fixture(scope="module")
+def result(run_and_warnings):
+    return run_and_warnings[0]
 
 
 def _band(res, method, ring="15-19 deg"):
@@ -66,22 +73,58 @@ def test_below_the_band_the_outputs_keep_the_full_resolution_power(result):
 
 def test_an_empty_noise_band_adds_nothing(result):
     """Ring 9-13 deg on this display: Nyquist (about 9 cycles/deg) is below T_L there, the
-    band is closed, so ours equals contrast at every frequency (to 0.01 dB: kernels of
-    impulses just outside the ring reach into its outer patches; measured 1.3e-4 dB)."""
+    band is closed, so ours equals contrast at every frequency (to 0.05 dB: kernels of
+    impulses just outside the ring reach into its outer patches; measured 1.3e-4 dB under the
+    widened clipping rule, 0.025 dB under the paper's, whose K there is larger)."""
     c = result.curves
     inner = c[(c["image"] == "all") & (c["ring"] == "9-13 deg")]
     o = inner[inner["method"] == "ours"]["ratio_db"].to_numpy()
     k = inner[inner["method"] == "contrast"]["ratio_db"].to_numpy()
-    np.testing.assert_allclose(o, k, atol=0.01)
+    np.testing.assert_allclose(o, k, atol=0.05)
+
+
+def test_a_band_above_nyquist_is_said_in_one_line_and_its_rows_marked(result,
+                                                                      run_and_warnings, inputs):
+    """Ring 9-13 deg on this display: T_L(11) = 10.5 + (1 / 5) (8.0 - 10.5) = 10.0 cycles/deg,
+    above the ring's Nyquist frequency (about 9): the band is empty. One warning names the
+    ring; its rows in bands.csv say 'above Nyquist'; the note's table says so where it would
+    show NaN; the open ring 15-19 deg keeps its numbers."""
+    _, messages = run_and_warnings
+    nyq = [m for m in messages if "Nyquist" in m]
+    assert len(nyq) == 1 and "9-13 deg" in nyq[0] and "15-19 deg" not in nyq[0], messages
+    assert "\n" not in nyq[0]
+    b = result.bands
+    inner, outer = b[b["ring"] == "9-13 deg"], b[b["ring"] == "15-19 deg"]
+    assert set(inner["band_status"]) == {"above Nyquist"}
+    assert inner["band_lo_cpd"].to_numpy() == pytest.approx(10.0)
+    assert (inner["band_lo_cpd"] >= inner["nyquist_cpd"]).all()
+    assert set(outer["band_status"]) == {"open"} and outer["ratio_db"].notna().all()
+    md = (inputs[0] / "out" / "spectra.md").read_text()
+    row = next(line for line in md.splitlines() if "| 9-13 deg |" in line)
+    assert row.count("above Nyquist") == 3 and "nan" not in row.lower(), row
+    assert "nan" not in md.lower()
+    assert "**Warning**" in md and "9-13 deg (T_L 10 cpd" in md
+
+
+def test_the_choice_of_scenes_is_marked_as_an_assumption(inputs):
+    """The paper's figure is "averaged over 5 scenes", which it does not name: the note says
+    which scenes this run averaged and that the choice is an assumption."""
+    md = (inputs[0] / "out" / "spectra.md").read_text()
+    line = next(line for line in md.splitlines() if line.startswith("Scenes"))
+    assert "an assumption" in line and "does not say which" in line
+    assert "s0, s2" in line
 
 
 def test_the_command_writes_csv_figure_and_note(inputs, capsys):
     d, display, images = inputs
     out = d / "cli"
     code = main(["evaluate", "spectra", *map(str, images), "--display", str(display),
-                 "--blur-rate", "0.34", "--rings", "17", "--backend", "cpu", "--impulses",
+                 "--blur-rate", "0.34", "--rings", "11,17", "--backend", "cpu", "--impulses",
                  "12", "--out", str(out)])
     assert code == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("fovexp: warning: spectra: the band lies above "
+                                               "the image's Nyquist frequency in ring(s) 9-13"), err
     for name in ("spectra.csv", "bands.csv", "spectra.png", "spectra.md"):
         assert (out / name).stat().st_size > 0
     rows = list(csv.DictReader((out / "bands.csv").open()))
@@ -110,3 +153,74 @@ def test_images_of_two_sizes_are_refused(inputs, tmp_path):
     with pytest.raises(FovexpError, match="one size"):
         spectra.analyse([images[0], other], Setup.make(str(display), backend="cpu"), [0.34],
                         spectra.default_rings((17.0,), 2.0))
+
+
+# ------------------------------------------------------------------ the band's value, by hand
+#: A display on which a 1024 x 512 image has 29.6 px/deg where the ring 15-19 deg meets the
+#: screen's centre row (gaze at the left edge): two 128 px patches lie in that ring, both at
+#: (447.5, 63.5) and (447.5, 447.5) px, both at 29.61 px/deg.
+GRATING_DISPLAY = """\
+name: grating
+width_px: 1024
+height_px: 512
+width_cm: 30.3948
+height_cm: 15.1974
+distance_cm: 50.0
+refresh_hz: 120
+peak_luminance_cd_m2: 100
+gamma: 2.2
+"""
+GRATING_PATCH_PX = 128
+#: Two vertical gratings, k cycles per 128 px patch (whole cycles: no leakage from the
+#: patch's edges, zero mean). At 29.61 px/deg, k = 32 is 7.40 cycles/deg and k = 38 is 8.79
+#: cycles/deg; their Hann-window neighbours (k +- 1) stay within 7.17-7.64 and 8.56-9.03.
+K_BETWEEN, K_INSIDE = 32, 38
+
+
+def _grating(k: int, amplitude: float = 0.2) -> np.ndarray:
+    x = np.arange(1024)
+    row = amplitude * np.cos(2 * np.pi * k * x / GRATING_PATCH_PX)
+    return np.repeat(row[None, :], 512, axis=0)
+
+
+def test_the_band_of_a_ring_is_taken_at_its_centre_on_gratings_of_known_spectrum(tmp_path):
+    """Ring 15-19 deg. Thibos' T_L (docs/METHOD.md 4.1): 8.0 cycles/deg at 15 deg and 5.5 at
+    20 deg, so at the centre, 17 deg, T_L = 8.0 + (2 / 5) (5.5 - 8.0) = 7.0 cycles/deg; at the
+    inner edge it would be 8.0. The band's upper end is Nyquist, 29.61 / 2 = 14.8 cycles/deg
+    (T_H(17) = 23.6 is above it).
+
+    The frequency bins are a quarter octave wide from 0.5 cycles/deg: the bin [6.73, 8.0)
+    (centre 7.34) lies in the band at the centre's T_L and out of it at the inner edge's. The
+    grating g1 (7.2-7.6 cycles/deg) falls in that bin only, g2 (8.6-9.0) in [8.0, 9.51), in
+    the band either way. The full-resolution image is g1 + g2 (equal power P); the stand-in
+    methods a g1 + b g2 have a^2 P + b^2 P in the band, so, by hand:
+
+    =========  ==============  ====================================  ================
+    method     output          band at the centre: 10 log10(...)     at the inner edge
+    =========  ==============  ====================================  ================
+    foveated   g2              (0 + 1) / 2 -> -3.01 dB               1 -> 0 dB
+    contrast   0.5 g1 + g2     (0.25 + 1) / 2 -> -2.04 dB            0 dB
+    ours       2 g1 + g2       (4 + 1) / 2 -> +3.98 dB               0 dB
+    =========  ==============  ====================================  ================
+    """
+    from fovexp import write_image
+
+    g1, g2 = _grating(K_BETWEEN), _grating(K_INSIDE)
+    write_image(tmp_path / "gratings.png", 0.5 + g1 + g2, 16)
+    (tmp_path / "grating.yaml").write_text(GRATING_DISPLAY)
+    setup = Setup.make(str(tmp_path / "grating.yaml"), backend="cpu", gaze=(0.0, 0.5))
+    stand_in = {"foveated": 0.5 + g2, "contrast": 0.5 + 0.5 * g1 + g2,
+                "ours": 0.5 + 2 * g1 + g2}
+    res = spectra.analyse([tmp_path / "gratings.png"], setup, [0.34],
+                          [spectra.Ring(15.0, 19.0)], GRATING_PATCH_PX,
+                          outputs_fn=lambda image, br: stand_in)
+    assert res.n_patches == {"15-19 deg": 2}
+    assert res.ppd["15-19 deg"] == pytest.approx(29.61, abs=0.01)
+    b = res.bands[res.bands["image"] == "all"].set_index("method")
+    expected_db = {"foveated": 10 * np.log10(1 / 2), "contrast": 10 * np.log10(1.25 / 2),
+                   "ours": 10 * np.log10(5 / 2)}
+    for method, want in expected_db.items():  # measured: within 2e-4 dB
+        assert b.loc[method, "ratio_db"] == pytest.approx(want, abs=0.005), method
+    assert b["band_lo_cpd"].iloc[0] == pytest.approx(7.0)
+    assert b["band_hi_cpd"].iloc[0] == pytest.approx(29.61 / 2, abs=0.01)
+    assert set(b["band_status"]) == {"open"}
