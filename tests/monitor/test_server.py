@@ -9,6 +9,7 @@ import json
 import socket
 import time
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -89,6 +90,23 @@ def test_paths_out_of_the_served_folders_are_refused(root: Path, report: Path,
     assert "not yours" not in r.text and "import" not in r.text
 
 
+@pytest.mark.parametrize(("link", "target"), [
+    pytest.param("leak.txt", "ABS/secret.txt", id="file-absolute"),
+    pytest.param("figures/leak.txt", "../../secret.txt", id="file-relative"),
+    pytest.param("figures/up", "ABS", id="folder"),
+])
+def test_symlinks_out_of_the_report_folder_are_refused(root: Path, report: Path, link: str,
+                                                       target: str) -> None:
+    """A symlink inside the report folder to a file, or a folder, outside it is not followed:
+    /report serves what lies inside the folder once every link is resolved."""
+    (report / link).symlink_to(target.replace("ABS", str(report.parent)))
+    assert (report / link).exists()  # the link works on disk
+    url = "/report/" + link + ("/secret.txt" if link.endswith("up") else "")
+    r = client(root, report=report).get(url)
+    assert r.status_code == 404, (url, r.status_code)
+    assert "not yours" not in r.text
+
+
 def test_no_report_folder(root: Path) -> None:
     r = client(root).get("/report/report.html")
     assert r.status_code == 404 and "--report" in r.text
@@ -137,6 +155,65 @@ def test_the_token(root: Path) -> None:
     assert c.get("/api/sessions").status_code == 200
     # the token is checked before anything else answers
     assert c.post("/?token=wrong").status_code == 405
+
+
+TOKEN = "s3cret-token-abc"
+#: the token's near misses: none opens the page, whether in the cookie or in ?token=
+NEAR_MISSES = [
+    pytest.param("", id="empty"), pytest.param(TOKEN[:-1], id="proper-prefix"),
+    pytest.param(TOKEN[:4], id="short-prefix"),
+    pytest.param(TOKEN[:-1] + "x", id="wrong-same-length"),
+    pytest.param(TOKEN + "x", id="token-then-more"),
+]
+
+
+def _token_client(root: Path) -> TestClient:
+    return client(root, token=TOKEN, loopback_only=False, host="10.0.0.5")
+
+
+def _is_the_page(r: Any) -> bool:
+    return r.status_code == 200 and "<title>fovexp monitor</title>" in r.text
+
+
+@pytest.mark.parametrize("cookie", [
+    pytest.param(None, id="no-cookie"), *NEAR_MISSES,
+    pytest.param(f"other={TOKEN}", id="token-under-another-name"),
+])
+def test_a_cookie_other_than_the_token_is_refused(root: Path, cookie: str | None) -> None:
+    """The token's cookie opens the page only when its value is exactly the token: no cookie,
+    an empty one, a prefix of the token, a wrong token of its length, the token with more after
+    it, or the token in another cookie, are refused (403) with the plain-text reason."""
+    headers = {} if cookie is None else {
+        "cookie": cookie if cookie.startswith("other=") else f"{TOKEN_COOKIE}={cookie}"}
+    r = _token_client(root).get("/", headers=headers)
+    assert r.status_code == 403 and "token" in r.text, (cookie, r.status_code)
+    assert r.headers["content-type"].startswith("text/plain") and not _is_the_page(r)
+    assert "set-cookie" not in r.headers
+
+
+def test_the_token_in_the_cookie_opens_the_page(root: Path) -> None:
+    """The cookie holding exactly the token opens the page (among other cookies too), and
+    sets no new cookie."""
+    for header in (f"{TOKEN_COOKIE}={TOKEN}", f"a=1; {TOKEN_COOKIE}={TOKEN}; b=2"):
+        r = _token_client(root).get("/", headers={"cookie": header})
+        assert _is_the_page(r), (header, r.status_code)
+        assert "set-cookie" not in r.headers
+
+
+@pytest.mark.parametrize("given", NEAR_MISSES)
+def test_a_query_token_other_than_the_token_is_refused(root: Path, given: str) -> None:
+    """``?token=`` opens the page only when it is exactly the token; a near miss is refused
+    (403) and sets no cookie."""
+    r = _token_client(root).get("/?token=" + given)
+    assert r.status_code == 403 and "token" in r.text, (given, r.status_code)
+    assert not _is_the_page(r) and "set-cookie" not in r.headers
+
+
+def test_the_token_in_the_query_opens_the_page(root: Path) -> None:
+    """``?token=`` holding exactly the token opens the page and sets the token's cookie."""
+    r = _token_client(root).get("/?token=" + TOKEN)
+    assert _is_the_page(r)
+    assert r.headers["set-cookie"].startswith(f"{TOKEN_COOKIE}={TOKEN};")
 
 
 def _free_port() -> int:
