@@ -7,7 +7,11 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 B=.venv/bin/fovexp
+# FOVEXP_EVAL_PRESET=release runs the evaluate commands under the release preset, into
+# benchmarks/evaluation/release/ (issue 26: both presets side by side in EVALUATION.md)
+PRESET=${FOVEXP_EVAL_PRESET:-paper}
 OUT=benchmarks/evaluation
+[ "$PRESET" = paper ] || OUT=benchmarks/evaluation/$PRESET
 S=stimuli/generated/3840x2160
 WORK=${FOVEXP_EVAL_WORK:-out/evaluation}
 # simulated participants of the validation dry runs (FOVEXP_EVAL_PARTICIPANTS="S01" for one)
@@ -20,15 +24,16 @@ if want "${1:-all}" scenes; then
   run $B stimuli generate --size 480x270 --stimuli stimuli     # what the dry runs show
 fi
 if want "${1:-all}" spectra; then   # 6.1: the 5 calibration scenes, Table 2's blur-rates
-  run $B evaluate spectra $S/scene-0{0,1,2,3,4}.png --backend cpu --out $OUT/spectra
+  run $B evaluate spectra $S/scene-0{0,1,2,3,4}.png --backend cpu --preset $PRESET \
+    --out $OUT/spectra
 fi
 if want "${1:-all}" temporal; then  # 6.2: a 30-frame pan, 8 px per frame
   run $B stimuli pan --size 3840x2160 --frames 30 --step 8 --out "$WORK/pan"
-  run $B evaluate temporal "$WORK/pan" --backend cpu --out $OUT/temporal
+  run $B evaluate temporal "$WORK/pan" --backend cpu --preset $PRESET --out $OUT/temporal
 fi
 if want "${1:-all}" fovvdp; then    # 6.1: the 10 validation scenes at the paper's 0.68
   run .venv-fovvdp/bin/fovexp evaluate fovvdp $S/scene-{05,06,07,08,09,10,11,12,13,14}.png \
-    --blur-rate 0.68 --backend cpu --out $OUT/fovvdp
+    --blur-rate 0.68 --backend cpu --preset $PRESET --out $OUT/fovvdp
 fi
 if want "${1:-all}" validation; then  # 6.1 and 6.3: dry runs of both validations, analysed
   rm -rf "$WORK/results"
@@ -70,7 +75,8 @@ PY
   cp "$WORK/report/tables/impulses-"*.csv $OUT/
 fi
 if want "${1:-all}" compression; then  # 6.3: JPEG at the dry runs' blur-rates, native 4K scenes
-  run $B evaluate compression "$WORK/results" --images $S --backend cpu --out $OUT/compression
+  run $B evaluate compression "$WORK/results" --images $S --backend cpu --preset $PRESET \
+    --out $OUT/compression
 fi
 if want "${1:-all}" stereo; then    # 6.4: the stereo test pair at 4K
   run $B stimuli stereo --size 3840x2160 --out "$WORK/pair"

@@ -31,6 +31,9 @@ def _common(p: argparse.ArgumentParser, blur_help: str, blur_default: str | None
     p.add_argument("--seed", type=int, default=1, help="the impulses' seed (default 1)")
     p.add_argument("--backend", choices=BACKEND_CHOICES, default="auto",
                    help="cpu, gpu, or auto (a hardware GPU if there is one)")
+    p.add_argument("--preset", choices=("paper", "release"), default="paper",
+                   help="the paper's constants and Table 2 (default), or the authors' release "
+                        "with its own defaults (docs/METHOD.md, 5; CPU backend)")
     p.add_argument("--out", type=Path, required=True, metavar="DIR",
                    help="folder for the CSV, the PNG figure and the Markdown note")
 
@@ -45,7 +48,8 @@ def _setup(args: argparse.Namespace) -> Any:
             check_parameter(name, getattr(args, name))
         except ValueError as exc:
             raise FovexpError(f"--{name} {getattr(args, name)}: {exc}") from None
-    return Setup.make(args.display, args.backend, args.impulses, args.seed, args.gaze)
+    return Setup.make(args.display, args.backend, args.impulses, args.seed, args.gaze,
+                      args.preset)
 
 
 def add_evaluate_parser(sub: Any) -> argparse.ArgumentParser:
@@ -144,6 +148,8 @@ def add_evaluate_parser(sub: Any) -> argparse.ArgumentParser:
     c.add_argument("--gaze", type=_gaze, default=(0.5, 0.5), help="x,y in [0, 1]")
     c.add_argument("--quality", type=int, default=90, help="JPEG quality (default 90)")
     c.add_argument("--backend", choices=BACKEND_CHOICES, default="auto")
+    c.add_argument("--preset", choices=("paper", "release"), default="paper",
+                   help="whose foveation (the paper's 8 deg fovea, or the release's 12 deg)")
     c.add_argument("--out", type=Path, required=True, metavar="DIR")
     c.set_defaults(func=compression_command)
     return p
@@ -231,7 +237,7 @@ def compression_command(args: argparse.Namespace) -> int:
             _numbers("--pair", args.pair, lambda b: 0 <= b <= 5, "two blur-rates in [0, 5]"))
     if len(pair) not in (0, 2):
         raise FovexpError(f"--pair {args.pair!r}: give two blur-rates, LO,HI")
-    setup = Setup.make(args.display, args.backend, gaze=args.gaze)
+    setup = Setup.make(args.display, args.backend, gaze=args.gaze, preset=args.preset)
     res = compression.run(args.results, setup, args.out, experiment=args.experiment,
                           images=args.images, quality=args.quality, ratios=tuple(ratios),
                           pair=(pair[0], pair[1]) if pair else None)

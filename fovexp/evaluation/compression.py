@@ -385,8 +385,9 @@ def note(res: CompressionResult, results: Path) -> str:
     lines = [
         "# Foveated compression (paper section 6.3)",
         "",
-        f"Blur-rates: the participants' means in {results}, {res.experiment_line()}. "
-        "The paper used its 12-impulse experiment (Figure 16 right).",
+        f"Blur-rates: the participants' means in {results}, {res.experiment_line()}."
+        + ("" if res.choice is not None and res.choice.impulses == 12 else
+           " The paper used its 12-impulse experiment (Figure 16 right)."),
         "",
         *([f"**Warning**: {warning}.", ""] if warning else []),
         f"{res.setup_line}. Each scene foveated (method foveated) at the contrast and at "

@@ -207,7 +207,8 @@ def analyse(paths: Sequence[Path], setup: Setup, blur_rate: float,
         raise FovexpError("no images given")
     jod = pd.DataFrame(rows)
     return FovvdpResult(jod, paired_tests(jod, modes), blur_rate, names,
-                        metrics["foveated"].ppd, setup.describe(enh), table2_clamp(blur_rate))
+                        metrics["foveated"].ppd, setup.describe(enh),
+                        table2_clamp(blur_rate) if setup.preset == "paper" else "")
 
 
 def figure(res: FovvdpResult):  # noqa: ANN201
@@ -313,7 +314,7 @@ def run(paths: Sequence[Path], setup: Setup, blur_rate: float, out: Path,
     """:func:`analyse`, then ``fovvdp.csv``, ``fovvdp-tests.csv``, ``fovvdp.png`` and
     ``fovvdp.md`` into ``out``; a clamp of Table 2 is also a warning (one line)."""
     _import()  # the extra's absence first, as the only line
-    clamp = table2_clamp(blur_rate)
+    clamp = table2_clamp(blur_rate) if setup.preset == "paper" else ""
     if clamp:  # said before the (long) run, not after it
         warnings.warn(f"fovvdp: {clamp}", UserWarning, stacklevel=2)
     res = analyse(paths, setup, blur_rate, contrast_ratio, device, nonfoveated)

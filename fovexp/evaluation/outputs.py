@@ -53,18 +53,20 @@ class Setup:
     impulses: int = 64
     seed: int = 1
     gaze: tuple[float, float] = (0.5, 0.5)
+    #: "paper" (Table 2) or "release" (the release's constants and defaults)
+    preset: str = "paper"
 
     @classmethod
     def make(cls, display: str, backend: str = "auto", impulses: int = 64, seed: int = 1,
-             gaze: tuple[float, float] = (0.5, 0.5)) -> Setup:
-        return cls(load_display(display), backend, impulses, seed, gaze)
+             gaze: tuple[float, float] = (0.5, 0.5), preset: str = "paper") -> Setup:
+        return cls(load_display(display), backend, impulses, seed, gaze, preset)
 
     def enhancer(self) -> Any:
-        return make_enhancer(self.display, backend=self.backend)
+        return make_enhancer(self.display, preset=self.preset, backend=self.backend)
 
     def params(self, method: str, blur_rate: float, seed: int | None = None) -> Any:
         return make_params(method=method, blur_rate=blur_rate, impulses=self.impulses,
-                           seed=self.seed if seed is None else seed)
+                           seed=self.seed if seed is None else seed, preset=self.preset)
 
     def describe(self, enh: Any) -> str:
         kind = enh.backend + (f" ({enh.fallback_reason})" if getattr(
@@ -72,7 +74,10 @@ class Setup:
         return (f"display {self.display.name} ({self.display.width_px}x"
                 f"{self.display.height_px} px, {self.display.distance_cm:g} cm), gaze "
                 f"{self.gaze[0]:g},{self.gaze[1]:g}, {self.impulses} impulses per kernel, seed "
-                f"{self.seed}, Table 2's f_e, s_k, s_f; backend {kind}")
+                f"{self.seed}, "
+                + ("Table 2's f_e, s_k, s_f" if self.preset == "paper"
+                   else "the release preset's constants and defaults (f_e, s_k, s_f)")
+                + f", clipping rule {getattr(enh, 'clipping', '?')}; backend {kind}")
 
 
 def outputs(enh: Any, setup: Setup, image: np.ndarray, blur_rate: float,
