@@ -72,7 +72,9 @@ def sigma_px(
     inputs = np.float32 if np.result_type(ecc_deg, ppd) == np.float32 else np.float64
     shape, (e, p) = flat_broadcast(ecc_deg, ppd, dtype=inputs)
     out = np.empty(e.shape)
-    _sigma_points(e, p, float(blur_rate), float(fovea_deg), np.dtype(dtype) == np.float32, out)
+    # + 0.0: a blur-rate of -0.0 is 0, and its map +0.0 (no blur), not -0.0
+    _sigma_points(e, p, float(blur_rate) + 0.0, float(fovea_deg), np.dtype(dtype) == np.float32,
+                  out)
     return out.reshape(shape).astype(dtype, copy=False)
 
 
@@ -139,7 +141,7 @@ def sigma_on_blocks(
     if out is None:
         out = np.zeros(geom.shape, np.float32)
     ux, uy, vx, vy, d, pitch = geom.exact_terms(gaze_px)
-    _exact_sigma_blocks(ux, uy, vx, vy, d, pitch, float(blur_rate), float(fovea_deg),
+    _exact_sigma_blocks(ux, uy, vx, vy, d, pitch, float(blur_rate) + 0.0, float(fovea_deg),
                         np.ascontiguousarray(need, dtype=np.bool_), int(shift), out)
     return out
 

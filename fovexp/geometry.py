@@ -200,7 +200,8 @@ class ViewingGeometry:
     """The geometry of an image on a display.
 
     The image covers pixels ``[x0, x0 + width) x [y0, y0 + height)`` of a full-screen frame of
-    ``screen_width x screen_height`` pixels (by default the image *is* the frame). Pixel
+    ``screen_width x screen_height`` pixels (by default the image *is* the frame: a screen
+    size left at 0 is the image's, the origin 0). Pixel
     coordinates are the image's own; the pitch is the frame's. Attributes are in the units
     their names say; ``pitch_*_cm`` is the size of one frame pixel on the screen.
 
@@ -228,6 +229,13 @@ class ViewingGeometry:
     screen_height_px: int = 0
     x0_px: int = 0
     y0_px: int = 0
+
+    def __post_init__(self) -> None:
+        # a screen size left at 0: the image is the whole frame (as for_image makes it)
+        if self.screen_width_px == 0:
+            object.__setattr__(self, "screen_width_px", self.width_px)
+        if self.screen_height_px == 0:
+            object.__setattr__(self, "screen_height_px", self.height_px)
 
     @classmethod
     def for_image(

@@ -202,7 +202,7 @@ def check_parameter(name: str, value: object) -> float | int:
         raise ValueError(f"must be {what} in {where}") from None
     if not math.isfinite(v) or not (lo < v if open_lo else lo <= v) or v > hi:
         raise ValueError(f"must be {what} in {where}")
-    return v
+    return v + 0  # -0.0 + 0 is +0.0: a negative zero is 0, the same value for every stage
 
 
 class _CheckedParameters(BaseModel):

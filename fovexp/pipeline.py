@@ -445,6 +445,8 @@ class Enhancer:
         sigma_given = None
         if sigma_px is not None:
             sigma_given = np.asarray(sigma_px, dtype=self._dtype)
+            if np.signbit(sigma_given).any():  # -0.0 is 0 (no blur): + 0.0 makes it +0.0
+                sigma_given = sigma_given + self._dtype(0.0)
             if sigma_given.shape != img.shape[:2]:
                 raise FovexpError(
                     f"sigma map has shape {sigma_given.shape}, the image {img.shape[:2]}"

@@ -88,3 +88,13 @@ def test_scenes_come_out_sorted_whatever_the_trials_order() -> None:
     res = validate(rows.iloc[::-1].reset_index(drop=True))  # s2 before s1
     assert res.tests["scope"].tolist() == ["all scenes", "participant means", "s1", "s2"]
     assert res.sampling["scope"].tolist() == ["all scenes", "s1", "s2"]
+
+
+def test_scenes_come_out_sorted_when_the_first_participant_lacks_one() -> None:
+    """The per-scene tests in scene order also when the first participant's first scene has
+    no pair (P1 lacks ours on s1): the pairs then name s2 before s1."""
+    ours = dict(OURS)
+    del ours[("P1", "s1")]
+    res = validate(frame(ours=ours))
+    assert res.tests["scope"].tolist() == ["all scenes", "participant means", "s1", "s2"]
+    assert res.tests.set_index("scope").loc["s1", "n"] == 2

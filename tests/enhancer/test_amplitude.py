@@ -145,3 +145,10 @@ def test_each_clipping_rule_takes_its_own_neighbourhood():
         assert np.array_equal(full[ys, xs], pts), rule
     with pytest.raises(ValueError, match="clipping rule"):
         amp.clipping_extremes("widest", fov, luma, delta, kernel_radius_px=r)
+
+
+def test_a_negative_zero_sigma_selects_the_finest_level():
+    """sigma = -0.0 is no blur, as +0.0: the finest Laplacian level (1), the level eq. 8
+    clamps to, not a level of a negative cut-off."""
+    level = amp.laplacian_level(np.array([-0.0, 0.0, 1e-300]), 0.25)
+    assert level.tolist() == [1.0, 1.0, 1.0]

@@ -164,3 +164,25 @@ def test_flat_blocks_are_left_out_exactly():
     assert not contrast_change_where_needed(const, on_blocks, 1.5, 0.25, cflat).any()
     assert not contrast_change(const, sigma, 0.25, cflat).any()
     assert not contrast_change_where_needed(grey, on_blocks, 0.0, 0.25, flat).any()
+
+
+def test_negative_zero_sigmas_and_f_e_change_nothing_more_than_zero():
+    """-0.0 is 0: a sigma map holding -0.0 gives the change and the enhanced image of the map
+    with +0.0 bit for bit (0 where sigma is 0: those pixels keep their value), and an f_e of
+    -0.0 the change of f_e = 0."""
+    img = textured_image(40, 50, seed=5, rgb=False, flat_squares=False)
+    sigma = np.zeros((40, 50), np.float32)
+    sigma[:, 25:] = 3.4
+    negative = sigma.copy()
+    negative[:, :25] = -0.0
+    change = contrast_change(img, negative, 0.2)
+    assert change.tobytes() == contrast_change(img, sigma, 0.2).tobytes()
+    assert not change[:, :25].any() and change[:, 25:].any()
+    rgb = np.stack([img, img[::-1], img[:, ::-1]], axis=-1)
+    assert (contrast_enhance(rgb, negative, 0.2).tobytes()
+            == contrast_enhance(rgb, sigma, 0.2).tobytes())
+    zero = np.zeros_like(sigma)
+    assert contrast_change(img, -zero, 0.2).tobytes() == np.zeros_like(img).tobytes()
+    assert contrast_enhance(rgb, -zero, 0.2).tobytes() == rgb.tobytes()
+    assert (contrast_change(img, sigma, -0.0).tobytes()
+            == contrast_change(img, sigma, 0.0).tobytes())

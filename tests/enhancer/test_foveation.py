@@ -327,3 +327,35 @@ def test_the_pyramid_level_of_a_blur_and_a_run_of_blurred_columns():
         wider = sigma.copy()
         wider[:, :50] = s
         assert np.array_equal(foveate(img, wider)[:, :30], fast[:, :30])
+
+
+def test_negative_zero_sigmas_and_blur_rates_are_zero():
+    """-0.0 is 0: a sigma map holding -0.0 is blurred as the map with +0.0 bit for bit (those
+    pixels left as they are), fast and exact, with and without skipping; a blur-rate of -0.0
+    gives the map of +0.0, every pixel +0.0 (sigma_px, sigma_on_blocks, the bound 1e-3 px)."""
+    from fovexp import load_display
+    from fovexp.foveation import sigma_bound_px, sigma_on_blocks, sigma_px
+    from fovexp.geometry import ViewingGeometry
+
+    img = linearize(textured_image(40, 56, seed=3, flat_squares=False), 2.2)
+    sigma = np.zeros((40, 56), np.float32)
+    sigma[:, 28:] = 2.5
+    negative = sigma.copy()
+    negative[:, :28] = -0.0
+    for blur in (lambda s: foveate(img, s), lambda s: foveate(img, s, skip=False),
+                 lambda s: foveate_exact(img, s)):
+        out = blur(negative)
+        assert out.tobytes() == blur(sigma).tobytes()
+        assert out[:, :18].tobytes() == img[:, :18].tobytes()  # 10 px (4 sigma) off the blur
+        zero = np.zeros((40, 56), np.float32)
+        assert blur(-zero).tobytes() == blur(zero).tobytes() == img.tobytes()
+    g = ViewingGeometry.for_image(load_display("lg-oled55cx"), 56, 40,
+                                  viewport=(1500, 900, 1920, 1080))
+    gaze = g.gaze_px((0.2, 0.3))
+    ecc, ppd = g.eccentricity_and_ppd_maps(gaze)
+    for dtype in (np.float32, np.float64):
+        neg = sigma_px(ecc, ppd, -0.0, 8.0, dtype)
+        assert neg.tobytes() == sigma_px(ecc, ppd, 0.0, 8.0, dtype).tobytes()
+        assert not np.signbit(neg).any()
+    assert sigma_on_blocks(g, gaze, -0.0, 8.0).tobytes() == np.zeros((40, 56), np.float32).tobytes()
+    assert sigma_bound_px(g, gaze, -0.0, 8.0) == sigma_bound_px(g, gaze, 0.0, 8.0) == 1e-3

@@ -130,3 +130,31 @@ def test_the_draw_at_sigma_one_and_below_the_whole_distribution():
     far = frequency.draw_truncated(np.array([0.5]), np.array([0.0]), np.array([0.01]),
                                    np.array([math.exp(-100.0)]))
     assert far[0] == math.exp(-100.0)
+
+
+def test_a_negative_zero_sigma_is_no_blur_and_opens_no_band():
+    """sigma = -0.0 is sigma = 0 (it compares equal): the blur removes nothing, so its cut-off
+    3 / (2 pi sigma) is +inf, not the -inf the formula gives, and the band (eq. 1) stays empty,
+    exactly as at +0.0, whatever the eccentricity (the noise must not open at the fovea)."""
+    assert frequency.blur_cutoff_cpp(np.array([-0.0, 0.0, -0.0])).tolist() == [np.inf] * 3
+    ecc = np.array([0.0, 5.0, 20.0, 40.0, 70.0])
+    ppd = np.full(ecc.size, 40.0)
+    neg = frequency.frequency_band_cpp(ecc, ppd, np.full(ecc.size, -0.0))
+    pos = frequency.frequency_band_cpp(ecc, ppd, np.zeros(ecc.size))
+    assert np.array_equal(neg[0], pos[0]) and np.array_equal(neg[1], pos[1])
+    assert (neg[0] >= neg[1]).all()  # empty: no noise
+    assert np.array_equal(frequency.blur_cutoff_cpp(np.float32(-0.0)), np.inf)
+
+
+def test_a_band_open_by_one_ulp_draws_its_upper_limit():
+    """F_L one float step below F_H: the band is open (F_L < F_H) but ln F_L == ln F_H, so
+    mu_n = ln F_H and sigma_n = 0 (eqs. 3-4). The draw is then the point exp(mu_n) = F_H (its
+    limit), not 0 / 0: no NaN frequency reaches the synthesis."""
+    hi = np.array([0.3, 0.35])
+    lo = np.nextafter(hi, 0.0)
+    assert (lo < hi).all() and np.array_equal(np.log(lo), np.log(hi))  # the case asked for
+    for s_f in (2.21, 1e-300):
+        mu, sn = frequency.lognormal_params(lo, hi, s_f)
+        assert not sn.any() and np.array_equal(mu, np.log(hi))
+        f = frequency.draw_truncated(np.array([0.01, 0.99]), mu, sn, hi)
+        assert np.array_equal(f, np.minimum(np.exp(mu), hi))

@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from fovexp import gabor
+from fovexp import gabor, make_options
 
 
 def test_kernel_radius_and_density_as_computed_by_hand():
@@ -157,3 +157,132 @@ def test_synthesis_without_skipping_and_with_a_closer_cut():
     ref = direct_sum((h, w), imp, k, f, t, gabor.kernel_radius_px(0.06, 0.5), 0.06,
                      gabor.normalisation(3, 0.06, "uniform", 0.5))
     assert np.abs(cut - ref).max() < 1e-9 * max(1.0, np.abs(ref).max())
+
+
+_MASK64 = 2**64 - 1
+
+
+def _splitmix(state: int) -> tuple[int, int]:
+    """SplitMix64 (Steele et al. 2014), written out on Python integers."""
+    state = (state + 0x9E3779B97F4A7C15) & _MASK64
+    z = state
+    z = ((z ^ (z >> 30)) * 0xBF58476D1CE4E5B9) & _MASK64
+    z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & _MASK64
+    return state, z ^ (z >> 31)
+
+
+def _uniform(state: int) -> tuple[int, float]:
+    """53 random bits as (k + 1/2) / 2**53: strictly inside (0, 1)."""
+    state, z = _splitmix(state)
+    return state, ((z >> 11) + 0.5) / 2.0**53
+
+
+def _cell_state(seed: int, cx: int, cy: int) -> int:
+    """A cell's stream, keyed by its coordinates modulo the period and the seed."""
+    p = gabor.CELL_PERIOD
+    key = (seed * 0x100000001B3 + (cx % p) * p + (cy % p)) & _MASK64
+    return _splitmix(key)[0]
+
+
+def reference_impulses(w, h, n, a, seed, count="poisson", cell_scale=1.0):
+    """The impulses as fovexp.gabor documents them, in plain Python: per cell (rows of cells
+    from one cell past the top-left corner), a first uniform u gives the count (jittered:
+    floor(m) + 1 if u < m - floor(m), else floor(m); Poisson, Knuth's: multiply uniforms
+    while the product is above exp(-m)), then per impulse the uniforms x, y, weight, quantile."""
+    cell = gabor.cell_size_px(a, cell_scale)
+    m = gabor.impulse_density(n, a) * cell * cell
+    nx, ny = math.ceil(w / cell) + 2, math.ceil(h / cell) + 2
+    out = []
+    for cy in range(-1, ny - 1):
+        for cx in range(-1, nx - 1):
+            state, u = _uniform(_cell_state(seed, cx, cy))
+            if count == "jittered":
+                k = int(m) + (1 if u < m - int(m) else 0)
+            else:
+                k, p = 0, u
+                while p > math.exp(-m):
+                    k += 1
+                    state, u = _uniform(state)
+                    p *= u
+            for _ in range(k):
+                state, ux = _uniform(state)
+                state, uy = _uniform(state)
+                state, uw = _uniform(state)
+                state, uq = _uniform(state)
+                out.append(((cx + ux) * cell - 0.5, (cy + uy) * cell - 0.5,
+                            float(np.float32(2.0 * uw - 1.0)), uq))
+    return out
+
+
+def _as_tuples(imp):
+    return list(zip(imp.x_px.tolist(), imp.y_px.tolist(), imp.weight.tolist(),
+                    imp.quantile.tolist(), strict=True))
+
+
+def test_the_impulses_are_the_documented_stream_bit_for_bit():
+    """Every impulse (position, weight, quantile) is the SplitMix64 stream of its cell as the
+    module states it, to the last bit: the uniforms are (k + 1/2) / 2**53, not shifted by a
+    step, so a trial log's seed gives the same noise in any later version."""
+    for count in ("poisson", "jittered"):
+        imp = gabor.generate_impulses(50, 40, 12, 0.06, 1, count=count)
+        assert _as_tuples(imp) == reference_impulses(50, 40, 12, 0.06, 1, count)
+
+
+#: cell scales (EngineOptions.cell_scale) tuned so that a cell's count rule is a tie: the first
+#: uniform u of cell (-1, -1) of the seed equals m - floor(m) (jittered) or exp(-m) (Poisson),
+#: exactly; found by stepping the scale one float at a time (m = N cell_scale^2 / pi)
+JITTERED_TIE = (8, 0.6493474777778507)  # seed, cell_scale: m = 1.61059..., u = 0.61059...
+POISSON_TIE = (3, 0.35247422289677977)  # m = 0.47455..., exp(-m) = u = 0.62216...
+
+
+@pytest.mark.parametrize(("count", "tie"), [("jittered", JITTERED_TIE), ("poisson", POISSON_TIE)])
+def test_a_count_on_its_tie_follows_the_rule_as_written(count, tie):
+    """A uniform exactly on the count's threshold, which a tuned cell_scale reaches: the
+    jittered count adds its extra impulse only if u < m - floor(m) (so u = m - floor(m) gives
+    floor(m)), Knuth's Poisson count goes on only while the product is > exp(-m) (so
+    u = exp(-m) gives 0); the cell's count and every impulse of the frame are the reference's."""
+    seed, scale = tie
+    a = 0.06
+    cell = gabor.cell_size_px(a, scale)
+    m = gabor.impulse_density(12, a) * cell * cell
+    u = _uniform(_cell_state(seed, -1, -1))[1]
+    assert u == (m - math.floor(m) if count == "jittered" else math.exp(-m))  # the tie
+    make_options(cell_scale=scale)  # a scale the engine accepts
+    imp = gabor.generate_impulses(40, 30, 12, a, seed, count=count, cell_scale=scale)
+    first = (gabor.cell_index(imp.x_px, cell) == 0) & (gabor.cell_index(imp.y_px, cell) == 0)
+    assert first.sum() == (math.floor(m) if count == "jittered" else 0)
+    assert _as_tuples(imp) == reference_impulses(40, 30, 12, a, seed, count, scale)
+
+
+def test_the_kernel_square_is_closed_at_its_radius():
+    """The kernel is cut to the closed square |d_x|, |d_y| <= r: a pixel exactly r from an
+    impulse gets the kernel's value there (the envelope equals the cut, 0.305 here), the
+    pixel past it nothing. One impulse at x = 16.25 with r = 10.25 exactly (a cut tuned one
+    float at a time, an EngineOptions.kernel_truncation the engine accepts): column 6 lies at
+    |d| = r, column 5 beyond; the synthesis is the direct sum, which keeps |d| = r."""
+    a, trunc = 0.06, 0.3047605534365342
+    r = gabor.kernel_radius_px(a, trunc)
+    assert r == 10.25  # the tie asked for
+    make_options(kernel_truncation=trunc)
+    imp = gabor.Impulses(np.array([16.25]), np.array([12.0]), np.array([0.5], np.float32),
+                         np.array([0.5]), gabor.cell_size_px(a), 0)
+    one = (np.ones(1), np.zeros(1), np.zeros(1))  # K = 1, F = 0 (no carrier), t = 0
+    out = gabor.synthesize((24, 32), imp, *one, 12, a, trunc, dtype=np.float64)
+    ref = direct_sum((24, 32), imp, *one, r, a, gabor.normalisation(12, a, "uniform", trunc))
+    assert ref[12, 6] == pytest.approx(0.5 * gabor.normalisation(12, a, "uniform", trunc)
+                                       * trunc, rel=1e-12)
+    assert np.abs(out - ref).max() < 1e-9 * np.abs(ref).max()
+    assert out[12, 6] != 0.0 and not out[:, :6].any()
+
+
+def test_amplitudes_of_negative_zero_add_no_noise():
+    """K = -0.0 is K = 0: those impulses are skipped (and add exact zeros when summed), the
+    noise of K = -0.0 everywhere is +0.0 everywhere, as K = 0's."""
+    imp = gabor.generate_impulses(48, 40, 3, 0.06, 4)
+    m = len(imp)
+    rng = np.random.default_rng(3)
+    f, t = rng.uniform(0.05, 0.45, m), rng.uniform(-np.pi, np.pi, m)
+    zero = np.zeros((40, 48), np.float32).tobytes()
+    for skip in (True, False):
+        assert gabor.synthesize((40, 48), imp, np.full(m, -0.0), f, t, 3, 0.06,
+                                skip=skip).tobytes() == zero

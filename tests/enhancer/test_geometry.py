@@ -269,3 +269,24 @@ def test_a_viewport_fits_at_the_frames_edges_and_not_past_them():
     for vp in ((1521, 0, 1920, 1080), (0, 781, 1920, 1080), (0, -1, 1920, 1080)):
         with pytest.raises(FovexpError, match="does not fit"):
             ViewingGeometry.for_image(LG, 400, 300, viewport=vp)
+
+
+def test_a_geometry_made_directly_is_the_image_full_screen_by_default():
+    """ViewingGeometry's defaults (no screen size, no origin) are the image full screen, the
+    frame for_image makes without a viewport: the same geometry, the same gaze and
+    eccentricities; a screen size and origin given are kept."""
+    w, h = 640, 360
+    full = ViewingGeometry.for_image(LG, w, h)
+    direct = ViewingGeometry(w, h, LG.width_cm / w, LG.height_cm / h, LG.distance_cm, "exact",
+                             w / LG.horizontal_field_deg)
+    assert direct == full
+    assert (direct.screen_width_px, direct.screen_height_px, direct.x0_px, direct.y0_px) == (
+        w, h, 0, 0)
+    assert direct.gaze_px((0.5, 0.5)) == ((w - 1) / 2, (h - 1) / 2)
+    x, y = np.array([0.0, 319.5, 639.0]), np.array([0.0, 179.5, 359.0])
+    gaze = direct.gaze_px((0.25, 0.75))
+    assert np.array_equal(direct.eccentricity_deg(x, y, gaze), full.eccentricity_deg(x, y, gaze))
+    part = ViewingGeometry(w, h, 0.03, 0.03, 80.0, screen_width_px=1920, screen_height_px=1080,
+                           x0_px=100, y0_px=50)
+    assert (part.screen_width_px, part.screen_height_px, part.x0_px, part.y0_px) == (
+        1920, 1080, 100, 50)

@@ -292,3 +292,74 @@ def test_with_noise_composes_like_the_output_and_takes_another_layer():
     fov = enh.enhance((0.5, 0.5), make_params(method="foveated", blur_rate=0.57))
     with pytest.raises(FovexpError, match="foveated"):
         fov.with_noise(noise)
+
+
+def _same_bits(a: np.ndarray, b: np.ndarray) -> bool:
+    """``a`` and ``b`` bit for bit (a -0.0 differs from a +0.0)."""
+    a, b = np.asarray(a), np.asarray(b)
+    return a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes()
+
+
+#: the maps compared: the sigma map, the band, K and the noise
+_MAPS = ("sigma_px", "f_low_cpp", "f_high_cpp", "amplitude", "noise")
+
+
+def _zero_run(img, sigma=None, **kw):
+    """Enhance ``img`` (64 x 96, 25 deg right of the gaze) with ``sigma`` or the parameters
+    ``kw``: the output, the maps, the linear images and the parameters used."""
+    enh = Enhancer(LG)
+    enh.set_image(img, sigma_px=sigma, viewport=(2900, 1048, 3840, 2160))
+    res = enh.enhance((0.5, 0.5), make_params(**{"blur_rate": 0.57, "impulses": 12, **kw}))
+    out = {name: res.map(name) for name in _MAPS}
+    out.update(output=res.output, foveated=res.linear("foveated"),
+               contrast=res.linear("contrast"))
+    return out, res.params, enh
+
+
+def test_negative_zeros_are_zero_in_every_stage():
+    """A sigma of -0.0 is sigma = 0 (it compares equal): through Enhancer and fovexp.enhance,
+    a sigma map holding -0.0 and a blur-rate, f_e or s_k of -0.0 give the results of +0.0 bit
+    for bit (every map, the linear images, the output), store +0.0, open no noise band where
+    the map is 0 and leave the pixels far from the noise untouched to the last bit (paper
+    section 4.1); s_f of -0.0 is refused as 0 is (its range is open at 0)."""
+    from fovexp import enhance
+    from fovexp.colour import linearize
+
+    h, w = 64, 96
+    img = textured_image(h, w, seed=7, flat_squares=False)
+    sigma = np.full((h, w), 3.0, np.float32)
+    sigma[:, :48] = 0.0
+    negative = sigma.copy()
+    negative[:, :48] = -0.0
+    (pos, _, _), (neg, _, enh) = _zero_run(img, sigma), _zero_run(img, negative)
+    for name in pos:
+        assert _same_bits(neg[name], pos[name]), name
+    assert (neg["f_low_cpp"][:, :48] >= neg["f_high_cpp"][:, :48]).all()  # no band there
+    assert np.signbit(negative[:, :48]).all()  # the caller's map is left as it was
+    # 17 columns lie farther than the kernel's reach (r sqrt(2) = 28.6 px) from the noise
+    lin = linearize(img, enh._gamma(), enh.preset.transfer)
+    assert _same_bits(neg["foveated"][:, :17], lin[:, :17])
+    assert _same_bits(neg["contrast"][:, :17], lin[:, :17])
+    assert not neg["noise"][:, :17].any() and neg["noise"].any()
+    # a map of -0.0 only: nothing changes, as with +0.0
+    pos, _, _ = _zero_run(img, np.zeros((h, w), np.float32))
+    neg, _, _ = _zero_run(img, np.full((h, w), -0.0, np.float32))
+    for name in pos:
+        assert _same_bits(neg[name], pos[name]), name
+    assert not neg["noise"].any()
+    for name in ("blur_rate", "f_e", "s_k"):
+        pos, _, _ = _zero_run(img, **{name: 0.0})
+        neg, p_neg, _ = _zero_run(img, **{name: -0.0})
+        assert _same_bits(np.float64(getattr(p_neg, name)), np.float64(0.0)), name  # +0.0
+        for m in pos:
+            assert _same_bits(neg[m], pos[m]), (name, m)
+        if name != "f_e":  # no blur, or K = 0: no noise
+            assert not neg["noise"].any(), name
+    one_shot = enhance(img, LG, params=EnhanceParams(blur_rate=-0.0, impulses=12))
+    zero = enhance(img, LG, params=EnhanceParams(blur_rate=0.0, impulses=12))
+    assert _same_bits(one_shot.output, zero.output)
+    assert _same_bits(one_shot.map("sigma_px"), zero.map("sigma_px"))
+    assert not one_shot.map("sigma_px").any()
+    for s_f in (0.0, -0.0):
+        with pytest.raises(FovexpError, match=r"s_f=-?0.0: must be a finite number in \(0"):
+            make_params(s_f=s_f)

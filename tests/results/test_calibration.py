@@ -244,3 +244,40 @@ def test_derive_leaves_pilots_out_unless_asked_and_refuses_dry_runs_for_real(tmp
     assert fe_by_blur_rate(dry / "calibration-fe")  # a dry run's own chain may use it
     with pytest.raises(FovexpError, match="holds only simulated sessions"):
         fe_by_blur_rate(dry / "calibration-fe", real_only=True)
+
+
+def test_the_summaries_do_not_depend_on_the_trials_order_to_the_last_bit() -> None:
+    """Participant means are averaged in participant order, whatever order the log's rows
+    come in: every permutation of the rows gives the same summary bit for bit (0.1, 0.2, 0.3
+    summed in another order differ in the last bit), and sk_lines gives its lines in ascending
+    blur-rate for a summary in any row order."""
+    from itertools import permutations
+
+    from fovexp.results.calibration import sk_lines, sk_summary
+
+    rows = [("P1", 0.11, None, "f_e", 0.1), ("P2", 0.11, None, "f_e", 0.2),
+            ("P3", 0.11, None, "f_e", 0.3)]
+    assert (0.1 + 0.2) + 0.3 != (0.3 + 0.2) + 0.1  # the order shows in the last bit
+    want = fe_summary(_trials(rows))
+    assert want["mean"].iloc[0] == np.mean([0.1, 0.2, 0.3])  # P1, P2, P3
+    for order in permutations(rows):
+        pd.testing.assert_frame_equal(fe_summary(_trials(list(order))), want, check_exact=True)
+    sk = _trials([(p, br, sf, "s_k", v) for br in (0.11, 0.57) for p in ("P1", "P2")
+                  for sf, v in ((1.0, 20.0), (2.0, 16.0))])
+    summary = sk_summary(sk)
+    backwards = sk_lines(summary.iloc[::-1])
+    assert list(backwards) == [0.11, 0.57] and backwards == sk_lines(summary)
+
+
+def test_a_summary_by_one_key_raises_no_warning() -> None:
+    """Grouped by one key (f_e's summary: blur-rate alone), the groups are taken by a scalar
+    level, not a 1-list, which pandas deprecates with a FutureWarning: the summary warns
+    nothing (a caller running with warnings as errors gets a result)."""
+    import warnings
+
+    t = _trials([("P1", 0.11, None, "f_e", 0.1), ("P2", 0.11, None, "f_e", 0.2),
+                 ("P1", 0.34, None, "f_e", 0.3)])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        fe = fe_summary(t)
+    assert fe["blur_rate"].tolist() == [0.11, 0.34] and fe["n"].tolist() == [2, 1]

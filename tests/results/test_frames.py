@@ -310,3 +310,58 @@ def test_a_frame_flipped_exactly_at_enter_plus_the_slack_is_before_it(tmp_path: 
     assert t[0] + r + ENTER_SLACK_S == t[2]
     log = [{"trial_index": 0, "start_value": 0.0, "final_value": 0.02, "response_time_s": r}]
     assert final_value_violations(frames, log).empty
+
+
+def test_a_log_torn_inside_its_header_has_no_complete_line(tmp_path: Path) -> None:
+    """A kill while the header was written leaves no newline at all: the torn line is dropped
+    like any other, and nothing is left to read (one error naming the file), even when the
+    part written already names every required column."""
+    path = tmp_path / "f.csv"
+    path.write_bytes(b"trial_index,attempt,frame,blanked,gaze_ecc_d")
+    with pytest.raises(FovexpError, match=r"f.csv: not a frame log"):
+        read_frame_log(path)
+    path.write_bytes(b"trial_index,attempt,frame,blanked,gaze_ecc_d\n")  # complete: no rows
+    assert len(read_frame_log(path)) == 0
+
+
+def _response_time_to(t0: float, target: float) -> float:
+    """The response time r whose Enter + slack, t0 + r + ENTER_SLACK_S, is ``target``
+    exactly (found one float step at a time)."""
+    from fovexp.results.frames import ENTER_SLACK_S
+
+    r = (target - ENTER_SLACK_S) - t0
+    for _ in range(8):
+        if t0 + r + ENTER_SLACK_S == target:
+            break
+        r = np.nextafter(r, np.inf if t0 + r + ENTER_SLACK_S < target else -np.inf)
+    assert t0 + r + ENTER_SLACK_S == target
+    return float(r)
+
+
+def test_the_frames_at_enter_edges_and_without_a_blanked_flag(tmp_path: Path) -> None:
+    """The final-value rule at its edges. A frame flipped exactly at Enter + the slack counts
+    as before the press when it is the only stimulus frame so far (the first was blanked),
+    and when it is the first frame itself (a press logged up to the slack before the first
+    flip). A frame whose blanked flag is missing is not taken as a stimulus frame: the value
+    seen is the last frame known to be shown."""
+    rows = trial(0, 10.0, [0.0, 0.02])
+    rows[0]["blanked"] = 1  # the first frame black: the second is the only stimulus frame
+    frames = write(tmp_path / "a.csv", rows)
+    t = frames["flip_time_s"].to_numpy(float)
+    log = [{"trial_index": 0, "start_value": 0.0, "final_value": 0.02,
+            "response_time_s": _response_time_to(t[0], t[1])}]
+    assert final_value_violations(frames, log).empty
+    frames = write(tmp_path / "b.csv", trial(0, 10.0, [0.0, 0.02]))
+    t = frames["flip_time_s"].to_numpy(float)
+    r = _response_time_to(t[0], t[0])  # Enter + slack on the first flip itself
+    log = [{"trial_index": 0, "start_value": 0.0, "final_value": 0.0, "response_time_s": r}]
+    assert final_value_violations(frames, log).empty
+    rows = trial(0, 10.0, [0.0, 0.02, 0.05])
+    rows[2]["blanked"] = ""  # not recorded: not known to be shown
+    frames = write(tmp_path / "c.csv", rows)
+    assert frames["blanked"].isna().tolist() == [False, False, True]
+    log = [{"trial_index": 0, "start_value": 0.0, "final_value": 0.02,
+            "response_time_s": round(2 * PERIOD_S + 0.003, 6)}]
+    assert final_value_violations(frames, log).empty
+    log[0]["final_value"] = 0.05
+    assert "shows 0.02" in final_value_violations(frames, log)["problem"].iloc[0]

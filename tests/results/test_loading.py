@@ -443,3 +443,18 @@ def test_the_frame_rules_check_every_session_and_the_error_names_the_first_reaso
     with pytest.raises(FovexpError, match=r"no trials left .*\(e\.g\. \S*P01\S*: practice "
                                           r"trial\)$"):
         load_results(only)
+
+
+def test_r9_takes_the_experiments_in_name_order_whatever_their_folders(tmp_path: Path) -> None:
+    """The experiments come from the files' own column, not their folders: folders sorted the
+    other way round (a/ holds calibration-sk, b/ calibration-fe) still give R9's exclusions,
+    and its first error, in experiment order."""
+    for folder, exp in (("a", "calibration-sk"), ("b", "calibration-fe")):
+        for p in range(2):
+            write_trials(tmp_path / folder / f"P0{p}", rows(exp, f"P0{p}", k=p, seed=p))
+        write_trials(tmp_path / folder / "P09", rows(exp, "P09", k=9, sha="b" * 64))
+    ds = load_results(tmp_path)
+    mixed = [e.experiment for e in ds.exclusions if e.rule == "R9 mixed protocol versions"]
+    assert mixed == ["calibration-fe", "calibration-sk"]
+    with pytest.raises(FovexpError, match="^experiment calibration-fe: protocol 'c' matches 0"):
+        load_results(tmp_path, protocol={"calibration-fe": "c", "calibration-sk": "c"})
