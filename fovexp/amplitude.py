@@ -200,6 +200,10 @@ def headroom_at(
         return np.full(np.shape(x_px), np.inf)
     if ext.kind == "window":
         return headroom_limit(*window_extremes(ext.lo, ext.hi, kernel_radius_px, x_px, y_px))
-    xc, yc = np.clip(x_px, 0, None), np.clip(y_px, 0, None)
+    # the cell an impulse reads is decided at its float32 position, as the GPU holds it (and
+    # p + 0.5 is exact in float32 below 2**23): a position within a float32 step of a cell's
+    # edge reads the same cell on both backends, where neighbouring cells' caps may differ
+    xc = np.clip(np.asarray(x_px, np.float32), 0, None)
+    yc = np.clip(np.asarray(y_px, np.float32), 0, None)
     return headroom_limit(sample_nearest(ext.lo, xc, yc, ext.block),
                           sample_nearest(ext.hi, xc, yc, ext.block))

@@ -2,7 +2,7 @@
 
 Every knob of :class:`~fovexp.params.EngineOptions` (and the impulse count, and the backend) is
 run on one frame and compared with a stated converged **reference**: 256 impulses per kernel,
-``float64``, the exact per-pixel foveation and the exact extremes (:data:`REFERENCE_OPTIONS`;
+``float64``, the exact per-pixel foveation, the preset's clipping rule (:data:`REFERENCE_OPTIONS`;
 256 is inside the public impulse range, 1..512; the kernel keeps its 0.01 cut, see there).
 
 What is measured, per configuration, each in its own process (spawned, so that its peak
@@ -20,10 +20,11 @@ resident memory is its own and Numba's allocations, which tracemalloc does not s
 - the output's RMSE in 8-bit display codes (the display-encoded output times 255, before
   rounding) against the reference (``rmse_ref_8bit``), and against the reference's options at
   the configuration's own impulse count (``rmse_paired_8bit``: the same random field, so it is
-  the error of the fast path itself: meaningful for the foveation, the extremes, the dtype, the
-  truncation and the backend; blank for the noise variants, whose field differs), and of the
-  foveated image alone (``rmse_foveated_8bit``). Against the reference, the output's RMSE is
-  dominated by the noise: two impulse counts are two different random fields;
+  the error of the fast path itself: meaningful for the foveation, the dtype, the truncation and
+  the backend, and for the clipping rules how far each moves the output; blank for the noise
+  variants, whose field differs), and of the foveated image alone (``rmse_foveated_8bit``).
+  Against the reference, the output's RMSE is dominated by the noise: two impulse counts are
+  two different random fields;
 - the noise's statistics, the meaningful accuracy of the noise knobs, per eccentricity ring
   (:data:`RINGS_DEG`), from the ``noise``, ``amplitude``, ``f_low_cpp``, ``f_high_cpp`` and
   ``eccentricity_deg`` maps, on 64 px tiles where the noise is on throughout: the fraction of
@@ -736,12 +737,12 @@ def write_markdown(rows: list[dict[str, Any]], info: dict[str, Any], path: Path,
         "",
         f"Reference: {ref['impulses']} impulses per kernel, "
         + ", ".join(f"{k}={v}" for k, v in ref["options"].items())
-        + "; 256 is inside the public impulse range 1..512. The kernel keeps the method's "
-        "0.01 cut: `kernel_truncation` also sets the reach of clipping control's extremes "
-        "(N_min, N_max over the pixels the kernel reaches, section 4.2; the min/max pyramid's "
-        "reach is 2 ceil(r / 8) + 1 level-3 blocks), so another cut changes the headroom "
-        "neighbourhood as well as the kernel's tail: the truncation knob's RMSE is mostly "
-        "that.",
+        + "; 256 is inside the public impulse range 1..512. The clipping rule is the "
+        "preset's (each rule is a method of its own, benchmarks/CLIPPING.md). The kernel keeps "
+        "the method's 0.01 cut: under the widened and exact clipping rules `kernel_truncation` "
+        "also sets the reach of the extremes (N_min, N_max over the pixels the kernel reaches, "
+        "section 4.2; the widened rule's reach is 2 ceil(r / 8) + 1 level-3 blocks), so "
+        "another cut changes the headroom neighbourhood as well as the kernel's tail.",
         "",
         "How measured: each configuration in its own spawned process; time = wall clock of "
         "`Enhancer.enhance` on a frame whose foveation is simulated (new image, moved gaze, "
@@ -958,7 +959,7 @@ def add_bench_parser(sub: Any) -> argparse.ArgumentParser:
         description="Run time against error of the engine's options (impulse count, exact "
         "foveation, clipping rules, float64, kernel truncation, noise variants, backend) on one "
         f"frame, against a converged reference ({REFERENCE_IMPULSES} impulses, float64, exact "
-        "foveation and extremes), and the time and peak memory against "
+        "foveation), and the time and peak memory against "
         "resolution. Prints a table; writes bench.csv, BENCH.md, bench.json and Pareto plots "
         "(PNG) into --out. Each configuration runs in its own process. The default run takes "
         "about 10 minutes on a 2-core machine.",

@@ -811,7 +811,9 @@ def enhance(
     >>> from fovexp import enhance, load_display, make_params
     >>> grey = np.full((27, 48), 0.5, dtype=np.float32)
     >>> res = enhance(grey, load_display("lg-oled55cx"), params=make_params(method="contrast"))
-    >>> bool(np.array_equal(res.output, grey))  # nothing to enhance on a flat image
+    >>> # nothing to enhance on a flat image: the grey back, to the float32 rounding of the
+    >>> # transfer function's round trip (NumPy's vectorised power differs by CPU)
+    >>> bool(np.abs(res.output - grey).max() <= 2e-6)
     True
     """
     params = params or EnhanceParams()

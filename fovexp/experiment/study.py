@@ -210,7 +210,7 @@ def next_commands(study: Study) -> str:
         f"    # each frame, {size} ({study.display})",
         f"#   then name their ids in {main}: images: [lab-01, ...]",
         f"fovexp stimuli check {' '.join(study.protocols)}",
-        f"xvfb-run -s '-screen 0 {size}x24' fovexp run {main} --participant SIM01 --dry-run "
+        f"xvfb-run -a -s '-screen 0 {size}x24' fovexp run {main} --participant SIM01 --dry-run "
         f"--window {size} --limit-trials 2    # a rehearsal at the display's size",
         "fovexp analyze results --out report",
         f"fovexp run {main} --participant P01    # the real session, on the rig",
@@ -237,7 +237,7 @@ profile; a profile of your own goes in `protocols/displays/NAME.yaml` and is nam
 way) and this folder's stimuli (`stimuli: ../stimuli`). A real session shows every image at
 the display's own size, {_size(study.size)}, and so does a dry run with `--window
 {_size(study.size)}`: it refuses what the real session refuses. The dry run needs an X screen
-that large (`xvfb-run -s '-screen 0 {_size(study.size)}x24'` on a machine without one).
+that large (`xvfb-run -a -s '-screen 0 {_size(study.size)}x24'` on a machine without one).
 
 ## Next
 

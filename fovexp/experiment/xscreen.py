@@ -4,7 +4,7 @@ partly off-screen.
 
 A dry run at the display's own size (``--window 3840x2160``) is a rehearsal of the real
 session; on a machine without such a display it needs a virtual screen that large
-(``xvfb-run -s "-screen 0 3840x2160x24"``), and a smaller one would show, and time, only part
+(``xvfb-run -a -s "-screen 0 3840x2160x24"``), and a smaller one would show, and time, only part
 of every frame.
 """
 

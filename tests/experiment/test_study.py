@@ -66,6 +66,9 @@ def test_init_makes_a_study_that_loads_where_it_lands(tmp_path: Path, capsys,
     rehearsal = ("fovexp run protocols/lab-validation.yaml --participant SIM01 --dry-run "
                  "--window 3840x2160 --limit-trials 2")
     assert rehearsal in r.stdout and rehearsal in (study / "README.md").read_text()
+    # a free display number (-a): without it xvfb-run fails wherever :99 is taken (issue 32)
+    assert "xvfb-run -a -s '-screen 0 3840x2160x24' " + rehearsal in r.stdout
+    assert "xvfb-run -s" not in r.stdout + (study / "README.md").read_text()
     for cmd in ("fovexp stimuli add", "fovexp stimuli check", "fovexp analyze results"):
         assert cmd in r.stdout
     marker = yaml.safe_load((study / STUDY_FILE).read_text())
