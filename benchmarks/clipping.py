@@ -54,6 +54,7 @@ from fovexp.evaluation.spectra import (
     default_rings,
     patch_power,
     patch_px,
+    ring_band_cpd,
     ring_patches,
 )
 from fovexp.params import RELEASE_TABLE
@@ -72,12 +73,29 @@ def band_power(img_grey, per_ring, side_px, edges):
 
 
 def in_band(ring, ppd, edges):
-    from fovexp import t_high_cpd, t_low_cpd
-
+    """The frequency bins in the ring's band (``fovexp evaluate spectra``'s), and the band."""
     centres = np.sqrt(edges[:-1] * edges[1:])
-    lo = float(t_low_cpd(ring.centre_deg))
-    hi = min(float(t_high_cpd(ring.centre_deg)), 0.5 * ppd)
+    lo, hi = ring_band_cpd(ring, ppd)
     return (centres >= lo) & (centres <= hi), lo, hi
+
+
+class RingSpectra:
+    """The spectra's set-up for one image (``fovexp evaluate spectra``'s rings, patches and
+    frequency bins, gaze at the centre) and the full-resolution image's band power."""
+
+    def __init__(self, display, image, rings):
+        h, w = image.shape[:2]
+        geom = ViewingGeometry.for_image(display, w, h, "exact")
+        self.side = patch_px(w)
+        self.per_ring = {r.label: ring_patches(geom, (0.5, 0.5), r, self.side) for r in rings}
+        self.ppd = {k: float(v.ppd.mean()) for k, v in self.per_ring.items()}
+        self.edges = bin_edges_cpd(0.5 * max(float(p.ppd.max())
+                                             for p in self.per_ring.values()))
+        self.full = self.power(image)
+
+    def power(self, image):
+        """Band power per ring (label -> power per frequency bin) of an image's grey."""
+        return band_power(grey(image), self.per_ring, self.side, self.edges)
 
 
 def measure(images, presets, blur_rates, rules, quick, release_images=1):
@@ -88,13 +106,8 @@ def measure(images, presets, blur_rates, rules, quick, release_images=1):
         table = PAPER_TABLE2 if preset == "paper" else RELEASE_TABLE
         for name, path in (images if preset == "paper" else images[:release_images]):
             image = read_image(path)
-            h, w = image.shape[:2]
-            geom = ViewingGeometry.for_image(display, w, h, "exact")
-            side = patch_px(w)
-            per_ring = {r.label: ring_patches(geom, (0.5, 0.5), r, side) for r in rings}
-            ppd = {k: float(v.ppd.mean()) for k, v in per_ring.items()}
-            edges = bin_edges_cpd(0.5 * max(float(p.ppd.max()) for p in per_ring.values()))
-            full = band_power(grey(image), per_ring, side, edges)
+            spec = RingSpectra(display, image, rings)
+            ppd, edges, full = spec.ppd, spec.edges, spec.full
             ecc = None
             for br in blur_rates:
                 f_e, s_k, s_f = table.at(br)
@@ -118,12 +131,12 @@ def measure(images, presets, blur_rates, rules, quick, release_images=1):
                                                     else noise)
                     row = {"preset": preset, "image": name, "blur_rate": br, "rule": rule,
                            "s_k": s_k, "rings": {}}
-                    powers = {"ours": band_power(grey(res.output), per_ring, side, edges)}
+                    powers = {"ours": spec.power(res.output)}
                     if rule == rules[0]:
                         for m in ("foveated", "contrast"):
                             r2 = enh.enhance((0.5, 0.5), make_params(
                                 method=m, blur_rate=br, preset=preset))
-                            powers[m] = band_power(grey(r2.output), per_ring, side, edges)
+                            powers[m] = spec.power(r2.output)
                     for r in rings:
                         sel = (ecc >= r.lo_deg) & (ecc < r.hi_deg)
                         mask, lo, hi = in_band(r, ppd[r.label], edges)

@@ -16,7 +16,7 @@ the s_k protocol's first step to its top), Sponza at 0.34.
 
     .venv/bin/python benchmarks/clipping_space.py [--scenes N]
 
-writes ``clipping_space.json`` and ``clipping_space.md`` beside this file.
+writes ``clipping_space.json`` and ``clipping_space.md`` beside this file (or into ``--out``).
 """
 
 from __future__ import annotations
@@ -32,7 +32,6 @@ import numpy as np
 from fovexp import (
     EngineOptions,
     Enhancer,
-    ViewingGeometry,
     colour,
     load_display,
     make_params,
@@ -41,11 +40,10 @@ from fovexp import (
 )
 from fovexp import amplitude as amp
 from fovexp.bench import machine_cpu
-from fovexp.evaluation.outputs import grey
-from fovexp.evaluation.spectra import bin_edges_cpd, default_rings, patch_px, ring_patches
+from fovexp.evaluation.spectra import default_rings
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from clipping import ROOT, SPONZA, band_power, db, in_band  # noqa: E402
+from clipping import ROOT, SPONZA, RingSpectra, db, in_band  # noqa: E402
 
 S_K_CURVE = (1.5, 3.0, 6.0, 12.0, 21.02, 30.0, 42.04, 45.0)
 
@@ -77,6 +75,7 @@ def variants(display):
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenes", type=int, default=3)
+    ap.add_argument("--out", type=Path, default=Path(__file__).resolve().parent)
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
     display = load_display("lg-oled55cx")
@@ -87,20 +86,15 @@ def main(argv=None) -> int:
     bands, curve = [], []
     for name, path in images:
         image = read_image(path)
-        h, w = image.shape[:2]
-        geom = ViewingGeometry.for_image(display, w, h, "exact")
-        side = patch_px(w)
-        per_ring = {r.label: ring_patches(geom, (0.5, 0.5), r, side) for r in rings}
-        ppd = {k: float(v.ppd.mean()) for k, v in per_ring.items()}
-        edges = bin_edges_cpd(0.5 * max(float(p.ppd.max()) for p in per_ring.values()))
-        full = band_power(grey(image), per_ring, side, edges)
+        spec = RingSpectra(display, image, rings)
+        ppd, edges, full = spec.ppd, spec.edges, spec.full
         for label, enh in variants(display).items():
             enh.set_image(image)
             for br in (0.34, 0.57):
                 res = enh.enhance((0.5, 0.5), make_params(blur_rate=br))
                 out = res.output
                 ecc = res.map("eccentricity_deg")
-                pw = band_power(grey(out), per_ring, side, edges)
+                pw = spec.power(out)
                 noise = res.map("noise")
                 if isinstance(enh, EncodedEnhancer):
                     base = colour.encode(enh.linear("contrast"), enh._gamma())
@@ -144,7 +138,8 @@ def main(argv=None) -> int:
         vals = [next(c["std"] for c in curve if c["variant"] == v and c["s_k"] == s_k)
                 for v in variants(display)]
         lines.append(f"| {s_k:g} | " + " | ".join(f"{x:.4f}" for x in vals) + " |")
-    out = Path(__file__).resolve().parent
+    out = args.out
+    out.mkdir(parents=True, exist_ok=True)
     (out / "clipping_space.json").write_text(json.dumps({"bands": bands, "curve": curve},
                                                         indent=1))
     (out / "clipping_space.md").write_text("\n".join(lines) + "\n")
