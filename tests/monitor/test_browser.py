@@ -140,11 +140,15 @@ def test_the_live_page_follows_a_dry_run_and_survives_its_kill(
                  and int(svg.get_attribute("data-points") or 0) > 10, timeout_s=5)
         assert driver.find_element("id", "trail").get_attribute("d").startswith("M")
         # a flagged trial shows its flag
-        flag = wait_for("R13's flag", lambda: [f for f in driver.find_elements(
-            "css selector", "#rules .flag") if f.get_attribute("data-rule") == "R13 latency"],
+        # read inside the wait: the page redraws the list (4 Hz), and an element found just
+        # before a redraw is stale when read (seen under load)
+        flag_text, flag_shown = wait_for("R13's flag", lambda: [
+            (f.text, f.is_displayed()) for f in driver.find_elements(
+                "css selector", "#rules .flag") if f.get_attribute("data-rule") == "R13 latency"],
             timeout_s=20)[0]
-        assert flag.text == "R13: would be excluded" and flag.is_displayed()
-        latency = driver.find_element("css selector", '#rules [data-rule="R13 latency"]').text
+        assert flag_text == "R13: would be excluded" and flag_shown
+        latency = wait_for("R13's row", lambda: driver.find_element(
+            "css selector", '#rules [data-rule="R13 latency"]').text)
         assert "limit 0.5 ms" in latency
         assert "Dry run" in text(driver, "rules-note")
         # the trial counter advances
