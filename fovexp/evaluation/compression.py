@@ -42,7 +42,8 @@ from typing import Any
 
 import numpy as np
 
-from fovexp import FovexpError, parse_yaml, read_image
+from fovexp import FovexpError, read_image
+from fovexp.results.loading import impulse_count
 
 from .outputs import OutFolder, Setup, colour_of, pyplot, table_md
 
@@ -65,8 +66,6 @@ def jpeg_size(image: np.ndarray, quality: int = JPEG_QUALITY) -> int:
 
 #: The impulse count of the paper's compression experiment (section 6.3: Figure 16 right).
 PAPER_IMPULSES = 12
-#: A protocol's impulse count when it names none (fovexp.experiment.protocol's default).
-DEFAULT_IMPULSES = 64
 #: Blur-rate ratios of the saving-against-ratio table (ours' blur-rate / contrast's).
 RATIOS = (1.0, 1.25, 1.5, 1.75, 2.0, 2.25, 2.5)
 #: Table 2's pair: contrast at 0.34, ours at 0.57 (section 5.3's blur-rates).
@@ -77,23 +76,6 @@ def validation_experiments(ds: Any) -> list[str]:
     """The experiments of a dataset whose trials adjust the blur-rate (validations)."""
     t = ds.trials
     return sorted(set(t.loc[t["adjusted_parameter"] == "blur_rate", "experiment"]))
-
-
-def recorded_impulses(results: Path, experiment: str) -> int | None:
-    """The ``impulses`` of the protocol the sessions of ``experiment`` recorded (the newest
-    session's copy, docs/LOGS.md), or None where no session file records the protocol."""
-    root = results / experiment
-    best: tuple[str, int] | None = None
-    for path in sorted(root.rglob("session-*.json")) if root.is_dir() else []:
-        try:
-            info = json.loads(path.read_text())
-            text = info.get("protocol") if isinstance(info, dict) else None
-            spec = parse_yaml(text, str(path)) if isinstance(text, str) else None
-        except (OSError, ValueError, FovexpError):
-            continue
-        if isinstance(spec, dict) and (best is None or path.name > best[0]):
-            best = (path.name, int(spec.get("impulses", DEFAULT_IMPULSES)))
-    return None if best is None else best[1]
 
 
 @dataclass(frozen=True)
@@ -111,9 +93,9 @@ class Choice:
 def pick_experiment(results: Path, experiments: list[str], requested: str | None) -> Choice:
     """The paper's 12-impulse experiment unless ``requested`` names one (module docstring)."""
     if requested is not None:
-        n = recorded_impulses(results, requested)
+        n = impulse_count(results, requested)
         return Choice(requested, n, "asked for (--experiment)")
-    counts = {e: recorded_impulses(results, e) for e in experiments}
+    counts = {e: impulse_count(results, e) for e in experiments}
     twelve = [e for e, n in counts.items() if n == PAPER_IMPULSES]
     if twelve:
         name = "validation-12" if "validation-12" in twelve else twelve[0]

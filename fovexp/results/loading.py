@@ -58,7 +58,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from fovexp import FovexpError
+from fovexp import FovexpError, parse_yaml
 
 from .format import (
     FLOAT_COLUMNS,
@@ -446,3 +446,32 @@ def _typed(frame: pd.DataFrame) -> pd.DataFrame:
     frame["practice"] = frame["practice"].astype(bool)
     frame["line"] = frame["line"].astype(int)
     return frame
+
+
+#: A protocol's impulse count when it does not name one (fovexp.experiment.protocol's default).
+DEFAULT_IMPULSES = 64
+
+
+def impulse_count(results: Path, experiment: str) -> int | None:
+    """The ``impulses`` of the protocol the sessions of ``experiment`` ran (the newest
+    session's copy of the protocol in its ``session-*.json``, docs/LOGS.md; 64 where the
+    protocol names none), or None when no session file records the protocol."""
+    folder = results / experiment
+    if not folder.is_dir():
+        folder = results if results.name == experiment else folder
+    best: tuple[str, int] | None = None
+    for path in sorted(folder.rglob("session-*.json")):
+        try:
+            info = json.loads(path.read_text())
+            text = info.get("protocol") if isinstance(info, dict) else None
+            if not isinstance(text, str):
+                continue
+            spec = parse_yaml(text, str(path))
+        except (OSError, ValueError, FovexpError):
+            continue
+        if not isinstance(spec, dict):
+            continue
+        n = int(spec.get("impulses", DEFAULT_IMPULSES))
+        if best is None or path.name > best[0]:
+            best = (path.name, n)
+    return None if best is None else best[1]

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from fovexp.analysis.report import run_analysis
-from fovexp.analysis.sections.impulses import impulse_count
+from fovexp.results.loading import impulse_count
 
 from analysis_fixtures import Noise, Truth, session_id, simulate_rows, write_trials
 

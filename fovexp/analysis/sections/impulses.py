@@ -22,7 +22,6 @@ from the protocol copy its ``session-*.json`` files record (docs/LOGS.md).
 
 from __future__ import annotations
 
-import json
 import math
 from itertools import combinations
 from pathlib import Path
@@ -32,7 +31,7 @@ import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
 
-from fovexp import FovexpError, parse_yaml
+from fovexp.results.loading import impulse_count
 
 from ..figures import _save
 from ..stats import paired_ttest
@@ -42,34 +41,8 @@ from .common import md_table, p_text, write_csv
 if TYPE_CHECKING:
     from ..state import Analysis
 
-#: a protocol's impulse count when it does not name one (fovexp.experiment.protocol's default)
-DEFAULT_IMPULSES = 64
 DIFF_COLUMNS = ["a", "b", "test", "n", "mean_adv_a", "mean_adv_b", "mean_diff", "t", "df", "p",
                 "ci_low", "ci_high"]
-
-
-def impulse_count(results: Path, experiment: str) -> int | None:
-    """The ``impulses`` of the protocol the sessions of ``experiment`` ran (the newest
-    session's copy), or None when no session file records the protocol."""
-    folder = results / experiment
-    if not folder.is_dir():
-        folder = results if results.name == experiment else folder
-    best: tuple[str, int] | None = None
-    for path in sorted(folder.rglob("session-*.json")):
-        try:
-            info = json.loads(path.read_text())
-            text = info.get("protocol") if isinstance(info, dict) else None
-            if not isinstance(text, str):
-                continue
-            spec = parse_yaml(text, str(path))
-        except (OSError, ValueError, FovexpError):
-            continue
-        if not isinstance(spec, dict):
-            continue
-        n = int(spec.get("impulses", DEFAULT_IMPULSES))
-        if best is None or path.name > best[0]:
-            best = (path.name, n)
-    return None if best is None else best[1]
 
 
 def advantages(trials: pd.DataFrame) -> pd.Series:
