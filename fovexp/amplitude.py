@@ -192,6 +192,8 @@ def headroom_at(
     if x_px is None:
         if shape is None:
             raise ValueError("headroom_at needs points or a shape")
+        if ext.kind == "off":
+            return np.full(shape, np.inf)
         if ext.kind == "window":  # every pixel's square: the separable filter
             return headroom_limit(*window_extremes(ext.lo, ext.hi, kernel_radius_px))
         yy, xx = np.mgrid[0:shape[0], 0:shape[1]].astype(np.float64)
