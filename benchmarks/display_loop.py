@@ -1,15 +1,15 @@
 """The runner's display loop at 4K: does the display thread ever wait, and how old is the gaze
 that decides a frame?
 
-Runs the session's own frame loop (:class:`fovexp.experiment.frameloop.TrialLoop`) in a real
+Runs the session's own frame loop (:class:`fovexp.experiment.tasks.frameloop.TrialLoop`) in a real
 PsychoPy window of 3840x2160 under Xvfb, with simulated gaze at 600 Hz and the enhancer
 rendering the 4K test half on a worker thread (CPU backend; optionally the GPU backend writing
 into the window's textures), a wheel step every 100 ms. The simulated samples are delivered by a
 producer thread into the frame loop's buffer, as the Tobii adapter delivers a tracker's
 (:class:`ThreadedSimulatedGaze`). Each configuration runs twice per repeat, in one process and
 window, alternating the order from repeat to repeat: with the gaze read right after the previous
-flip (``old``), and late-latched (``new``: :class:`~fovexp.experiment.frameloop.LateLatch`), so
-the two are compared under the same load. It records, per frame, the gaze-to-flip latency (the
+flip (``old``), and late-latched (``new``: :class:`~fovexp.experiment.tasks.frameloop.LateLatch`),
+so the two are compared under the same load. It records, per frame, the gaze-to-flip latency (the
 deciding sample to the flip, on the gaze clock, as the frame log has it), the draw latency (the
 decision to the flip), the flips later than 1.5 periods (the session's dropped frames), and the
 display thread's own time; the machine's load average before each run; and, in the same
@@ -68,7 +68,7 @@ def frame_path(which: str = "auto", size: tuple[int, int] = (W, H),
         if not SPONZA.exists():
             raise SystemExit(f"{SPONZA}: no such file (use --frame generated)")
         return SPONZA
-    from fovexp.experiment.stimuli import StimulusSet, generate_scenes, size_text
+    from fovexp.stimuli.folder import StimulusSet, generate_scenes, size_text
 
     stim = StimulusSet(stimuli)
     if size_text(size) not in stim.scenes["scene-00"].sha256:
@@ -86,7 +86,7 @@ _FRAMES: dict[tuple[Path, tuple[int, int]], np.ndarray] = {}
 def _frame(path: Path, size: tuple[int, int] = (W, H)) -> np.ndarray:
     """The split screen of ``path`` at ``size`` (read once; scaled when the file is another
     size: Sponza, or the 4K scene in a window fovexp pins no scene size for)."""
-    from fovexp.experiment.stimuli import load_stimulus, split_screen
+    from fovexp.stimuli.folder import load_stimulus, split_screen
 
     if (path, size) not in _FRAMES:
         _FRAMES[path, size] = split_screen(load_stimulus(path, size, scale=True))
@@ -123,7 +123,7 @@ class ThreadedSimulatedGaze:
     name = "simulated"
 
     def __init__(self, sim, period_s: float = 0.002) -> None:
-        from fovexp.experiment.gaze import SampleBuffer
+        from fovexp.experiment.trackers.gaze import SampleBuffer
 
         self.sim, self.period_s = sim, period_s
         self.buffer = SampleBuffer()
@@ -161,7 +161,7 @@ def wheel_participant(adjuster, every_s: float = 0.1):
     """A participant turning the wheel one notch every ``every_s`` seconds, turning back
     before the next notch would leave the adjuster's range (the benchmark's load: a render
     every 100 ms)."""
-    from fovexp.experiment.trial import Wheel
+    from fovexp.experiment.tasks.trial import Wheel
 
     state = {"next": every_s, "dir": 1}
 
@@ -182,11 +182,11 @@ def run_block(screen, backend: str, parameter: str, seconds: float, frame_file: 
     with ``latch`` (a ``LateLatch``, carried from block to block as a session carries it from
     trial to trial) or not (None). Returns the block's raw figures (:func:`summarize`)."""
     from fovexp import load_display, make_params
-    from fovexp.experiment.frameloop import TrialIO, TrialLoop, display_thread_first
-    from fovexp.experiment.gaze import BlankingMonitor, FixationGeometry
-    from fovexp.experiment.render import TestRenderer
+    from fovexp.experiment.display.render import TestRenderer
+    from fovexp.experiment.tasks.frameloop import TrialIO, TrialLoop, display_thread_first
+    from fovexp.experiment.tasks.trial import TrialState, ValueAdjuster
+    from fovexp.experiment.trackers.gaze import BlankingMonitor, FixationGeometry
     from fovexp.experiment.trackers.simulated import SimulatedGaze
-    from fovexp.experiment.trial import TrialState, ValueAdjuster
 
     load = load_average()
     display = load_display("lg-oled55cx")
@@ -279,7 +279,7 @@ def run_pair(screen, backend: str, parameter: str, seconds: float, blocks: int,
     """Old and new for ``seconds`` each, in ``blocks`` alternating blocks (so that both see
     the same load, which changes by the second on a shared machine); returns both modes'
     figures."""
-    from fovexp.experiment.frameloop import LateLatch
+    from fovexp.experiment.tasks.frameloop import LateLatch
 
     latch = LateLatch(1 / REFRESH_HZ)
     got: dict[str, list[dict]] = {"old": [], "new": []}
@@ -359,30 +359,30 @@ def run_monitor_ab(screen, seconds: float, blocks: int, browser: bool, seed: int
     (issue 23): blocks of ``seconds`` in rotation, each a new attempt of the session's frame
     loop with the session's own log writing (the gaze and frame logs in batches by their
     flusher thread): ``off`` (no status file), ``publisher`` (the live status file written 4
-    times a second, as every session does: :class:`fovexp.experiment.live.LivePublisher` fed
+    times a second, as every session does: :class:`fovexp.experiment.records.live.LivePublisher` fed
     by the logs' taps), ``monitor`` (the same, and ``fovexp monitor`` serving it with its page
     open in Chromium on this machine). Each block's display-thread work per frame is kept."""
     import tempfile
 
     from fovexp import load_display, make_params
-    from fovexp.experiment.frameloop import (
-        LateLatch,
-        TrialIO,
-        TrialLoop,
-        display_thread_first,
-    )
-    from fovexp.experiment.gaze import BlankingMonitor, FixationGeometry
-    from fovexp.experiment.live import LivePublisher
-    from fovexp.experiment.logs import (
+    from fovexp.experiment.display.render import TestRenderer
+    from fovexp.experiment.records.live import LivePublisher
+    from fovexp.experiment.records.logs import (
         FRAME_COLUMNS,
         GAZE_COLUMNS,
         BatchLog,
         PeriodicFlusher,
     )
-    from fovexp.experiment.render import TestRenderer
-    from fovexp.experiment.rows import gaze_items, gaze_row
+    from fovexp.experiment.records.rows import gaze_items, gaze_row
+    from fovexp.experiment.tasks.frameloop import (
+        LateLatch,
+        TrialIO,
+        TrialLoop,
+        display_thread_first,
+    )
+    from fovexp.experiment.tasks.trial import TrialState, ValueAdjuster
+    from fovexp.experiment.trackers.gaze import BlankingMonitor, FixationGeometry
     from fovexp.experiment.trackers.simulated import SimulatedGaze
-    from fovexp.experiment.trial import TrialState, ValueAdjuster
 
     display = load_display("lg-oled55cx")
     fix = FixationGeometry(display)
@@ -523,9 +523,9 @@ def _tap_cost(fix, n: int = 100_000) -> dict:
     batches, as the publisher thread does)."""
     import tempfile
 
-    from fovexp.experiment.gaze import GazeSample
-    from fovexp.experiment.live import LivePublisher
-    from fovexp.experiment.logs import FRAME_COLUMNS
+    from fovexp.experiment.records.live import LivePublisher
+    from fovexp.experiment.records.logs import FRAME_COLUMNS
+    from fovexp.experiment.trackers.gaze import GazeSample
 
     pub = LivePublisher(Path(tempfile.mkdtemp()), "tap", {}, fix)
     row = tuple(range(len(FRAME_COLUMNS)))
@@ -641,7 +641,7 @@ def measure_uploads(screen, reps: int, frame_file: Path) -> dict:
     from psychopy import visual
     from pyglet import gl
 
-    from fovexp.experiment.render import to_rgba8
+    from fovexp.experiment.display.render import to_rgba8
 
     w, h = screen.size
     frame = _frame(frame_file, (w, h))
@@ -936,8 +936,8 @@ def main(argv: list[str] | None = None) -> int:
     sys.path.insert(0, str(HERE))
     from run import machine  # the same machine description as the main benchmark
 
-    from fovexp.experiment.frameloop import display_thread_first
-    from fovexp.experiment.window import PsychoScreen
+    from fovexp.experiment.display.window import PsychoScreen
+    from fovexp.experiment.tasks.frameloop import display_thread_first
 
     frame_file = frame_path(args.frame, size, args.stimuli)
     flags = " ".join(a for a in (argv if argv is not None else sys.argv[1:]))

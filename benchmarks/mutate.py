@@ -487,7 +487,7 @@ def main() -> int:
     env.pop("NUMBA_DISABLE_JIT", None)
     if not stimuli.is_dir():
         subprocess.run([sys.executable, "-c",
-                        "import sys; from fovexp.experiment.stimuli import DRY_RUN_SIZE, "
+                        "import sys; from fovexp.stimuli.folder import DRY_RUN_SIZE, "
                         "StimulusSet, generate_scenes; generate_scenes(StimulusSet(sys.argv[1]), "
                         "DRY_RUN_SIZE)", str(stimuli)], cwd=works[0], check=True)
     record = ROOT / "benchmarks" / "mutation" / "results.json"

@@ -1,4 +1,4 @@
-"""Time, file size and memory of the generated scenes (fovexp.experiment.scenes); results written
+"""Time, file size and memory of the generated scenes (fovexp.stimuli.scenes); results written
 to benchmarks/SCENES.md and benchmarks/scenes.json with the machine they came from.
 
     .venv/bin/python benchmarks/scenes.py [--sizes 3840x2160 480x270] [--repeats 3]
@@ -27,7 +27,7 @@ from run import machine, peak_rss_mb, reset_peak_rss  # noqa: E402
 
 
 def per_scene(size: tuple[int, int], repeats: int) -> list[dict]:
-    from fovexp.experiment import scenes
+    from fovexp.stimuli import scenes
 
     rows = []
     for spec in scenes.SCENES:
@@ -46,7 +46,7 @@ def per_scene(size: tuple[int, int], repeats: int) -> list[dict]:
 
 def peak_memory_4k() -> float:
     """Peak RSS (MB) of this process while it draws and encodes the most demanding scene."""
-    from fovexp.experiment import scenes
+    from fovexp.stimuli import scenes
 
     reset_peak_rss()
     scenes.png_bytes(scenes.render_scene(1, 3840, 2160))  # cobblestones: the largest arrays

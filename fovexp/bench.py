@@ -329,7 +329,7 @@ def find_frame(image: Path | None) -> tuple[Path | None, str]:
     for cand in SPONZA_CANDIDATES:
         if cand.is_file():
             return cand, f"{cand.name} (the shared Sponza render)"
-    return None, "generated scene-00 (fovexp.experiment.scenes), drawn natively at each size"
+    return None, "generated scene-00 (fovexp.stimuli.scenes), drawn natively at each size"
 
 
 def frame_at(path: Path | None, size: tuple[int, int]) -> tuple[np.ndarray, str]:
@@ -337,7 +337,7 @@ def frame_at(path: Path | None, size: tuple[int, int]) -> tuple[np.ndarray, str]
     up; scikit-image) when it has another size, or the generated scene drawn at that size."""
     w, h = size
     if path is None:
-        from .experiment.scenes import render_scene
+        from .stimuli.scenes import render_scene
 
         return render_scene(0, w, h).astype(np.float32) / 255.0, "drawn at this size"
     from .io import read_image

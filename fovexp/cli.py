@@ -1,5 +1,5 @@
 """``fovexp`` command line: ``enhance`` and ``compile`` (this module), ``run`` (experiment
-runner), ``init`` (a study folder, :mod:`fovexp.experiment.study`), ``analyze`` (analysis),
+runner), ``init`` (a study folder, :mod:`fovexp.experiment.protocol.study`), ``analyze`` (analysis),
 ``monitor`` (the live view of running sessions), ``docs`` (the documentation site,
 :mod:`fovexp.docsite`) and ``bench`` (run time against error, :mod:`fovexp.bench`).
 Bad input prints one ``fovexp: error: ...`` line and exits with 2.
@@ -31,13 +31,13 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
                 "foveate and enhance an image, a folder of frames or a video"),
     "run": ("fovexp.experiment.cli", "add_run_parser",
             "run an experiment protocol with a participant"),
-    "stimuli": ("fovexp.experiment.stimuli_cli", "add_stimuli_parser",
+    "stimuli": ("fovexp.stimuli.cli", "add_stimuli_parser",
                 "generate scenes, add a lab's frames, check a protocol's images"),
     "analyze": ("fovexp.analysis.cli", "add_analyze_parser",
                 "turn trial logs into the paper's results (Table 2, validation tests)"),
     "monitor": ("fovexp.monitor.cli", "add_monitor_parser",
                 "watch running sessions in a browser (read-only)"),
-    "init": ("fovexp.experiment.study", "add_init_parser",
+    "init": ("fovexp.experiment.protocol.study", "add_init_parser",
              "make a study folder: copies of the shipped protocols, stimuli/, results/"),
     "docs": ("fovexp.docsite", "add_docs_parser",
              "the documentation: print where the built site is, or open it"),

@@ -2,7 +2,7 @@
 
 They live in the project's top-level folders (``protocols/``, ``protocols/displays/``,
 ``stimuli/``) and are installed inside the package as ``fovexp.protocols`` and
-``fovexp.stimuli`` (pyproject.toml), so the same lookup works from a clone (an editable
+``fovexp.stimuli.shipped`` (pyproject.toml), so the same lookup works from a clone (an editable
 install) and from a wheel, in any folder. A lab's own files come first: a name is searched in
 ``./protocols`` (``./protocols/displays``) of the current folder before the shipped ones.
 """
@@ -16,7 +16,7 @@ from .errors import FovexpError
 
 
 def shipped(package: str) -> Path:
-    """The folder of a data package (``"fovexp.protocols"``, ``"fovexp.stimuli"``)."""
+    """The folder of a data package (``"fovexp.protocols"``, ``"fovexp.stimuli.shipped"``)."""
     return Path(str(importlib.resources.files(package)))
 
 
@@ -33,8 +33,8 @@ def shipped_displays() -> Path:
 def shipped_stimuli() -> Path:
     """The folder of the shipped stimulus data: ``scenes.yaml``, the generated scenes' sha256
     per resolution (read-only; the scenes themselves go to a lab's stimulus folder,
-    ``fovexp.experiment.stimuli``)."""
-    return shipped("fovexp.stimuli")
+    ``fovexp.stimuli.folder``)."""
+    return shipped("fovexp.stimuli.shipped")
 
 
 def find_protocol(name_or_path: str | Path) -> Path:

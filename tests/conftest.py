@@ -13,7 +13,7 @@ def dry_run_scenes(tmp_path_factory) -> Iterator[Path]:
     a stimulus folder of this test session's own, named by $FOVEXP_STIMULI for every test and
     every command a test starts: tests never read or write the clone's stimuli/ folder.
     ``$FOVEXP_TEST_STIMULI`` names a folder made beforehand instead (the mutation runs')."""
-    from fovexp.experiment.stimuli import DRY_RUN_SIZE, ENV_VAR, StimulusSet, generate_scenes
+    from fovexp.stimuli.folder import DRY_RUN_SIZE, ENV_VAR, StimulusSet, generate_scenes
 
     prepared = os.environ.get("FOVEXP_TEST_STIMULI")
     if prepared:  # benchmarks/mutate.py: made once for its thousands of short test runs

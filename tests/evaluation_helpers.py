@@ -30,7 +30,7 @@ def small_display(folder: Path) -> Path:
 
 
 def scene(index: int, size: tuple[int, int] = SIZE) -> np.ndarray:
-    from fovexp.experiment.scenes import render_scene
+    from fovexp.stimuli.scenes import render_scene
 
     return render_scene(index, *size).astype(np.float32) / 255.0
 

@@ -18,11 +18,11 @@ import numpy as np
 import pytest
 
 import fovexp
-from fovexp.experiment import scenes
-from fovexp.experiment.gaze import GazeSample, monotonic_us
 from fovexp.experiment.interfaces import FlipTimes
+from fovexp.experiment.tasks.trial import Key
+from fovexp.experiment.trackers.gaze import GazeSample, monotonic_us
 from fovexp.experiment.trackers.simulated import ClockedGaze
-from fovexp.experiment.trial import Key
+from fovexp.stimuli import scenes
 
 REPO = Path(__file__).resolve().parent.parent
 PYTHON = sys.executable
@@ -205,7 +205,7 @@ class StubScreen:
         self.cal_views.append(type(view).__name__)
         if self.cal_answer is not None:
             return list(self.cal_answer(view))
-        from fovexp.experiment.calibration import HeadBoxView, ResultView, TextView
+        from fovexp.experiment.trackers.calibration import HeadBoxView, ResultView, TextView
 
         if isinstance(view, HeadBoxView):
             return ["space"]
@@ -224,7 +224,7 @@ class StubScreen:
         pass
 
     def set_test(self, right) -> None:
-        """``right``: a render (:class:`fovexp.experiment.render.Rendered`) or an image."""
+        """``right``: a render (:class:`fovexp.experiment.display.render.Rendered`) or an image."""
         self.test = getattr(right, "rgba8", right)
 
     def prepare(self, blank: bool) -> None:

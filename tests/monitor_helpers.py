@@ -34,7 +34,7 @@ def live(sid: str, *, state: str = "trial", position: int = 3, total: int = 10,
          blanked: float = 0.1, dropped: int = 1, frames: int = 300, p95: float = 12.0,
          dry_run: bool = True, updated: float | None = None, pid: int | None = None,
          host: str | None = None, seq: int = 1, **extra: Any) -> dict[str, Any]:
-    """A live status file's content, as the runner writes it (fovexp.experiment.live)."""
+    """A live status file's content, as the runner writes it (fovexp.experiment.records.live)."""
     trial = {"index": position + 1, "attempt": 0, "position": position, "total": total,
              "practice": False, "method": "ours", "image": "scene-02", "parameter": "s_k",
              "value": 21.5, "start_value": 10.0, "frames": frames, "dropped": dropped,

@@ -156,6 +156,8 @@ def test_runner_and_analysis_use_the_public_api(graph, part):
     """Of the enhancer they import only the package's public names (``from fovexp import``,
     docs/API.md), the shared logs layer ``fovexp.results``, and their own modules."""
     allowed = ("fovexp", "fovexp.results", part)
+    if part == "fovexp.experiment":  # the stimuli are a layer of their own (below)
+        allowed += ("fovexp.stimuli",)
     # ``fovexp run --monitor`` starts ``fovexp monitor`` beside the session
     beside = ("fovexp.experiment.cli", "fovexp.monitor.cli")
     bad = [(a, b) for a, b in _edges(graph, part, "fovexp")
@@ -168,6 +170,7 @@ def test_the_engine_does_not_import_the_runner_or_the_analysis(graph):
     engine = [m for m in graph if not m.startswith(("fovexp.experiment", "fovexp.analysis",
                                                     "fovexp.results", "fovexp.monitor",
                                                     "fovexp.cli", "fovexp.__main__", "fovexp.bench",
+                                                    "fovexp.stimuli",
                                                     "fovexp.evaluation", "fovexp.rig",
                                                     # compiles every kernel, the evaluation's too
                                                     "fovexp.warmup"))]
@@ -175,6 +178,81 @@ def test_the_engine_does_not_import_the_runner_or_the_analysis(graph):
            if b.startswith(("fovexp.experiment", "fovexp.analysis", "fovexp.results",
                             "fovexp.evaluation"))]
     assert bad == []
+
+
+def test_the_stimuli_sit_on_the_public_api(graph):
+    """``fovexp.stimuli`` (the scenes, a lab's stimulus folder, ``fovexp stimuli``) is read by
+    the runner, the rig check and the bench: it imports the enhancer's public names and its own
+    modules, and only its command line's ``check`` reads a protocol."""
+    bad = [(a, b) for a, b in _edges(graph, "fovexp.stimuli", "fovexp")
+           if b != "fovexp" and not b.startswith("fovexp.stimuli.")
+           and (a, b) != ("fovexp.stimuli.cli", "fovexp.experiment.protocol.spec")]
+    assert bad == []
+
+
+#: The runner's rooms, lowest first: each may import the rooms before it (and
+#: ``fovexp.experiment.interfaces``), never one after it (docs/EXPERIMENT.md, "The runner's
+#: rooms"; each room's ``__init__`` says the same).
+ROOMS = ("protocol", "trackers", "tasks", "display", "records")
+#: What lives at the top of ``fovexp.experiment``: the session's plan, its options, its command
+#: line, the structural types the rooms share, the package itself.
+TOP = {"__init__", "session", "options", "cli", "interfaces"}
+
+
+def _room(module: str) -> str | None:
+    parts = module.split(".")
+    if parts[:2] != ["fovexp", "experiment"] or len(parts) < 3:
+        return None
+    return parts[2] if parts[2] in ROOMS else "top:" + parts[2]
+
+
+def test_the_runner_has_its_rooms():
+    """At most 8 modules at the runner's top level; every room a package whose docstring says
+    what lives in it and what it may import."""
+    top = {p.stem for p in (PACKAGE / "experiment").glob("*.py")}
+    assert top == TOP and len(top) <= 8
+    for room in ROOMS:
+        doc = ast.get_docstring(ast.parse((PACKAGE / "experiment" / room / "__init__.py")
+                                          .read_text()))
+        assert doc and "May import" in doc, room
+    assert len((PACKAGE / "experiment" / "session.py").read_text().splitlines()) <= 400
+
+
+def test_the_rooms_import_downwards(graph):
+    """A room imports only rooms below it (:data:`ROOMS`), the shared types
+    (``interfaces``) and, outside the runner, the public API, the logs layer and the stimuli;
+    no room imports ``session``, ``options`` or ``cli``; ``interfaces`` holds types only."""
+    bad = []
+    for a, deps in graph.items():
+        ra = _room(a)
+        if ra is None or ra.startswith("top:") and ra != "top:interfaces":
+            continue
+        for b in deps:
+            rb = _room(b)
+            if rb is None or rb == ra:
+                continue
+            if ra == "top:interfaces":
+                ok = b in ("fovexp.experiment.trackers.gaze", "fovexp.experiment.tasks.trial",
+                           "fovexp.experiment.display.render")
+            elif rb == "top:interfaces":
+                ok = True
+            else:
+                ok = rb in ROOMS and ROOMS.index(rb) < ROOMS.index(ra)
+            if not ok:
+                bad.append((a, b))
+    assert bad == []
+    users = sorted(a for a, deps in graph.items() for b in deps
+                   if b in ("fovexp.experiment.session", "fovexp.experiment.options")
+                   and _room(a) in ROOMS)
+    assert users == []
+
+
+def test_the_room_check_sees_an_upward_import(graph):
+    """The check itself: a task that wrote its rows through ``records`` would be caught."""
+    fake = {**graph, "fovexp.experiment.tasks.adjust":
+            graph["fovexp.experiment.tasks.adjust"] | {"fovexp.experiment.records.rows"}}
+    with pytest.raises(AssertionError):
+        test_the_rooms_import_downwards(fake)
 
 
 def test_the_evaluation_uses_the_public_api(graph):
@@ -197,10 +275,10 @@ def test_the_evaluation_uses_the_public_api(graph):
 
 
 def test_the_rig_check_sits_on_the_runner(graph):
-    """``fovexp.rig`` measures with the session's own parts (``fovexp.experiment``), the logs
-    layer and the enhancer's public API; nothing below it imports it (a session reads its
+    """``fovexp.rig`` measures with the session's own parts (``fovexp.experiment``, its stimuli),
+    the logs layer and the enhancer's public API; nothing below it imports it (a session reads its
     reports through ``fovexp.results``)."""
-    allowed = ("fovexp.results", "fovexp.experiment", "fovexp.rig")
+    allowed = ("fovexp.results", "fovexp.experiment", "fovexp.stimuli", "fovexp.rig")
     bad = [(a, b) for a, b in _edges(graph, "fovexp.rig", "fovexp")
            if not (b == "fovexp" or any(b == p or b.startswith(p + ".") for p in allowed))]
     assert bad == []

@@ -20,7 +20,7 @@ def _without(monkeypatch, *names: str) -> None:
 
 
 def test_no_psychopy_names_the_experiment_extra(monkeypatch):
-    from fovexp.experiment.window import PsychoScreen
+    from fovexp.experiment.display.window import PsychoScreen
 
     _without(monkeypatch, "psychopy")
     with pytest.raises(FovexpError) as exc:
@@ -48,7 +48,7 @@ def test_no_moderngl_the_runner_says_only_that_the_cpu_is_used(monkeypatch):
     """The render thread, given the window's GL context to share, does not try it without
     moderngl: its one note is the fallback's, nothing about a GL context (issue 21)."""
     from fovexp import load_display
-    from fovexp.experiment.render import TestRenderer
+    from fovexp.experiment.display.render import TestRenderer
 
     class Share:  # the window's side: never made current without moderngl
         def make_current(self):

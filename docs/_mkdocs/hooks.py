@@ -31,16 +31,17 @@ REFERENCE: dict[str, tuple[str, str, list[tuple[str, list[str] | None]]]] = {
     "reference/protocol.md": (
         "Protocols", "A protocol file's keys and their checks (docs/EXPERIMENT.md, \"The "
         "protocols\"), and how a loaded protocol plans a session.",
-        [("fovexp.experiment.protocol", ["Protocol", "AdjustSpec", "ParamSource",
-                                          "FixationSpec", "TrackerSpec", "RenderSpec",
-                                          "load_protocol", "LoadedProtocol", "limit_order",
-                                          "protocol_display"])]),
+        [("fovexp.experiment.protocol.spec", ["Protocol", "AdjustSpec", "ParamSource",
+                                               "FixationSpec", "TrackerSpec", "RenderSpec",
+                                               "load_protocol", "LoadedProtocol", "limit_order",
+                                               "protocol_display"]),
+         ("fovexp.experiment.protocol.defaults", None)]),
     "reference/stimuli.md": (
         "Stimuli and study folders", "The stimulus folder, the checks a session makes of its "
         "images, and the study folder `fovexp init` makes (docs/STUDY.md).",
-        [("fovexp.experiment.stimuli", ["StimulusSet", "ImageCheck", "may_scale", "find_folder",
-                                         "find_study", "generate_scenes"]),
-         ("fovexp.experiment.study", ["init_study", "Study", "next_commands"])]),
+        [("fovexp.stimuli.folder", ["StimulusSet", "ImageCheck", "may_scale", "find_folder",
+                                    "find_study", "generate_scenes"]),
+         ("fovexp.experiment.protocol.study", ["init_study", "Study", "next_commands"])]),
     "reference/results.md": (
         "Trial logs", "The log formats the runner writes and the analysis reads "
         "(docs/LOGS.md), and loading them with the exclusion rules.",

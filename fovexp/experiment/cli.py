@@ -116,7 +116,7 @@ def participant_form(args: argparse.Namespace, results_root: Path,
     from the flags; else from this participant's earlier session in the results root (any
     experiment); else asked at the console when there is one. Never in a dry run or on
     resume (the session file has it)."""
-    from .operator import FORM_FIELDS, ask_form, parse_form
+    from .tasks.operator import FORM_FIELDS, ask_form, parse_form
 
     if args.dry_run:
         return None, "dry run"
@@ -150,14 +150,16 @@ def participant_form(args: argparse.Namespace, results_root: Path,
 
 def run_command(args: argparse.Namespace) -> int:
     """Validate everything, then run the session; errors print one line and return 2."""
-    from .session import EXIT_ERROR, Session, SessionOptions
+    from .options import SessionOptions
+    from .session import EXIT_ERROR, Session
 
     session = monitor = None
     try:
-        from .participant import SimTruth
-        from .protocol import load_protocol
-        from .stimuli import DRY_RUN_SIZE
-        from .validation import check_participant
+        from fovexp.stimuli.folder import DRY_RUN_SIZE
+
+        from .protocol.spec import load_protocol
+        from .records.participant_id import check_participant
+        from .tasks.simulated_participant import SimTruth
 
         check_participant(args.participant)
         if args.monitor or args.monitor_host or args.monitor_port is not None:
@@ -177,7 +179,7 @@ def run_command(args: argparse.Namespace) -> int:
             raise FovexpError("--tracker-config is for --tracker iohub")
         if args.screen < 0:
             raise FovexpError("--screen must be 0 or more")
-        from .operator import parse_form
+        from .tasks.operator import parse_form
 
         parse_form({"age": args.age, "sex": args.sex, "vision_correction": args.vision})
         truth = SimTruth.load(args.sim_truth) if args.sim_truth else SimTruth()
@@ -190,7 +192,7 @@ def run_command(args: argparse.Namespace) -> int:
         frame_size = args.window or (DRY_RUN_SIZE if args.dry_run else protocol.native_size)
         images = protocol.prepare_images(frame_size, args.dry_run)
         if args.windowed or args.dry_run:  # a full-screen window is the display check's
-            from .xscreen import check_window_fits, x_screen_size
+            from .display.xscreen import check_window_fits, x_screen_size
 
             check_window_fits(frame_size, x_screen_size())
         scaled = sorted({(v.size, v.frame_size) for v in images.values() if v.scaled})

@@ -8,7 +8,7 @@ Clocks. Every time a :class:`Screen` returns (flips, key presses) is on ``time.m
 clock, in seconds; a :class:`GazeSource`'s times (``now_us``, the samples' ``system_time_us``)
 are on its own clock, in whole microseconds (a Tobii's system clock). The frame loop puts a
 flip on the gaze clock by reading ``now_us`` right after the flip returns
-(:class:`fovexp.experiment.frameloop.TrialLoop`). A screen whose toolkit keeps another clock
+(:class:`fovexp.experiment.tasks.frameloop.TrialLoop`). A screen whose toolkit keeps another clock
 (PsychoPy's, which is ``psychtoolbox.GetSecs``, seconds since the epoch, once psychtoolbox
 loads) converts at the source, from the two clocks read back to back.
 
@@ -33,11 +33,11 @@ from typing import TYPE_CHECKING, Any, NamedTuple, Protocol
 
 import numpy as np
 
-from .gaze import GazeSample, SourceEvent
-from .trial import InputEvent
+from .tasks.trial import InputEvent
+from .trackers.gaze import GazeSample, SourceEvent
 
 if TYPE_CHECKING:  # the renderer's module starts threads and GL on use, not on import
-    from .render import Rendered
+    from .display.render import Rendered
 
 
 class FlipTimes(NamedTuple):
@@ -83,7 +83,7 @@ class Screen(Protocol):
     def measure_display(self) -> tuple[float | None, tuple[int, int], tuple[int, int]]: ...
     def message(self, text: str, keys: list[str] | None, timeout_s: float | None,
                 each_frame: Callable[[], None] | None = None) -> str | None: ...
-    # the view is one of fovexp.experiment.calibration's view dataclasses
+    # the view is one of fovexp.experiment.trackers.calibration's view dataclasses
     def calibration_frame(self, view: Any) -> list[str]: ...
     def take_operator_keys(self) -> set[str]: ...
     def set_reference(self, left: np.ndarray) -> None: ...
@@ -98,7 +98,7 @@ class Screen(Protocol):
         """:meth:`prepare` and :meth:`flip`."""
     def poll_input(self) -> list[InputEvent]:
         """Wheel notches and keys since the last call (keys stamped with their press time where
-        the keyboard gives it: :class:`fovexp.experiment.trial.Key`)."""
+        the keyboard gives it: :class:`fovexp.experiment.tasks.trial.Key`)."""
     def mouse_position(self) -> tuple[float, float] | None: ...
     def info(self) -> dict[str, Any]:
         """What the session file records of the window: its keyboard (``backend``, and
@@ -123,4 +123,19 @@ class Renderer(Protocol):
 #: a screen factory: ``PsychoScreen`` or a test's stand-in
 ScreenFactory = Callable[..., Screen]
 
-__all__ = ["FlipTimes", "GazeSource", "Renderer", "Screen", "ScreenFactory"]
+class SessionRecord(Protocol):
+    """The session file as the rooms below the session write it (the tracker's set-up, the
+    screens around trials): :class:`fovexp.experiment.records.sessionfile.SessionFile`."""
+
+    info: dict[str, Any]
+
+    def write(self) -> None: ...
+
+    def update(self, **update: Any) -> None: ...
+
+    def event(self, kind: str, **detail: Any) -> None: ...
+
+    def set_in_run(self, key: str, value: Any, write: bool = True) -> None: ...
+
+
+__all__ = ["FlipTimes", "GazeSource", "Renderer", "Screen", "ScreenFactory", "SessionRecord"]

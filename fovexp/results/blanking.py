@@ -1,5 +1,5 @@
 """The blanking rule of paper section 5.1, defined once: the runner decides every frame with it
-(:class:`fovexp.experiment.gaze.BlankingMonitor`), and the analysis and the tests check the
+(:class:`fovexp.experiment.trackers.gaze.BlankingMonitor`), and the analysis and the tests check the
 frame logs against it (:func:`fovexp.results.frames.unblanked_violations`).
 
 Section 5.1: "stimuli are hidden by rendering a black frame whenever participants' gaze

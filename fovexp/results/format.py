@@ -1,13 +1,14 @@
 """The one definition of the runner's log formats (docs/LOGS.md): columns, types, the
 participant-ID rule, CSV formatting, and the ``trials.csv`` reader that detects a torn last row.
 
-Both the runner (:mod:`fovexp.experiment.logs`) and the analysis (:mod:`fovexp.analysis`) use
-this module. It imports nothing of the runner but the package itself, and no PsychoPy.
+Both the runner (:mod:`fovexp.experiment.records.logs`) and the analysis (:mod:`fovexp.analysis`)
+use this module. It imports nothing of the runner but the package itself, and no PsychoPy.
 """
 
 from __future__ import annotations
 
 import csv
+import datetime as _dt
 import io
 import math
 import re
@@ -65,6 +66,12 @@ def is_participant_id(text: object) -> bool:
 ISO_RE = re.compile(
     r"^\d{4}-\d{2}-\d{2}[T ]\d{2}:\d{2}(:\d{2}(\.\d+)?)?(Z|[+-]\d{2}(:?\d{2})?)?$"
 )
+
+
+def now_iso() -> str:
+    """The logs' time stamp (``timestamp``, the session file's times): local time with its
+    offset, to the millisecond, as :data:`ISO_RE` reads it."""
+    return _dt.datetime.now().astimezone().isoformat(timespec="milliseconds")
 
 #: The gaze log's last columns: each eye's position (the tracker's gaze origin, mm, in the
 #: frame of the session's ``display_area``), empty where not measured.

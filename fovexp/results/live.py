@@ -1,7 +1,7 @@
 """The live status file (``live-<session>.json``, docs/LOGS.md): what a running session shows
 now, for ``fovexp monitor``.
 
-The runner (:mod:`fovexp.experiment.live`) rewrites it a few times a second from a thread of
+The runner (:mod:`fovexp.experiment.records.live`) rewrites it a few times a second from a thread of
 its own; the monitor reads it from disk and shares nothing else with the runner, so it can
 neither slow a frame nor stop a session. Each write is whole: a temporary file renamed over the
 old one (``os.replace``), so a reader sees the old text or the new, never half. It is not

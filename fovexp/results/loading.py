@@ -448,7 +448,7 @@ def _typed(frame: pd.DataFrame) -> pd.DataFrame:
     return frame
 
 
-#: A protocol's impulse count when it does not name one (fovexp.experiment.protocol's default).
+#: A protocol's impulse count when it does not name one (fovexp.experiment.protocol.spec's default).
 DEFAULT_IMPULSES = 64
 
 

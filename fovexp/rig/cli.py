@@ -61,7 +61,7 @@ def add_rig_parser(subparsers: Any) -> argparse.ArgumentParser:
 
 
 def rig_check_command(args: argparse.Namespace) -> int:
-    from fovexp.experiment.sessionfile import versions
+    from fovexp.experiment.records.sessionfile import versions
 
     from .measure import RigOptions, run_measurements
     from .report import build_report, write_report

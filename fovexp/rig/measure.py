@@ -69,16 +69,21 @@ def _pct(v: list[float], q: float) -> float:
 
 def run_measurements(opts: RigOptions) -> Measured:
     """The whole check (module docstring); returns the figures and verdicts."""
-    from fovexp.experiment.frameloop import LateLatch, TrialIO, TrialLoop, display_thread_first
-    from fovexp.experiment.gaze import BlankDecision, BlankingMonitor, FixationGeometry
-    from fovexp.experiment.protocol import load_protocol
-    from fovexp.experiment.render import TestRenderer
-    from fovexp.experiment.render_budget import step_values, time_renders
-    from fovexp.experiment.stimuli import DRY_RUN_SIZE, load_stimulus, split_screen
+    from fovexp.experiment.display.render import TestRenderer
+    from fovexp.experiment.display.render_budget import step_values, time_renders
+    from fovexp.experiment.display.window import PsychoScreen
+    from fovexp.experiment.protocol.spec import load_protocol
+    from fovexp.experiment.tasks.frameloop import (
+        LateLatch,
+        TrialIO,
+        TrialLoop,
+        display_thread_first,
+    )
+    from fovexp.experiment.tasks.trial import TrialState, ValueAdjuster, Wheel
     from fovexp.experiment.trackers import make_gaze_source
+    from fovexp.experiment.trackers.gaze import BlankDecision, BlankingMonitor, FixationGeometry
     from fovexp.experiment.trackers.iohub import RateMeter
-    from fovexp.experiment.trial import TrialState, ValueAdjuster, Wheel
-    from fovexp.experiment.window import PsychoScreen
+    from fovexp.stimuli.folder import DRY_RUN_SIZE, load_stimulus, split_screen
 
     class NeverBlank(BlankingMonitor):
         """The session's blanking monitor (the sample each frame used: the latency), with the

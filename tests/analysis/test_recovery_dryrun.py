@@ -44,7 +44,7 @@ import yaml
 
 from fovexp import PAPER_TABLE2, ParameterTable
 from fovexp.cli import main as fovexp_main
-from fovexp.experiment.logs import read_trials
+from fovexp.experiment.records.logs import read_trials
 
 from experiment_helpers import make_workspace, run_cli, xvfb_display  # noqa: F401
 

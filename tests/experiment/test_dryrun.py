@@ -11,14 +11,14 @@ from pathlib import Path
 import pytest
 
 from fovexp import PAPER_TABLE2
-from fovexp.experiment.logs import (
+from fovexp.experiment.protocol.spec import load_protocol
+from fovexp.experiment.records.logs import (
     BLANKING_COLUMNS,
     FRAME_COLUMNS,
     GAZE_COLUMNS,
     TRIAL_COLUMNS,
     read_trials,
 )
-from fovexp.experiment.protocol import load_protocol
 from fovexp.results.blanking import BlankingRule
 from fovexp.results.frames import (
     decision_age_us,

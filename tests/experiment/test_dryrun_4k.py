@@ -22,7 +22,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from fovexp.experiment.logs import read_trials
+from fovexp.experiment.records.logs import read_trials
 from fovexp.results.blanking import BlankingRule
 from fovexp.results.frames import (
     decision_age_us,

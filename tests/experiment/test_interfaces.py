@@ -9,12 +9,12 @@ import inspect
 
 import pytest
 
+from fovexp.experiment.display.render import TestRenderer
+from fovexp.experiment.display.window import PsychoScreen
 from fovexp.experiment.interfaces import GazeSource, Renderer, Screen
-from fovexp.experiment.render import TestRenderer
 from fovexp.experiment.trackers.mouse import MouseGaze
 from fovexp.experiment.trackers.simulated import SimulatedGaze
 from fovexp.experiment.trackers.tobii import TobiiGaze
-from fovexp.experiment.window import PsychoScreen
 
 from experiment_helpers import ScriptedGaze, StubScreen
 

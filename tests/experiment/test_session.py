@@ -12,10 +12,11 @@ import pytest
 import yaml
 
 from fovexp import FovexpError
-from fovexp.experiment.logs import read_trials
-from fovexp.experiment.protocol import load_protocol
-from fovexp.experiment.session import Session, SessionOptions
-from fovexp.experiment.trial import Key, Wheel
+from fovexp.experiment.options import SessionOptions
+from fovexp.experiment.protocol.spec import load_protocol
+from fovexp.experiment.records.logs import read_trials
+from fovexp.experiment.session import Session
+from fovexp.experiment.tasks.trial import Key, Wheel
 
 from analysis_fixtures import write_study
 from experiment_helpers import (

@@ -9,10 +9,11 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from fovexp.experiment.logs import read_trials
-from fovexp.experiment.protocol import load_protocol
-from fovexp.experiment.session import Session, SessionOptions
-from fovexp.experiment.trial import Key
+from fovexp.experiment.options import SessionOptions
+from fovexp.experiment.protocol.spec import load_protocol
+from fovexp.experiment.records.logs import read_trials
+from fovexp.experiment.session import Session
+from fovexp.experiment.tasks.trial import Key
 from fovexp.results.blanking import BlankingRule
 from fovexp.results.frames import final_value_violations, read_frame_log, unblanked_violations
 

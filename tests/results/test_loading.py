@@ -258,7 +258,7 @@ def test_participant_folder_mismatch_is_noted(tmp_path: Path) -> None:
 
 def test_runner_writer_round_trip(tmp_path: Path) -> None:
     """Rows written by the runner's own TrialLog (and its session JSON) load unchanged."""
-    logs = pytest.importorskip("fovexp.experiment.logs")
+    logs = pytest.importorskip("fovexp.experiment.records.logs")
     folder = tmp_path / "calibration-fe" / "P01"
     r = rows()
     log = logs.TrialLog(folder / "trials.csv")

@@ -1,5 +1,9 @@
-"""The gaze sources, one module per source, and the one place that chooses among them
-(:func:`make_gaze_source`: ``fovexp run`` and ``fovexp rig check`` both call it).
+"""The eye tracker's side of a session: the gaze sources, one module per source, and the one
+place that chooses among them (:func:`make_gaze_source`: ``fovexp run`` and ``fovexp rig check``
+both call it); what the sources share and the blanking decision (:mod:`.gaze`); the tracker's
+set-up in a session (:mod:`.setup`: display area, calibration, validation, drift checks), the
+calibration screens' flow (:mod:`.calibration`) and the data quality they measure
+(:mod:`.quality`).
 
 - :mod:`.simulated`: the simulated eye tracker of dry runs and CI (:class:`SimulatedGaze`);
 - :mod:`.mouse`: the mouse pointer as gaze, for pilot sessions (:class:`MouseGaze`);
@@ -11,8 +15,13 @@
   the lost-tracker path, the tracker's own calibration).
 
 Each satisfies :class:`fovexp.experiment.interfaces.GazeSource`; what they share (samples,
-events, the clock, the fixation geometry) is :mod:`fovexp.experiment.gaze`. Nothing here
+events, the clock, the fixation geometry) is :mod:`fovexp.experiment.trackers.gaze`. Nothing here
 imports PsychoPy or a tracker's SDK at import time.
+
+May import: ``fovexp`` (public API), :mod:`fovexp.results`,
+:mod:`fovexp.experiment.interfaces`, and the room below it, ``protocol`` (its defaults, a
+trial's index); the session file only through :class:`~fovexp.experiment.interfaces.SessionRecord`
+(tests/test_layers.py).
 """
 
 from __future__ import annotations
@@ -24,8 +33,8 @@ from fovexp import FovexpError
 from fovexp.results.format import TRACKERS
 
 if TYPE_CHECKING:
-    from ..gaze import FixationGeometry
     from ..interfaces import GazeSource
+    from .gaze import FixationGeometry
     from .simulated import SimGazeParams
 
 def iohub_config_path(protocol: Any, tracker_config: str | Path | None) -> Path:

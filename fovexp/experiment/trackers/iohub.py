@@ -32,8 +32,8 @@ sample: any non-zero status) and its position is finite; invalid and missing sam
 next frame as with every source.
 
 **Lost tracker.** A reader thread asks the server for events every millisecond and puts them in
-a :class:`~fovexp.experiment.gaze.SampleBuffer`; the frame loop only drains it (it never waits
-on the server). The tracker is lost when the server process is gone (checked before every
+a :class:`~fovexp.experiment.trackers.gaze.SampleBuffer`; the frame loop only drains it (it never
+waits on the server). The tracker is lost when the server process is gone (checked before every
 request), when the tracker says it is not connected (``isConnected``, every 0.25 s), or when no
 sample came for ``stall_s``: the frame loop then takes the lost-tracker path (black at once,
 the trial restarts when the tracker is back). A server that exited is started again (once by
@@ -42,8 +42,8 @@ session ends saved.
 
 **Calibration.** A tracker's own set-up (``runSetupProcedure``: on an EyeLink the camera set-up
 of its host PC) through :class:`IoHubCalibration`; then fovexp's validation
-(``fovexp.experiment.quality``), as for every tracker. MouseGaze has nothing to calibrate: a
-pilot session skips the set-up as ``--tracker mouse`` does, and a dry run moves the pointer to
+(``fovexp.experiment.trackers.quality``), as for every tracker. MouseGaze has nothing to calibrate:
+a pilot session skips the set-up as ``--tracker mouse`` does, and a dry run moves the pointer to
 the targets itself (``pointer=True``: X's XTest, as xdotool does) so that the calibration
 screen and the validation run on real ioHub samples.
 """
@@ -63,9 +63,9 @@ from typing import Any
 
 from fovexp import FovexpError
 
-from ..calibration import CalibrationOutcome, TrackerOwnCalibration
-from ..gaze import GAZE_BUFFER_S, GazeSample, SampleBuffer, SourceEvent
+from .calibration import CalibrationOutcome, TrackerOwnCalibration
 from .families import IoHubConfig, check_plugin, hub_config
+from .gaze import GAZE_BUFFER_S, GazeSample, SampleBuffer, SourceEvent
 
 #: ioHub's status flags of a binocular sample (its plugins' convention)
 LEFT_MISSING = 20
@@ -705,7 +705,7 @@ def _own_socket_sender(io: Any, timeout_s: float) -> _OwnSocketRPC:
 
 class IoHubCalibration(TrackerOwnCalibration):
     """The tracker's own set-up (``runSetupProcedure``) as the calibration flow's backend
-    (``fovexp.experiment.calibration.CalibrationBackend`` with ``own_procedure``): the flow
+    (``fovexp.experiment.trackers.calibration.CalibrationBackend`` with ``own_procedure``): the flow
     runs it on its worker thread, shows what is going on meanwhile, then validates on fovexp's
     targets."""
 

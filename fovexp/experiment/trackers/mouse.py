@@ -7,7 +7,7 @@ import math
 from collections.abc import Callable
 from typing import Any
 
-from ..gaze import GazeSample, SourceEvent, monotonic_us
+from .gaze import GazeSample, SourceEvent, monotonic_us
 
 
 class MouseGaze:

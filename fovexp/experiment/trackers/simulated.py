@@ -13,9 +13,9 @@ from typing import Any
 
 import numpy as np
 
-from ..gaze import (
+from ..protocol.defaults import TRACKER_RATE_HZ
+from .gaze import (
     HALF_IPD_MM,
-    TRACKER_RATE_HZ,
     DisplayArea,
     FixationGeometry,
     GazeSample,

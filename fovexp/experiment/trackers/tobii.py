@@ -1,8 +1,8 @@
 """Tobii Pro eye trackers through tobii-research (paper section 5.1: Tobii Pro Spectrum, 600 Hz).
 
 The gaze callback runs on the SDK's thread and only appends the SDK's sample dictionary to a
-:class:`~fovexp.experiment.gaze.SampleBuffer`; conversion, the blanking decision and disk writes
-happen in the frame loop and the log writer. Samples keep the tracker's own device and system
+:class:`~fovexp.experiment.trackers.gaze.SampleBuffer`; conversion, the blanking decision and disk
+writes happen in the frame loop and the log writer. Samples keep the tracker's own device and system
 timestamps (microseconds). Connection loss/restoration and gaze output frequency changes arrive
 as notifications; a stall of the sample stream and a measured rate off the nominal one are
 noticed too.
@@ -21,10 +21,10 @@ import numpy as np
 
 from fovexp import FovexpError
 
-from ..calibration import CalibrationOutcome, PointSamples
-from ..gaze import (
+from ..protocol.defaults import TRACKER_RATE_HZ
+from .calibration import CalibrationOutcome, PointSamples
+from .gaze import (
     GAZE_BUFFER_S,
-    TRACKER_RATE_HZ,
     DisplayArea,
     GazeSample,
     SampleBuffer,
@@ -291,15 +291,15 @@ class TobiiGaze:
         return out[0], out[1]
 
     def calibration(self) -> TobiiCalibration:
-        """The SDK's screen-based calibration as a :class:`fovexp.experiment.calibration`
+        """The SDK's screen-based calibration as a :class:`fovexp.experiment.trackers.calibration`
         backend."""
         return TobiiCalibration(self, self.calibration_factory)
 
 
 class TobiiCalibration:
     """``tobii_research.ScreenBasedCalibration`` behind the calibration flow's backend interface
-    (:class:`fovexp.experiment.calibration.CalibrationBackend`). Its calls block (collecting a
-    point takes the SDK about a second), so the flow runs them on a worker thread.
+    (:class:`fovexp.experiment.trackers.calibration.CalibrationBackend`). Its calls block
+    (collecting a point takes the SDK about a second), so the flow runs them on a worker thread.
 
     ``factory`` makes the calibration object from the tracker (default the SDK's class, which
     accepts only a connected ``tobii_research.EyeTracker``; tests without a tracker pass a
