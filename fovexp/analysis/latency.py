@@ -27,11 +27,18 @@ from fovexp.results.frames import (
     unblanked_violations,
     unchecked_ages,
 )
+from fovexp.results.gating import read_gaze_log, session_gating
 from fovexp.results.loading import Dataset
 
 COLUMNS = ("experiment", "participant", "session", "tracker", "frames", "with_gaze",
            "median_ms", "p95_ms", "max_ms", "draw_median_ms", "draw_p95_ms", "dropped_pct",
            "rule_violations")
+#: What the gaze log adds (:func:`fovexp.results.gating.session_gating`): the delivery
+#: latency, the tracker's cost, the rule against the newest sample measured, and, where the
+#: simulated eye's truth is logged, the stimulus time while the eye was outside the window.
+GATING_COLUMNS = ("experiment", "participant", "session", "delivery_p50_ms", "delivery_p95_ms",
+                  "delivery_max_ms", "tracker_cost_frames", "stamped_violations", "outside_ms",
+                  "outside_fraction", "excursion_max_ms")
 
 
 def _session_rule(folder: Path, session: str) -> BlankingRule:
@@ -87,3 +94,26 @@ def session_latency(data: Dataset) -> tuple[pd.DataFrame, dict[str, np.ndarray],
                      "rule_violations": len(bad)})
         lat[f"{exp}/{pid}/{sid}"] = gaze_to_flip_ms(frames).dropna().to_numpy()
     return pd.DataFrame(rows, columns=list(COLUMNS)), lat, notes
+
+
+def session_gating_table(data: Dataset) -> tuple[pd.DataFrame, list[str]]:
+    """Per session included in ``data`` with a frame and a gaze log: what the blanking did
+    against the eye (:data:`GATING_COLUMNS`, :mod:`fovexp.results.gating`), and notes
+    (sessions whose gaze log predates the received times)."""
+    rows, notes = [], []
+    t = data.trials
+    if t.empty:
+        return pd.DataFrame(columns=list(GATING_COLUMNS)), notes
+    for (exp, pid, sid), grp in t.groupby(["experiment", "participant", "session"], sort=True):
+        folder = Path(str(grp["file"].iloc[0])).parent
+        fpath, gpath = folder / f"frames-{sid}.csv", folder / f"gaze-{sid}.csv"
+        if not (fpath.exists() and gpath.exists()):
+            continue
+        gaze = read_gaze_log(gpath)
+        if gaze["received_system_time_us"].isna().all():
+            notes.append(f"{exp}/{pid}: session {sid}: the gaze log is older than the received "
+                         "times (docs/LOGS.md): no delivery latency or tracker's cost")
+            continue
+        fig = session_gating(read_frame_log(fpath), gaze, _session_rule(folder, sid))
+        rows.append({"experiment": exp, "participant": pid, "session": sid, **fig})
+    return pd.DataFrame(rows, columns=list(GATING_COLUMNS)), notes

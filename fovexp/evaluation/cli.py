@@ -1,5 +1,6 @@
-"""``fovexp evaluate spectra|fovvdp|temporal|compression`` and ``fovexp stereo``: the paper's
-analyses of outputs (section 6) and its stereo extension (6.4). ``fovexp.cli`` registers
+"""``fovexp evaluate spectra|fovvdp|temporal|compression|gating`` and ``fovexp stereo``: the
+paper's analyses of outputs (section 6), its stereo extension (6.4), and the gaze-contingent
+blanking against the eye (``gating``, issue 28). ``fovexp.cli`` registers
 :func:`add_evaluate_parser` and :func:`add_stereo_parser`; this module only parses and hands
 over to the analysis modules (imported when the command runs). Bad input is one
 ``fovexp: error: ...`` line and exit status 2 (``fovexp.cli.main``)."""
@@ -152,6 +153,34 @@ def add_evaluate_parser(sub: Any) -> argparse.ArgumentParser:
                    help="whose foveation (the paper's 8 deg fovea, or the release's 12 deg)")
     c.add_argument("--out", type=Path, required=True, metavar="DIR")
     c.set_defaults(func=compression_command)
+
+    g = ev.add_parser(
+        "gating", help="the blanking against the eye, over delivery latencies (issue 28)",
+        description="Dry runs of PROTOCOL with the simulated eye of each behaviour and each "
+        "injected delivery latency (fovexp run --dry-run --sim-gaze B --gaze-latency-ms L, "
+        "under Xvfb where there is no display), then from their logs: the delivery latency, "
+        "the stimulus frames the latency let through, and the stimulus time on screen while "
+        "the simulated eye was outside the 1.25 deg window, per session, per trial and per "
+        "excursion, against 6 ms (McConkie and Loschky 2002) and 60 ms (Loschky and "
+        "Wolverton 2007). Writes gating.csv, gating-trials.csv, gating-excursions.csv, "
+        "gating.png and gating.md.")
+    g.add_argument("--protocol", default="calibration-fe",
+                   help="the protocol the dry runs run (default calibration-fe)")
+    g.add_argument("--latencies", default="0,4,8,16,32,48,64", metavar="MS,...",
+                   help="injected delivery latencies (default 0,4,8,16,32,48,64; one at or "
+                   "above the gaze timeout is noted, not run: the stimulus would never show)")
+    g.add_argument("--behaviours", default="steady,wandering", metavar="B,...",
+                   help="the simulated eye's behaviours (--sim-gaze presets, with settings "
+                   "joined by ';': wandering;blink_rate=0.3)")
+    g.add_argument("--trials", type=int, default=3, help="main trials per dry run (default 3)")
+    g.add_argument("--seed", type=int, default=5, help="the simulated eye's and participant's "
+                   "seed, the same for every run (default 5)")
+    g.add_argument("--sim-speed", type=float, default=12.0,
+                   help="the simulated participant's time compression (default 12)")
+    g.add_argument("--stimuli", type=Path, default=None, metavar="DIR",
+                   help="stimulus folder of the dry runs (default as for fovexp run)")
+    g.add_argument("--out", type=Path, required=True, metavar="DIR")
+    g.set_defaults(func=gating_command)
     return p
 
 
@@ -220,6 +249,23 @@ def temporal_command(args: argparse.Namespace) -> int:
     print(f"fovexp evaluate temporal: {res.n_frames} frames x {len(res.blur_rates)} "
           f"blur-rate(s); wrote {args.out}/temporal.csv, slices.csv, pairs.csv, temporal.png, "
           "temporal.md")
+    return 0
+
+
+def gating_command(args: argparse.Namespace) -> int:
+    from fovexp import FovexpError
+
+    from . import gating
+
+    if args.trials < 1 or args.sim_speed <= 0:
+        raise FovexpError("--trials must be at least 1 and --sim-speed above 0")
+    behaviours = [b.strip().replace(";", ",") for b in args.behaviours.split(",") if b.strip()]
+    table = gating.run(args.out, protocol=args.protocol,
+                       latencies_ms=gating.parse_list(args.latencies, "latencies"),
+                       behaviours=behaviours, trials=args.trials, seed=args.seed,
+                       sim_speed=args.sim_speed, stimuli=args.stimuli)
+    print(f"fovexp evaluate gating: {len(table)} dry runs; wrote {args.out}/gating.csv, "
+          "gating-trials.csv, gating-excursions.csv, gating.png, gating.md")
     return 0
 
 

@@ -74,6 +74,9 @@ def add_run_parser(subparsers: Any) -> argparse.ArgumentParser:
                    help="the monitor to open the window on (multi-monitor rigs; default 0)")
     p.add_argument("--skip-display-check", action="store_true",
                    help="do not stop when the refresh rate or window size differ from the profile")
+    p.add_argument("--accept-poll-keys", action="store_true",
+                   help="run although key presses are stamped when polled, not when pressed "
+                   "(no libjack, no ioHub keyboard); recorded in the session file")
     p.add_argument("--limit-trials", type=int, default=None, metavar="N",
                    help="only the first N main trials of the randomised order, each scene's "
                    "methods together so that they still pair (N rounded up to whole scenes; "
@@ -106,6 +109,26 @@ def add_run_parser(subparsers: Any) -> argparse.ArgumentParser:
     g.add_argument("--sim-speed", type=float, default=4.0,
                    help="time compression of the participant's behaviour (default 4)")
     g.add_argument("--sim-seed", type=int, default=None, help="seed of the simulated participant")
+    e = p.add_argument_group("simulated eye (--dry-run; docs/EXPERIMENT.md, \"Gaze truth\")")
+    e.add_argument("--sim-gaze", default=None, metavar="PRESET[,SETTING=VALUE...]",
+                   help="the simulated eye's behaviour: steady (default) or wandering "
+                   "(saccades away, blinks, lost samples: a third of a trial blanked or more), "
+                   "with single settings on top, e.g. wandering,blink_rate=0.3,"
+                   "saccade_deg=2:6 (the settings of SimGazeParams)")
+    e.add_argument("--gaze-latency-ms", type=float, default=None, metavar="MS",
+                   help="the simulated tracker's delivery latency: each sample reaches the "
+                   "runner MS after it was measured (its time stamps unchanged)")
+    e.add_argument("--gaze-latency-jitter-ms", type=float, default=None, metavar="MS",
+                   help="a normal jitter of the delivery latency, this sd (truncated at 0)")
+    e.add_argument("--gaze-replay", type=Path, default=None, metavar="FILE",
+                   help="drive the dry run from a recorded gaze: a fovexp gaze-<session>.csv, "
+                   "or a CSV with time_s (or time_ms, time_us), x, y and optionally valid")
+    e.add_argument("--gaze-replay-units", choices=("norm", "deg"), default="norm",
+                   help="a plain CSV's x, y: normalised screen coordinates (x right, y down; "
+                   "default) or degrees from the cross")
+    e.add_argument("--gaze-replay-end", choices=("loop", "stop"), default="loop",
+                   help="a replay shorter than the session: start it again (default), or stop "
+                   "the session with one line")
     p.set_defaults(func=run_command)
     return p
 
@@ -148,6 +171,37 @@ def participant_form(args: argparse.Namespace, results_root: Path,
     return {**answers, "source": "form"}, None
 
 
+def sim_gaze_params(args: argparse.Namespace, tracker: str, rate_hz: float) -> Any:
+    """The simulated eye's :class:`~fovexp.experiment.trackers.simulated.SimGazeParams` from
+    ``--sim-gaze`` and the latency flags, at the protocol's ``rate_hz`` unless the setting
+    names one (None: the defaults); refused for any source but the simulated one."""
+    import dataclasses
+
+    from .trackers.simulated import parse_sim_gaze
+
+    given = [f for f, v in (("--sim-gaze", args.sim_gaze),
+                            ("--gaze-latency-ms", args.gaze_latency_ms),
+                            ("--gaze-latency-jitter-ms", args.gaze_latency_jitter_ms),
+                            ("--gaze-replay", args.gaze_replay))
+             if v is not None]
+    if not given:
+        return None
+    if tracker != SIMULATED_TRACKER:
+        raise FovexpError(f"{', '.join(given)}: for the simulated eye (--dry-run), not "
+                          f"--tracker {tracker}")
+    params = parse_sim_gaze(args.sim_gaze or "steady")
+    latency = {k: v for k, v in (("latency_ms", args.gaze_latency_ms),
+                                 ("latency_jitter_ms", args.gaze_latency_jitter_ms))
+               if v is not None}
+    for k, v in latency.items():
+        if not (v >= 0 and v < 10_000):
+            raise FovexpError(f"--{k.replace('_', '-').replace('latency', 'gaze-latency')}: "
+                              f"{v} is not a latency in ms (0 to 10000)")
+    if "rate_hz=" not in (args.sim_gaze or ""):
+        latency["rate_hz"] = rate_hz
+    return dataclasses.replace(params, **latency)
+
+
 def run_command(args: argparse.Namespace) -> int:
     """Validate everything, then run the session; errors print one line and return 2."""
     from .options import SessionOptions
@@ -188,6 +242,7 @@ def run_command(args: argparse.Namespace) -> int:
                                  real_only=not args.dry_run and tracker != SIMULATED_TRACKER,
                                  stimuli=args.stimuli,
                                  include_pilots=args.include_pilots)
+        sim_gaze = sim_gaze_params(args, tracker, protocol.spec.tracker.sampling_hz)
         # Every image's sha256 and size, for the frames this run shows, before any window.
         frame_size = args.window or (DRY_RUN_SIZE if args.dry_run else protocol.native_size)
         images = protocol.prepare_images(frame_size, args.dry_run)
@@ -212,7 +267,9 @@ def run_command(args: argparse.Namespace) -> int:
             tracker_config=args.tracker_config,
             backend=args.backend, screen=args.screen,
             sim_truth=truth, sim_speed=args.sim_speed, sim_noise_scale=args.sim_noise_scale,
-            sim_seed=args.sim_seed,
+            sim_seed=args.sim_seed, sim_gaze=sim_gaze, accept_poll_keys=args.accept_poll_keys,
+            gaze_replay=None if args.gaze_replay is None else (
+                args.gaze_replay, args.gaze_replay_units, args.gaze_replay_end),
         )
         session = Session(protocol, opts)
         if not session.remaining:

@@ -50,5 +50,9 @@ class SessionOptions:
     sim_gaze: SimGazeParams | None = None
     #: seconds of each instruction/break screen in a dry run (no key presses there)
     dry_message_s: float = 0.2
+    #: a dry run's gaze replayed from a recording: (file, units "norm"/"deg", end "loop"/"stop")
+    gaze_replay: tuple[Path, str, str] | None = None
+    #: run a real session although its keys are stamped when polled (``--accept-poll-keys``)
+    accept_poll_keys: bool = False
     #: the calibration screens' durations (default Titta's; a dry run's are shorter)
     calibration_timing: CalibrationTiming | None = None

@@ -40,7 +40,7 @@ from .tasks.frameloop import Interrupted, LateLatch, display_thread_first, inter
 from .tasks.screens import Screens
 from .tasks.simulated_participant import SimulatedParticipant
 from .trackers import iohub_config_path, make_gaze_source
-from .trackers.gaze import FixationGeometry
+from .trackers.gaze import FixationGeometry, rule_record
 from .trackers.setup import Aborted, TrackerSetup, calibration_timing, display_area, window_ppd
 
 EXIT_OK = 0
@@ -165,11 +165,11 @@ class Session:
             self.opts.tracker, protocol=self.protocol, display=self.display,
             fixation=self.fixation, dry_run=self.opts.dry_run, screen=self.opts.screen,
             tracker_address=self.opts.tracker_address, tracker_config=self.opts.tracker_config,
-            sim_seed=self._sim_seed() + 7919 * n_runs, sim_params=self.opts.sim_gaze)
+            sim_seed=self._sim_seed() + 7919 * n_runs, sim_params=self.opts.sim_gaze,
+            replay=self.opts.gaze_replay)
 
     def iohub_config_path(self) -> Path:
-        """The ioHub configuration this session's ``--tracker iohub`` reads
-        (:func:`fovexp.experiment.trackers.iohub_config_path`)."""
+        """The ioHub configuration this session's ``--tracker iohub`` reads."""
         return iohub_config_path(self.protocol, self.opts.tracker_config)
 
     def _drain_gaze(self) -> None:
@@ -220,7 +220,8 @@ class Session:
             self.file.start_writer()
             self.file.set_in_run("results_disk", space, write=False)
             self.file.update(display_check={**check, "screen": opts.screen},
-                             display_area=area_info)
+                             display_area=area_info, blanking_rule=rule_record(
+                                 spec.fixation.radius_deg, spec.fixation.gaze_timeout_s))
             self.logs = RunLogs(self.folder, self.session_id, self.fixation)
         except BaseException as exc:
             self.file.stop_writer()
@@ -283,7 +284,7 @@ class Session:
         self.screens.display_checklist(opts.dry_run)
         window = self.screen.info()
         self.file.set_in_run("window", window)
-        self._operator_note(checks.keyboard_note(window, opts.dry_run))
+        self._operator_note(checks.keyboard_note(window, opts.dry_run, opts.accept_poll_keys))
         self._check_rig()
         self._check_render_budget()
         self.live.set_state("calibrating")
@@ -392,8 +393,7 @@ class Session:
         self._operator_note(note)
 
     def _load_frame(self, trial: Trial) -> np.ndarray:
-        img = self.images[trial.image]
-        # a dry run may scale (checked and recorded); a real session's sizes were checked
+        img = self.images[trial.image]  # a dry run may scale (checked and recorded)
         return split_screen(load_stimulus(img.path, self.screen.size, scale=img.scaled))
 
 

@@ -80,11 +80,14 @@ GAZE_ORIGIN_COLUMNS: tuple[str, ...] = (
     "right_origin_x_mm", "right_origin_y_mm", "right_origin_z_mm",
 )
 #: ``gaze-<session>.csv``: one row per tracker sample; times in microseconds; ``attempt`` as in
-#: the frame log (empty between trials).
+#: the frame log (empty between trials); ``received_system_time_us``: when the runner had the
+#: sample (issue 28; minus ``system_time_us``: the delivery latency); ``true_ecc_deg``: the
+#: simulated eye's true eccentricity (dry runs; empty for a real eye). A log written before the
+#: last two columns reads with them empty.
 GAZE_COLUMNS: tuple[str, ...] = (
     "trial_index", "attempt", "device_time_us", "system_time_us", "left_x", "left_y",
     "left_valid", "right_x", "right_y", "right_valid", "x", "y", "valid", "eccentricity_deg",
-    *GAZE_ORIGIN_COLUMNS,
+    *GAZE_ORIGIN_COLUMNS, "received_system_time_us", "true_ecc_deg",
 )
 #: ``frames-<session>.csv``: one row per stimulus frame; ``value`` is the adjusted value of the
 #: frame actually on screen; ``gaze_system_time_us`` and ``gaze_ecc_deg`` are the newest gaze

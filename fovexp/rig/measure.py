@@ -69,6 +69,7 @@ def _pct(v: list[float], q: float) -> float:
 
 def run_measurements(opts: RigOptions) -> Measured:
     """The whole check (module docstring); returns the figures and verdicts."""
+    from fovexp.experiment.display.checks import cross_px, keys_at_poll
     from fovexp.experiment.display.render import TestRenderer
     from fovexp.experiment.display.render_budget import step_values, time_renders
     from fovexp.experiment.display.window import PsychoScreen
@@ -127,9 +128,12 @@ def run_measurements(opts: RigOptions) -> Measured:
     out.checks.append(C.tracker_found_check(found, f"{kind}: {gaze.name}", error))
 
     screen = PsychoScreen(size=size, fullscreen=not opts.dry_run,
-                          cross_px=max(7.0, spec.fixation.cross_size_deg * fixation.ppd_centre
-                                       * size[0] / display.width_px),
+                          cross_px=cross_px(size, display, fixation.ppd_centre,
+                                            spec.fixation.cross_size_deg),
                           dry_run=opts.dry_run, refresh_hz=display.refresh_hz, screen=opts.screen)
+    window = screen.info()
+    out.checks.append(C.keyboard_check((window.get("keyboard") or {}).get("backend"),
+                                       keys_at_poll(window)))
     renderer = None
     try:
         attach = getattr(gaze, "attach", None)

@@ -9,6 +9,9 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import pytest
+
+from fovexp import FovexpError
 from fovexp.experiment.options import SessionOptions
 from fovexp.experiment.protocol.spec import load_protocol
 from fovexp.experiment.records.logs import read_trials
@@ -27,12 +30,13 @@ class FakeEnhancer(GreyEnhancer):
 
 
 def run_session(tmp_path: Path, monkeypatch, pid: str, screen_cls=StubScreen,
-                lines: list[str] | None = None) -> Session:
+                lines: list[str] | None = None, accept_poll_keys: bool = False) -> Session:
     use_enhancer(monkeypatch, FakeEnhancer)
     lp = load_protocol(REPO / "protocols" / "calibration-fe.yaml")
     opts = SessionOptions(participant=pid, results_root=tmp_path / "results", tracker="mouse",
                           dry_run=False, window_size=(W, H), practice_trials=0, limit_trials=2,
                           skip_display_check=True, fullscreen=False,
+                          accept_poll_keys=accept_poll_keys,
                           console=(lines.append if lines is not None else lambda t: None))
     s = Session(lp, opts)
     enter = {i: [Key("return")] for i in range(12, 10_000, 12)}
@@ -66,11 +70,23 @@ class PollStampedScreen(StubScreen):
         return {**super().info(), "keyboard": {"backend": "event", "key_time": "poll"}}
 
 
-def test_keys_stamped_at_the_poll_are_warned_and_recorded(tmp_path: Path, monkeypatch) -> None:
+def test_keys_stamped_at_the_poll_stop_a_real_session_unless_accepted(tmp_path: Path,
+                                                                       monkeypatch) -> None:
+    """Without ``--accept-poll-keys`` the session stops before its first trial, naming what to
+    install, its session file saying why; with it, a warning and the choice recorded."""
+    with pytest.raises(FovexpError, match=r"stamped when polled.*libjack-jackd2-0.*"
+                                          r"--accept-poll-keys"):
+        run_session(tmp_path, monkeypatch, "L03", PollStampedScreen)
+    folder = tmp_path / "results" / "calibration-fe" / "L03"
+    info = json.loads(next(folder.glob("session-*.json")).read_text())
+    assert info["state"] == "failed" and "libjack" in info["failure"]
+    assert not (folder / "trials.csv").exists() or len(read_trials(folder / "trials.csv")[0]) == 0
     lines: list[str] = []
-    s = run_session(tmp_path, monkeypatch, "L02", PollStampedScreen, lines)
+    s = run_session(tmp_path, monkeypatch, "L02", PollStampedScreen, lines,
+                    accept_poll_keys=True)
     warned = [ln for ln in lines if "stamped when polled" in ln]
     assert len(warned) == 1 and "libjack-jackd2-0" in warned[0]
     info = json.loads((s.folder / f"session-{s.session_id}.json").read_text())
     assert info["runs"][-1]["window"]["keyboard"]["key_time"] == "poll"
-    assert "keyboard_stamps_at_poll" in [e["event"] for e in info["events"]]
+    [event] = [e for e in info["events"] if e["event"] == "keyboard_stamps_at_poll"]
+    assert event["accepted"] is True

@@ -18,9 +18,9 @@ from experiment_helpers import make_workspace, run_cli, xvfb_display  # noqa: F4
 
 pytestmark = [pytest.mark.gui, pytest.mark.slow]
 
-CHECK_IDS = ["tracker.found", "display.refresh", "render.wheel_step", "gpu.auto",
-             "display.dropped", "gpu.handover", "gpu.stages", "tracker.rate", "tracker.loss",
-             "tracker.latency", "tracker.clock"]
+CHECK_IDS = ["tracker.found", "display.keyboard", "display.refresh", "render.wheel_step",
+             "gpu.auto", "display.dropped", "gpu.handover", "gpu.stages", "tracker.rate",
+             "tracker.loss", "tracker.latency", "tracker.clock"]
 MOUSEGAZE = """\
 eyetracker.hw.mouse.EyeTracker:
   name: tracker

@@ -20,7 +20,10 @@ UNITS: dict[str, str] = {
     "slope": "s_k per unit s_f", "intercept": "dimensionless", "r2": "dimensionless",
     "sr_ratio": "dimensionless", "reduction_pct": "%", "median_ms": "ms", "p95_ms": "ms",
     "max_ms": "ms", "draw_median_ms": "ms", "draw_p95_ms": "ms", "dropped_pct": "%",
-    "with_gaze": "frames", "rule_violations": "frames",
+    "with_gaze": "frames", "rule_violations": "frames", "delivery_p50_ms": "ms",
+    "delivery_p95_ms": "ms", "delivery_max_ms": "ms", "tracker_cost_frames": "frames",
+    "stamped_violations": "frames", "outside_ms": "ms", "outside_fraction": "dimensionless",
+    "excursion_max_ms": "ms",
     "n_trials": "trials", "n_levels": "s_f levels", "t": "dimensionless",
     "d_z": "dimensionless", "df": "degrees of freedom",
 }

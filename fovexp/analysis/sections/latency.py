@@ -5,7 +5,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from .. import figures as figs
-from ..latency import session_latency
+from ..latency import session_gating_table, session_latency
 from .common import md_table, write_csv
 
 if TYPE_CHECKING:
@@ -32,4 +32,28 @@ def latency_section(ana: Analysis) -> list[str]:
     else:
         parts.append("No frame log with gaze samples.\n")
     parts += [f"Note: {n}\n" for n in notes]
+    parts += gating_part(ana)
     return ["\n".join(parts)]
+
+
+def gating_part(ana: Analysis) -> list[str]:
+    """What the blanking did against the eye, per session (:mod:`fovexp.results.gating`)."""
+    table, notes = session_gating_table(ana.data)
+    write_csv(table, ana.tables / "gating.csv", ana.files)
+    parts = ["### The blanking against the eye (issue 28)\n",
+             "From the gaze log's received times: the tracker's delivery latency (received "
+             "minus measured; `delivery_*_ms`); the stimulus frames decided while a sample "
+             "already measured but not yet received was outside the window or invalid "
+             "(`tracker_cost_frames`: what the latency let through); the rule checked against "
+             "the newest sample *measured* before each decision (`stamped_violations`: 0 when "
+             "delivery is instant). Where the simulated eye's truth is logged (dry runs): the "
+             "stimulus time on screen while the eye was outside the window (`outside_ms`, and "
+             "as a fraction of the stimulus time), and the longest of it after one excursion "
+             "of the eye (`excursion_max_ms`; compare 6 ms, McConkie and Loschky 2002, and "
+             "60 ms, Loschky and Wolverton 2007, docs/EXPERIMENT.md).\n"]
+    if len(table):
+        parts.append(md_table(table, 2))
+    else:
+        parts.append("No session with a frame log and a gaze log with received times.\n")
+    parts += [f"Note: {n}\n" for n in notes]
+    return parts

@@ -85,18 +85,31 @@ def start_renderer(display: Display, spec: Any, backend: str,
                         gl_share=share() if share is not None and backend != "cpu" else None)
 
 
-def keyboard_note(info: dict[str, Any], dry_run: bool) -> Note | None:
-    """A warning when the window's keys do not carry the time they went down (``info``: the
-    window's :meth:`Screen.info`): an answer is then the value on screen at the poll that saw
-    Enter, up to a frame later than the press (a dry run's simulated participant answers at
-    the poll anyway)."""
+def keys_at_poll(info: dict[str, Any]) -> str | None:
+    """Why the window's keys do not carry the time they went down (``info``: the window's
+    :meth:`Screen.info`), with what to install; None when they do. An answer would then be the
+    value on screen at the poll that saw Enter, up to a frame later than the press. The rig
+    check fails its keyboard check with the same words."""
     kb = info.get("keyboard") or {}
-    if kb.get("key_time") == "press" or dry_run:
+    if kb.get("key_time") == "press":
         return None
     return (f"key presses are stamped when polled, not when pressed (keyboard backend "
             f"{kb.get('backend')!r}): install psychtoolbox's libjack (Debian/Ubuntu: "
-            "apt-get install libjack-jackd2-0) or run an ioHub server",
-            "keyboard_stamps_at_poll", {"backend": kb.get("backend")})
+            "apt-get install libjack-jackd2-0) or run an ioHub server")
+
+
+def keyboard_note(info: dict[str, Any], dry_run: bool, accept: bool = False) -> Note | None:
+    """A real session whose keys would be stamped at the poll does not start
+    (:class:`FovexpError` naming what to install) unless ``accept`` (``--accept-poll-keys``):
+    then a warning, its event recording the choice. A dry run's simulated participant answers
+    at the poll anyway."""
+    why = keys_at_poll(info)
+    if why is None or dry_run:
+        return None
+    if not accept:
+        raise FovexpError(f"{why}; --accept-poll-keys runs the session anyway (recorded)")
+    return (why, "keyboard_stamps_at_poll",
+            {"backend": (info.get("keyboard") or {}).get("backend"), "accepted": True})
 
 
 def renderer_notes(info: dict[str, Any]) -> list[Note]:

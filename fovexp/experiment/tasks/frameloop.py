@@ -13,10 +13,11 @@ measuring: :class:`FrameTiming`). Per frame, on the display thread, in this orde
 3. a finished render becomes the test half (an 8-bit upload, or a texture switch: the render
    thread prepared either);
 4. the frame drawn as the newest gaze sample predicts it (late latching only; below);
-5. the blanking decision: the gaze samples since the last poll are taken, ``now_us`` is read
-   on the gaze source's clock, and the newest sample decides by the one rule
-   (:class:`fovexp.results.blanking.BlankingRule`): black when it is older than the gaze
-   timeout at that moment, invalid, or beyond 1.25 deg;
+5. the blanking decision: ``now_us`` is read on the gaze source's clock at the poll, the gaze
+   samples since the last poll are taken, and the newest sample received by ``now_us``
+   decides by the one rule (:class:`fovexp.results.blanking.BlankingRule`): black when it is
+   older than the gaze timeout at that moment, invalid, or beyond 1.25 deg (the rule so holds
+   against every sample received before the decision, with no gap between poll and clock);
 6. draw (if the decision differs from the prediction) and flip; the flip time is put on the
    tracker's clock (``now_us`` read right after);
 7. the frame's log row: the sample that decided it, the decision and the flip, on one clock.
@@ -298,8 +299,9 @@ class TrialLoop:
         self._between_frames()
 
     def _between_frames(self) -> None:
+        now_us = self.gaze.now_us()
         samples = self.gaze.poll()
-        self.monitor.update(samples, self.gaze.now_us())
+        self.monitor.update(samples, now_us)
         self.io.gaze(None, self.attempt, samples)
 
     # -- the frames ----------------------------------------------------------------------------
@@ -334,13 +336,16 @@ class TrialLoop:
         return outcome
 
     def _decide(self) -> tuple[BlankDecision, int, float, float]:
-        """Step 5: the samples since the last poll, the decision at ``now_us`` read after them;
-        returns it with the samples' count, when the poll started and how long it took."""
+        """Step 5: the decision at ``now_us``, read at the poll (just before it), on the samples
+        received by then (:meth:`BlankingMonitor.update`; a sample the poll brings that arrived
+        after it decides the next frame); returns it with the samples' count, when the poll
+        started and how long it took."""
         gaze = self.gaze
         t_gaze = time.perf_counter()
+        now_us = gaze.now_us()
         samples = gaze.poll()
         t_polled = time.perf_counter()
-        decision = self.monitor.update(samples, gaze.now_us())
+        decision = self.monitor.update(samples, now_us)
         self.io.gaze(self.trial_index, self.attempt, samples)
         return decision, len(samples), t_gaze, t_polled - t_gaze
 

@@ -54,7 +54,8 @@ def make_gaze_source(kind: str, *, protocol: Any, display: Any, fixation: Fixati
                      dry_run: bool = False, screen: int = 0,
                      tracker_address: str | None = None,
                      tracker_config: str | Path | None = None, sim_seed: int = 1,
-                     sim_params: SimGazeParams | None = None) -> GazeSource:
+                     sim_params: SimGazeParams | None = None,
+                     replay: tuple[Path, str, str] | None = None) -> GazeSource:
     """The gaze source ``kind`` (``--tracker``) for ``protocol`` on ``display``: a Tobii at
     the protocol's rate (``tracker_address``: a given one, else the first found), the
     simulated eyes (``sim_seed``, ``sim_params``; default: the protocol's rate), the mouse, or
@@ -65,6 +66,14 @@ def make_gaze_source(kind: str, *, protocol: Any, display: Any, fixation: Fixati
         from .tobii import TobiiGaze
 
         return TobiiGaze(protocol.spec.tracker.sampling_hz, tracker_address)
+    if kind == "simulated" and replay is not None:  # a recorded gaze (--gaze-replay)
+        from .replay import ReplayGaze
+        from .simulated import SimGazeParams
+
+        p = sim_params or SimGazeParams()
+        return ReplayGaze(replay[0], fixation, units=replay[1], end=replay[2],
+                          latency_ms=p.latency_ms, latency_jitter_ms=p.latency_jitter_ms,
+                          seed=sim_seed)
     if kind == "simulated":
         from .simulated import SimGazeParams, SimulatedGaze
 

@@ -51,6 +51,16 @@ class GazeSample(NamedTuple):
     right_valid: bool
     left_origin_mm: Vec3 | None = None
     right_origin_mm: Vec3 | None = None
+    #: when the runner received the sample, on the ``system_time_us`` clock (None: as measured)
+    received_system_time_us: int | None = None
+    #: the simulated eye's true eccentricity from the cross (deg; None for a real eye)
+    true_ecc_deg: float | None = None
+
+    @property
+    def received_us(self) -> int:
+        """When the runner had the sample (its measurement time where the source does not say)."""
+        r = self.received_system_time_us
+        return self.system_time_us if r is None else r
 
     @property
     def valid(self) -> bool:
@@ -282,18 +292,38 @@ class BlankingMonitor:
         self.radius_deg = radius_deg
         self.timeout_us = self.rule.timeout_us
         self.last: GazeSample | None = None
+        self._pending: deque[GazeSample] = deque()
 
     def update(self, samples: list[GazeSample], now_us: int) -> BlankDecision:
         """Take the samples since the last call; decide a frame at ``now_us`` (the source's
-        clock, read after the samples were taken)."""
+        clock, read at the poll, before the samples were taken): the newest sample received by
+        then decides, and one received later (a poll is not instant) waits for the next
+        decision, so that the rule holds against every sample received before it."""
         if samples:
-            self.last = samples[-1]
+            self._pending.extend(samples)
+        while self._pending and self._pending[0].received_us <= now_us:
+            self.last = self._pending.popleft()
         s = self.last
         age = None if s is None else now_us - s.system_time_us
         valid = s is not None and s.valid
         ecc = self.fixation.eccentricity(s.point) if valid and s is not None else math.inf
         reason = self.rule.reason(age, valid, ecc)
         return BlankDecision(reason != "", reason, ecc, now_us)
+
+
+#: How the blanking decision measures a sample's angle (the session file's ``blanking_rule``).
+ANGLE_RULE = (
+    "binocular gaze point (the mean of the valid eyes) on the screen; its angle from the cross "
+    "seen from the nominal eye (the display profile's distance on the screen normal through the "
+    "cross), not from the eyes' measured origins; off the screen or no valid eye: black")
+
+
+def rule_record(radius_deg: float, timeout_s: float) -> dict[str, Any]:
+    """The blanking rule a session ran with, for its session file (docs/EXPERIMENT.md, "Gaze
+    truth"): the radius, the sample timeout, how the angle is computed and when the decision is
+    taken."""
+    return {"radius_deg": radius_deg, "gaze_timeout_s": timeout_s, "angle": ANGLE_RULE,
+            "decision": "at the poll: the newest sample received by then decides"}
 
 
 class SampleBuffer:
@@ -325,7 +355,8 @@ def sample_row(trial_index: int | None, attempt: int | None, s: GazeSample,
     return (trial_index, attempt, s.device_time_us, s.system_time_us,
             s.left_x, s.left_y, s.left_valid, s.right_x, s.right_y, s.right_valid,
             pt[0] if pt else None, pt[1] if pt else None, s.valid,
-            None if math.isinf(ecc) else round(ecc, 4)) + origin_fields(s)
+            None if math.isinf(ecc) else round(ecc, 4)) + origin_fields(s) + (
+            s.received_us, None if s.true_ecc_deg is None else round(s.true_ecc_deg, 4))
 
 
 def origin_fields(s: GazeSample) -> tuple[float | None, ...]:

@@ -462,12 +462,13 @@ class IoHubGaze:
 
     def poll(self) -> list[GazeSample]:
         out = []
-        for ev in self.buffer.drain():
+        for ev, received_us in self.buffer.drain():
             layout = self._layouts.get(int(ev[4]))
             if layout is None:
                 continue  # fixations, saccades, blinks: the samples say it all
             try:
-                out.append(sample_from_event(ev, layout, self.pixels))
+                out.append(sample_from_event(ev, layout, self.pixels)._replace(
+                    received_system_time_us=received_us))
             except (IndexError, TypeError, ValueError):
                 continue  # a malformed sample counts as lost
         if out:
@@ -593,8 +594,9 @@ class IoHubGaze:
             if evs is None:
                 rpc.drain()
                 continue
+            received_us = self.now_us()  # when they reached the runner (the delivery latency)
             for ev in evs:
-                self.buffer.append(ev)
+                self.buffer.append((ev, received_us))
             if isinstance(status, bool) and status != self._tracker_ok:
                 self._tracker_ok = status
                 self._note("connection_restored" if status else "connection_lost",

@@ -11,6 +11,7 @@ due. The gaze stream keeps going into the gaze log meanwhile (between trials). P
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from typing import Any
 
@@ -76,6 +77,11 @@ class TrackerSetup:
                  gaze_sink: Callable[[list[GazeSample]], None]) -> None:
         self.gaze, self.screen, self.spec = gaze, screen, protocol_spec
         self.area, self.distance_mm, self.ppd_px = area, distance_mm, ppd_px
+        # a source that states its delivery latency (the simulated tracker's --gaze-latency-ms)
+        # gets it, and four of its jitter's sd, on top of the wait for a window's late samples
+        late_s = timing.late_s + 1e-3 * (getattr(gaze, "latency_ms", 0.0)
+                                         + 4 * getattr(gaze, "latency_jitter_ms", 0.0))
+        timing = dataclasses.replace(timing, late_s=late_s)
         self.timing, self.auto, self.seed = timing, auto, seed
         self.file, self.gaze_sink = file, gaze_sink
         #: main trials since the last drift check or calibration

@@ -130,7 +130,8 @@ class TobiiGaze:
 
     # -- SDK callbacks: append only ------------------------------------------------------------
     def _on_gaze(self, data: dict[str, Any]) -> None:
-        self.buffer.append(data)
+        # with when it reached the runner, on the SDK's system clock (the delivery latency)
+        self.buffer.append((data, int(self.tr.get_system_time_stamp())))
 
     def _on_lost(self, data: Any) -> None:
         self._notes.append(("connection_lost", data))
@@ -219,9 +220,9 @@ class TobiiGaze:
     def poll(self) -> list[GazeSample]:
         raw = self.buffer.drain()
         out = []
-        for d in raw:
+        for d, received_us in raw:
             try:
-                out.append(sample_from_sdk(d))
+                out.append(sample_from_sdk(d)._replace(received_system_time_us=received_us))
             except (KeyError, TypeError, ValueError):
                 continue  # a malformed sample counts as lost
         if out:

@@ -51,11 +51,14 @@ def test_the_cross_is_its_degrees_at_the_centre_in_window_pixels() -> None:
 
 
 def test_warnings_for_the_operator() -> None:
-    """Keys stamped at the poll warn in a real session only; the renderer's fallback and notes
-    become one warning each, with their session-file events."""
+    """Keys stamped at the poll stop a real session unless accepted (then a warning whose
+    event records the choice), never a dry run; the renderer's fallback and notes become one
+    warning each, with their session-file events."""
     poll = {"keyboard": {"backend": "event", "key_time": "poll"}}
-    text, event, detail = keyboard_note(poll, dry_run=False)
-    assert event == "keyboard_stamps_at_poll" and detail == {"backend": "event"}
+    with pytest.raises(FovexpError, match="libjack.*--accept-poll-keys"):
+        keyboard_note(poll, dry_run=False)
+    text, event, detail = keyboard_note(poll, dry_run=False, accept=True)
+    assert event == "keyboard_stamps_at_poll" and detail == {"backend": "event", "accepted": True}
     assert "libjack" in text
     assert keyboard_note(poll, dry_run=True) is None
     assert keyboard_note({"keyboard": {"backend": "ptb", "key_time": "press"}}, False) is None

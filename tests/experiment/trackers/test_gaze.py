@@ -162,3 +162,91 @@ def test_simulated_gaze_stream_is_independent_of_validation_and_disconnects(
     s0 = next(o for o in got_other if o.left_valid and o.right_valid)
     assert s0.left_origin_mm == pytest.approx((-31.5, 0.0, 715.0))
     assert s0.right_origin_mm == pytest.approx((31.5, 0.0, 715.0))
+
+
+# -- the decision at the poll, delivery latency, the eye's truth (issue 28) ------------------
+
+def test_the_monitor_decides_on_what_was_received_by_the_decision(fix: FixationGeometry) -> None:
+    """A poll that brings a sample received after the decision's time keeps it for the next
+    decision: the rule holds against every sample received before each decision."""
+    mon = BlankingMonitor(fix, 1.25, 0.05)
+    inside, outside = (0.5, 0.5), point_at(fix, 3.0)
+    early = sample(1000, inside)
+    late = sample(2000, outside)._replace(received_system_time_us=5000)
+    d = mon.update([early, late], 4000)  # the poll began at 4000 us; `late` came at 5000 us
+    assert not d.blank and mon.last is early
+    d = mon.update([], 6000)
+    assert d.blank and d.reason == "outside" and mon.last is late
+
+
+class Clock:
+    def __init__(self) -> None:
+        self.t = 10_000_000
+
+    def __call__(self) -> int:
+        return self.t
+
+
+def test_delivery_latency_keeps_the_measurement_times(fix: FixationGeometry) -> None:
+    """Each sample reaches the runner ``latency_ms`` after it was measured, its time stamps
+    unchanged; with jitter, in order and never before it was measured."""
+    clock = Clock()
+    g = SimulatedGaze(fix, seed=3, params=SimGazeParams(latency_ms=8.0), clock_us=clock)
+    g.start()
+    clock.t += 100_000
+    got = g.poll()
+    assert got and all(s.received_us - s.system_time_us == 8000 for s in got)
+    assert max(s.received_us for s in got) <= clock.t
+    # the same samples, instant: 8 ms more of them
+    ref = SimulatedGaze(fix, seed=3, params=SimGazeParams(), clock_us=Clock())
+    ref.start()
+    ref._clock.t += 100_000
+    instant = ref.poll()
+    assert [s.system_time_us for s in instant[: len(got)]] == [s.system_time_us for s in got]
+    assert len(instant) - len(got) == pytest.approx(8e-3 * 600, abs=1)
+    j = SimulatedGaze(fix, seed=3, params=SimGazeParams(latency_ms=8, latency_jitter_ms=4),
+                      clock_us=clock)
+    j.start()
+    clock.t += 1_000_000
+    jittered = j.poll()
+    rec = [s.received_us for s in jittered]
+    lat_ms = (np.array(rec) - np.array([s.system_time_us for s in jittered])) / 1e3
+    assert rec == sorted(rec) and lat_ms.min() >= 0
+    # in order, as a tracker's FIFO delivers: a sample waits for the one before it, so the
+    # median lies above the 8 ms asked for, within the jitter
+    assert 8.0 <= np.median(lat_ms) <= 8.0 + 2 * 4.0 and lat_ms.std() > 1
+
+
+def test_saccades_follow_the_main_sequence_and_the_truth_is_logged(fix: FixationGeometry) -> None:
+    """A wandering eye's excursions last its dwell plus two main-sequence flights; the truth is
+    the gaze without its noise: within the jitter of what the tracker reports."""
+    from fovexp.experiment.trackers.simulated import (
+        PRESETS,
+        minimum_jerk,
+        parse_sim_gaze,
+        saccade_duration_s,
+    )
+
+    assert saccade_duration_s(8.0) == pytest.approx(0.0386)
+    assert minimum_jerk(0.0) == 0.0 and minimum_jerk(1.0) == 1.0
+    assert minimum_jerk(0.5) == pytest.approx(0.5)
+    clock = Clock()
+    g = SimulatedGaze(fix, seed=11, params=PRESETS["wandering"], clock_us=clock)
+    g.start()
+    clock.t += 20_000_000
+    s = g.poll()
+    truth = np.array([x.true_ecc_deg for x in s])
+    outside = truth > 1.25
+    assert 0.2 < outside.mean() < 0.6  # about a third of the time away, as the preset says
+    runs = np.diff(np.flatnonzero(np.diff(np.concatenate([[0], outside, [0]]))))[::2] / 600
+    # the time away is mostly in looks of at least the shortest dwell (the drift alone
+    # crosses 1.25 deg now and then, briefly)
+    assert runs[runs >= 0.15].sum() > 0.8 * runs.sum()
+    measured = np.array([fix.eccentricity(x.point) if x.valid else np.nan for x in s])
+    ok = np.isfinite(measured) & (truth < 10)
+    assert np.nanmedian(np.abs(measured[ok] - truth[ok])) < 0.15
+    with pytest.raises(Exception, match="no preset 'drifting'"):
+        parse_sim_gaze("drifting")
+    with pytest.raises(Exception, match="saccade_deg takes 2"):
+        parse_sim_gaze("wandering,saccade_deg=3")
+    assert parse_sim_gaze("wandering,blink_rate=0.3").blink_rate == 0.3
