@@ -98,12 +98,15 @@ GAZE_COLUMNS: tuple[str, ...] = (
 FRAME_COLUMNS: tuple[str, ...] = (
     "trial_index", "attempt", "frame", "flip_time_s", "interval_s", "dropped", "blanked", "value",
     "gaze_system_time_us", "gaze_ecc_deg", "flip_system_time_us", "decide_system_time_us",
+    "attempt_start_system_time_us",
 )
 #: The frame log's format versions (docs/LOGS.md, "Format versions"), each by its columns: a
 #: reader tells them apart by the header, and a newer version only appends columns, so an older
 #: log reads with the new columns empty. 1: issue 9 (to ``flip_system_time_us``); 2: issue 18
-#: (``decide_system_time_us``).
-FRAME_LOG_VERSIONS: dict[int, tuple[str, ...]] = {1: FRAME_COLUMNS[:11], 2: FRAME_COLUMNS}
+#: (``decide_system_time_us``); 3: issue 28 (``attempt_start_system_time_us``: when the
+#: attempt began, on the tracker's clock, the same in each of its rows).
+FRAME_LOG_VERSIONS: dict[int, tuple[str, ...]] = {1: FRAME_COLUMNS[:11], 2: FRAME_COLUMNS[:12],
+                                                  3: FRAME_COLUMNS}
 FRAME_LOG_VERSION = max(FRAME_LOG_VERSIONS)
 
 

@@ -27,7 +27,8 @@ from .format import FRAME_COLUMNS
 
 #: Integer columns of the frame log (nullable: empty fields are missing values).
 FRAME_INT_COLUMNS = ("trial_index", "attempt", "frame", "dropped", "blanked",
-                     "gaze_system_time_us", "flip_system_time_us", "decide_system_time_us")
+                     "gaze_system_time_us", "flip_system_time_us", "decide_system_time_us",
+                     "attempt_start_system_time_us")
 
 
 def read_frame_log(path: str | Path) -> pd.DataFrame:

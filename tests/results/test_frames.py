@@ -125,7 +125,8 @@ def test_a_log_of_the_previous_format(tmp_path: Path) -> None:
     minus the timeout breaks the rule for certain) and a first frame's age is left unchecked
     (counted), never guessed."""
     v1 = FRAME_LOG_VERSIONS[1]
-    assert frame_log_version(v1) == 1 and frame_log_version(FRAME_COLUMNS) == 2
+    assert frame_log_version(v1) == 1 and frame_log_version(FRAME_COLUMNS) == 3
+    assert frame_log_version(FRAME_LOG_VERSIONS[2]) == 2
     assert frame_log_version(FRAME_COLUMNS[:8]) == 0 and frame_log_version(["x"]) is None
     rows = [dict(r) for r in GOOD]
     rows[0] = frame(0, 0, 10.0, 0.0, age_s=0.2)  # first frame: cannot be checked

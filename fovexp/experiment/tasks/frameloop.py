@@ -279,6 +279,8 @@ class TrialLoop:
         self.io, self.participant, self.timings = io, participant, timings
         self.latch = latch
         self._visible = False  # the stimulus is on screen now (the last frame's decision)
+        #: when the attempt began (:meth:`show_first`; else its first frame), tracker clock
+        self.start_us: int | None = None
         self._last_blank_s: float | None = None  # the last flip: a vertical blank
 
     # -- before the first frame ------------------------------------------------------------------
@@ -286,6 +288,7 @@ class TrialLoop:
         """Request the start value's render and show the cross alone (black frames) until it is
         done; the samples meanwhile go to the gaze log without a trial and tell the blanking
         monitor where the gaze is."""
+        self.start_us = self.gaze.now_us()  # the attempt begins: the frame log's first column
         serial = self.renderer.request(self.params_for(self.st.value))
         while True:
             try:
@@ -351,6 +354,8 @@ class TrialLoop:
 
     def _frame(self) -> str | None:
         st, screen, gaze = self.st, self.screen, self.gaze
+        if self.start_us is None:  # run without show_first (benchmarks)
+            self.start_us = gaze.now_us()
         t0 = time.perf_counter()
         c0 = time.thread_time()
         # 1. tracker status
@@ -430,7 +435,8 @@ class TrialLoop:
         sample_us, ecc = self._decided_by(decision)
         self.io.frame((self.trial_index, self.attempt, st.n_frames - 1, round(flip.flip_s, 6),
                        None if dt is None else round(dt, 6), dropped, decision.blank,
-                       st.frames[-1][2], sample_us, ecc, flip_us, decision.decided_us))
+                       st.frames[-1][2], sample_us, ecc, flip_us, decision.decided_us,
+                       self.start_us))
         if self.timings is not None:
             self.timings.append(FrameTiming(
                 t_call - t0 - prepare_s - wait_s, c_call - c0, t_call - t_gaze, poll_s, n,

@@ -108,7 +108,7 @@ def test_a_resumed_log_of_an_older_format_is_upgraded(tmp_path: Path) -> None:
     v1 = FRAME_LOG_VERSIONS[1]
     path.write_text(",".join(v1) + "\n0,0,0,1.0,,0,0,0.2,990000,0.3,1000000\n0,0,1,1.0")
     log = BatchLog(path, FRAME_COLUMNS)
-    log.add((0, 0, 1, 1.008, 0.008, 0, 0, 0.2, 999000, 0.3, 1008000, 1007000))
+    log.add((0, 0, 1, 1.008, 0.008, 0, 0, 0.2, 999000, 0.3, 1008000, 1007000, 990000))
     log.flush(sync=True)
     frames = read_frame_log(path)
     assert path.read_text().splitlines()[0] == ",".join(FRAME_COLUMNS)
