@@ -40,7 +40,8 @@ def frame_rows(trial: int, latencies_ms: list[float], t0_us: int = 10_000_000,
     for k, lat in enumerate(latencies_ms):
         flip = t0_us + k * PERIOD_US
         rows.append([trial, attempt, k, flip / 1e6, None if k == 0 else PERIOD_US / 1e6, 0,
-                     blanked, 0.2, flip - round(1e3 * lat), ecc, flip, flip - DRAW_US])
+                     blanked, 0.2, flip - round(1e3 * lat), ecc, flip, flip - DRAW_US,
+                     t0_us - PERIOD_US])
     return rows
 
 
