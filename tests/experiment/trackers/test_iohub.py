@@ -94,6 +94,10 @@ def test_samples_follow_the_pointer_on_psychopys_clock(mousegaze) -> None:
     g = mousegaze()
     assert g.display_px == (1280, 720) and g.eyes == ("right",) and g.name == "mouse"
     g.start()
+    # the pointer away from every target first: a pointer already at one (the screen's
+    # centre, where an earlier test may have left it) would match a sample from before the move
+    xdotool("mousemove", "100", "100")
+    wait_for(g, lambda s: s.right_valid and abs(s.right_x - 100 / 1280) < 1e-9)
     for px, py in ((640, 360), (960, 180), (320, 540)):
         t_move = system_time_us(core.monotonicClock.getTime())
         xdotool("mousemove", str(px), str(py))
