@@ -148,13 +148,13 @@ def refresh_check(measured_hz: float | None, nominal_hz: float, seconds: float,
                  _judge(passed, advice), note)
 
 
-def keyboard_check(backend: str | None, why_not: str | None) -> Check:
+def keyboard_check(backend: str | None, why_not: str | None, virtual: bool) -> Check:
     """Keys stamped when pressed (``why_not``: the session's own refusal,
     :func:`fovexp.experiment.display.checks.keys_at_poll`, None when they are)."""
     passed = why_not is None
     return Check("display.keyboard", "display", "key presses stamped when pressed",
                  backend or "unknown", "backend", "the keyboard gives each key its press time",
-                 passed, _judge(passed, why_not or ""))
+                 passed, _judge(passed, why_not or ""), VIRTUAL if virtual else "")
 
 
 def dropped_check(stats: dict[str, Any], virtual: bool) -> Check:

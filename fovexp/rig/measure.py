@@ -133,7 +133,7 @@ def run_measurements(opts: RigOptions) -> Measured:
                           dry_run=opts.dry_run, refresh_hz=display.refresh_hz, screen=opts.screen)
     window = screen.info()
     out.checks.append(C.keyboard_check((window.get("keyboard") or {}).get("backend"),
-                                       keys_at_poll(window)))
+                                       keys_at_poll(window), virtual))
     renderer = None
     try:
         attach = getattr(gaze, "attach", None)

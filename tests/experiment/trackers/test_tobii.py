@@ -235,7 +235,8 @@ def test_display_area_mismatch_stops_before_any_window(tmp_path) -> None:
 
 def test_stream_buffer_rate_and_notifications() -> None:
     dev = StandInTracker()
-    g = TobiiGaze(frequency_hz=600, tracker=dev)
+    # no stall between the streams, however loaded the machine (stalls: the next tests)
+    g = TobiiGaze(frequency_hz=600, tracker=dev, stall_s=30.0)
     g.start()
     assert dev.freq == 600 and tr.EYETRACKER_GAZE_DATA in dev.subs
     # 1 s at 600 Hz delivered from another thread while the main thread drains.
