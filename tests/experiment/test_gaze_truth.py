@@ -65,7 +65,10 @@ def test_a_wandering_eye_with_and_without_latency(ws: Path) -> None:
     assert zero["stamped_violations"] == 0 and zero["tracker_cost_frames"] == 0
     assert eight["tracker_cost_frames"] > 0
     assert eight["outside_ms"] >= zero["outside_ms"]
-    assert zero["blanked"] > 0.2  # a wandering eye blanks much of a trial
+    # a wandering eye blanks part of each run (its share over 2 trials depends on where the
+    # wall clock puts them in the eye's stream: 16-40 % measured; the preset's third of the
+    # time away is checked on 20 s of samples in trackers/test_gaze.py)
+    assert zero["blanked"] > 0.05
 
 
 def test_the_report_shows_the_blanking_against_the_eye(ws: Path) -> None:
