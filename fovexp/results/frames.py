@@ -31,20 +31,26 @@ FRAME_INT_COLUMNS = ("trial_index", "attempt", "frame", "dropped", "blanked",
                      "attempt_start_system_time_us")
 
 
-def read_frame_log(path: str | Path) -> pd.DataFrame:
-    """A frame log, typed, one row per frame; a torn last line (a kill mid-write) is dropped.
-    Columns missing from an older log are added empty. Raises :class:`FovexpError` naming the
-    file when it cannot be read as one."""
-    path = Path(path)
+def read_complete_lines(path: Path, what: str) -> pd.DataFrame:
+    """A batch log's complete lines as strings (a torn last line, a kill mid-write, dropped);
+    :class:`FovexpError` naming the file when it cannot be read as ``what``."""
     try:
         data = path.read_bytes()
     except OSError as exc:
         raise FovexpError(f"{path}: cannot read: {exc.strerror}") from None
     data = data[: data.rfind(b"\n") + 1]  # complete lines only
     try:
-        frame = pd.read_csv(io.BytesIO(data), dtype=str, keep_default_na=False)
+        return pd.read_csv(io.BytesIO(data), dtype=str, keep_default_na=False)
     except (ValueError, pd.errors.ParserError) as exc:
-        raise FovexpError(f"{path}: not a frame log ({exc})") from None
+        raise FovexpError(f"{path}: not {what} ({exc})") from None
+
+
+def read_frame_log(path: str | Path) -> pd.DataFrame:
+    """A frame log, typed, one row per frame; a torn last line (a kill mid-write) is dropped.
+    Columns missing from an older log are added empty. Raises :class:`FovexpError` naming the
+    file when it cannot be read as one."""
+    path = Path(path)
+    frame = read_complete_lines(path, "a frame log")
     missing = [c for c in ("trial_index", "attempt", "frame", "blanked") if c not in frame]
     if missing:
         raise FovexpError(f"{path}: not a frame log (no {', '.join(missing)} column)")

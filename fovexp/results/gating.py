@@ -23,7 +23,6 @@ tested, a change up to 60 ms after a saccade is not more detectable.
 
 from __future__ import annotations
 
-import io
 from pathlib import Path
 
 import numpy as np
@@ -33,6 +32,7 @@ from fovexp import FovexpError
 
 from .blanking import BlankingRule
 from .format import GAZE_COLUMNS
+from .frames import read_complete_lines
 
 #: McConkie and Loschky (2002): a change this soon after a saccade's end goes unnoticed (ms).
 UNNOTICED_AFTER_SACCADE_MS = 6.0
@@ -49,15 +49,7 @@ def read_gaze_log(path: str | Path) -> pd.DataFrame:
     dropped, columns missing from an older log are added empty. Raises :class:`FovexpError`
     naming the file when it cannot be read as one."""
     path = Path(path)
-    try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise FovexpError(f"{path}: cannot read: {exc.strerror}") from None
-    data = data[: data.rfind(b"\n") + 1]
-    try:
-        raw = pd.read_csv(io.BytesIO(data), dtype=str, keep_default_na=False)
-    except (ValueError, pd.errors.ParserError) as exc:
-        raise FovexpError(f"{path}: not a gaze log ({exc})") from None
+    raw = read_complete_lines(path, "a gaze log")
     if "system_time_us" not in raw:
         raise FovexpError(f"{path}: not a gaze log (no system_time_us column)")
     out = pd.DataFrame(index=raw.index)

@@ -4,7 +4,6 @@ in."""
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import numpy as np
@@ -16,39 +15,10 @@ from fovexp.experiment.tasks.trial import (
     Key,
     ValueAdjuster,
 )
-from fovexp.experiment.trackers.gaze import FixationGeometry, GazeSample
+from fovexp.experiment.trackers.gaze import FixationGeometry
 
 DISPLAY = load_display("lg-oled55cx")
 
-
-
-
-@pytest.fixture(scope="module")
-def fix() -> FixationGeometry:
-    return FixationGeometry(DISPLAY)
-
-
-def point_at(fix: FixationGeometry, ecc: float, angle: float = 0.0) -> tuple[float, float]:
-    """The normalised screen point at ``ecc`` degrees from the cross in direction ``angle``,
-    found by bisection on the geometry's own eccentricity."""
-    lo, hi = 0.0, 0.45
-    d = np.array([math.cos(angle), math.sin(angle)])
-    for _ in range(80):
-        mid = 0.5 * (lo + hi)
-        p = (0.5 + mid * d[0], 0.5 + mid * d[1] * DISPLAY.width_px / DISPLAY.height_px)
-        if fix.eccentricity(p) < ecc:
-            lo = mid
-        else:
-            hi = mid
-    r = 0.5 * (lo + hi)
-    return 0.5 + r * d[0], 0.5 + r * d[1] * DISPLAY.width_px / DISPLAY.height_px
-
-
-def sample(t_us: int, p: tuple[float, float] | None, left_ok: bool = True,
-           right_ok: bool = True) -> GazeSample:
-    x, y = p if p is not None else (math.nan, math.nan)
-    return GazeSample(t_us, t_us, x, y, left_ok and p is not None, x, y,
-                      right_ok and p is not None)
 
 # -- simulated participant -------------------------------------------------------------------
 
