@@ -28,6 +28,7 @@ _PUBLIC: dict[str, str] = {
     "enhance": "pipeline",
     "find_protocol": "resources", "shipped_protocols": "resources",
     "shipped_stimuli": "resources",
+    "Steps": "progress", "progress_bar": "progress",
     "iter_frames": "sequence", "ssim": "sequence",
     "profile_stages": "gpu.profiling",
 }
@@ -53,6 +54,7 @@ if TYPE_CHECKING:  # the same names for type checkers (tests/test_layers.py hold
         make_params,
     )
     from .pipeline import MAP_NAMES, Enhancer, EnhanceResult, enhance
+    from .progress import Steps, progress_bar
     from .resources import find_protocol, shipped_protocols, shipped_stimuli
     from .sequence import iter_frames, ssim
 
@@ -64,7 +66,7 @@ __all__ = [
     "parse_yaml", "profile_stages", "read_image", "read_samples", "read_yaml",
     "shipped_protocols",
     "shipped_stimuli", "validation_error", "write_bytes_atomic", "write_image", "__version__",
-    "iter_frames", "ssim", "t_high_cpd", "t_low_cpd",
+    "iter_frames", "ssim", "t_high_cpd", "t_low_cpd", "Steps", "progress_bar",
 ]
 
 

@@ -51,6 +51,8 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
                "enhance a stereo pair: noise for one eye, warped to the other (section 6.4)"),
     "rig": ("fovexp.rig.cli", "add_rig_parser",
             "measure the rig before the first participant: display, GPU, tracker"),
+    "tracker": ("fovexp.experiment.cli", "add_tracker_parser",
+                "print the example ioHub configuration of an eye-tracker family"),
 }
 
 
@@ -177,14 +179,22 @@ def enhance_command(args: argparse.Namespace) -> int:
             f"{args.output}: unsupported output type {args.output.suffix!r} "
             f"(use {', '.join(IMAGE_SUFFIXES)})"
         )
-    image, depth = read_image_with_depth(args.input)
-    _set(enh, image, args, sigma)
-    result = enh.enhance(args.gaze, params)
-    write_image(args.output, result.output, _output_depth(args, args.output, depth))
-    if args.dump_maps:
-        from .maps import dump_maps
+    from .progress import Steps
 
-        dump_maps(result, args.dump_maps)
+    names = ["read", "enhance", "write"] + (["maps"] if args.dump_maps else [])
+    with Steps(names, desc="fovexp enhance") as step:
+        step("read")
+        image, depth = read_image_with_depth(args.input)
+        step("enhance")
+        _set(enh, image, args, sigma)
+        result = enh.enhance(args.gaze, params)
+        step("write")
+        write_image(args.output, result.output, _output_depth(args, args.output, depth))
+        if args.dump_maps:
+            from .maps import dump_maps
+
+            step("maps")
+            dump_maps(result, args.dump_maps, on_map=lambda name: step("maps", name))
     print(f"wrote {args.output} ({params.method}, blur-rate {params.blur_rate}, "
           f"f_e {result.params.f_e:.3g}, s_k {result.params.s_k:.3g}, s_f {result.params.s_f:.3g}; "
           f"{_backend_name(enh)})")
@@ -196,9 +206,8 @@ def _backend_name(enh: Any) -> str:
 
 
 def _enhance_sequence(enh: Any, params: Any, args: argparse.Namespace, sigma: Any) -> int:
-    from tqdm import tqdm
-
     from .io import write_image
+    from .progress import progress_bar
     from .sequence import VIDEO_SUFFIXES, InterframeSSIM, VideoWriter, iter_frames
 
     count, fps, frames = iter_frames(args.input)
@@ -208,8 +217,8 @@ def _enhance_sequence(enh: Any, params: Any, args: argparse.Namespace, sigma: An
     ssim_in, ssim_out = InterframeSSIM(), InterframeSSIM()
     n = 0
     try:
-        for name, image, depth in tqdm(frames, total=count, desc="enhance", unit="frame",
-                                       file=sys.stderr):
+        for name, image, depth in progress_bar(frames, total=count, desc="fovexp enhance",
+                                           unit="frame"):
             _set(enh, image, args, sigma)  # the impulses stay: they depend on size and seed
             result = enh.enhance(args.gaze, params)
             ssim_in.add(image)
@@ -248,10 +257,11 @@ def add_compile_parser(sub: Any) -> argparse.ArgumentParser:
 def compile_command(args: argparse.Namespace) -> int:
     from .warmup import compile_kernels
 
-    report = compile_kernels()
+    report = compile_kernels(show_progress=True)
     where = ", ".join(sorted(report.cache_dirs)) or "no cache folder"
-    print(f"fovexp compile: {len(report.compiled)} kernels compiled, {len(report.loaded)} "
-          f"already cached, in {report.seconds:.1f} s; cache: {where}")
+    print(f"fovexp compile: {report.total} kernels: {len(report.compiled)} compiled, "
+          f"{len(report.loaded)} loaded from the cache, {len(report.inlined)} inside the "
+          f"kernels that call them; {report.seconds:.1f} s; cache: {where}")
     return 0
 
 

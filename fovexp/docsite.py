@@ -1,8 +1,9 @@
 """``fovexp docs``: the documentation site, unpacked where a browser can open it.
 
 The site (docs/*.md and the API reference made from the docstrings, MkDocs Material) is built
-by ``./dev docs`` (``mkdocs build --strict``) and packed into ``fovexp/site.zip``, which the
-wheel ships as package data, so a lab with only the wheel has the documentation, offline. The
+by every wheel's build (``build_backend/fovexp_build.py``) or by ``./dev docs`` (``mkdocs build
+--strict``) and packed into ``fovexp/site.zip``, which the wheel ships as package data, so a lab
+with only the wheel has the documentation, offline. The
 first ``fovexp docs`` unpacks it into the user's cache folder (one folder per packed site); its
 pages open from disk (``file://``), search included (docs/DOCS.md).
 """
@@ -37,10 +38,9 @@ def site_folder(cache: Path | None = None) -> Path:
     packed = packed_site()
     if not packed.is_file():
         raise FovexpError(
-            f"this installation has no documentation site ({packed} is missing): it was "
-            "installed from a checkout in which the site was not built. Build it there with "
-            "'./dev docs' (pip install 'fovexp[docs]') and reinstall, or read docs/*.md in the "
-            "source")
+            f"this installation has no documentation site ({packed} is missing): it is an "
+            "editable install of a checkout in which the site was not built. Build it there "
+            "with './dev docs' (pip install 'fovexp[docs]'), or read docs/*.md in the source")
     if cache is None:
         import platformdirs
 
@@ -64,15 +64,18 @@ def site_folder(cache: Path | None = None) -> Path:
 
 
 def site_page(page: str = "index", cache: Path | None = None) -> Path:
-    """A page of the site (``index``, ``STUDY``, ``EXPERIMENT``, ``reference/fovexp``, ...);
-    raises FovexpError when the site or the page is not there."""
+    """A page of the site (``index``, ``STUDY``, ``EXPERIMENT``, ``reference/fovexp``, ...),
+    its name in any case (``study`` is ``STUDY``); raises FovexpError when the site or the
+    page is not there."""
     folder = site_folder(cache)
-    path = folder / f"{page.removesuffix('.html').removesuffix('.md')}.html"
-    if not path.is_file():
-        pages = sorted(p.relative_to(folder).with_suffix("").as_posix()
-                       for p in folder.rglob("*.html") if p.stem != "404")
+    pages = {p.relative_to(folder).with_suffix("").as_posix(): p
+             for p in folder.rglob("*.html") if p.stem != "404"}
+    name = page.removesuffix(".html").removesuffix(".md")
+    by_folded = {key.casefold(): path for key, path in pages.items()}
+    path = pages.get(name) or by_folded.get(name.casefold())
+    if path is None:
         raise FovexpError(f"no page {page!r} in the documentation site (pages: "
-                          f"{', '.join(pages)})")
+                          f"{', '.join(sorted(pages))})")
     return path
 
 

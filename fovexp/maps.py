@@ -12,6 +12,7 @@ in degrees on a cyclic colour map. Maps larger than :data:`PREVIEW_MAX_PX` are s
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -54,12 +55,23 @@ _STYLES: dict[str, _Style] = {
 }
 
 
-def dump_maps(result: EnhanceResult, folder: Path) -> None:
-    """Write every map of ``result`` to ``folder`` as NAME.npy and NAME.png."""
+def dump_maps(result: EnhanceResult, folder: Path,
+              on_map: Callable[[str], None] | None = None) -> None:
+    """Write every map of ``result`` to ``folder`` as NAME.npy and NAME.png; ``on_map(what)``
+    is called as each is computed (``"computing NAME"``) and written (``"writing NAME"``): the
+    command's progress."""
+    def say(what: str) -> None:
+        if on_map is not None:
+            on_map(what)
+
     folder.mkdir(parents=True, exist_ok=True)
-    maps = {name: result.map(name) for name in MAP_NAMES}
+    maps = {}
+    for name in MAP_NAMES:
+        say(f"computing {name}")
+        maps[name] = result.map(name)
     band_empty = ~(maps["f_low_cpp"] < maps["f_high_cpp"])  # NaN-safe: not open
     for name, m in maps.items():
+        say(f"writing {name}")
         save_npy(folder / f"{name}.npy", m)
         if name in IMAGE_MAPS:
             write_image(folder / f"{name}.png", m)

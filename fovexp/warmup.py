@@ -16,19 +16,25 @@ from __future__ import annotations
 
 import sys
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
 
 @dataclass
 class CompileReport:
-    """What :func:`compile_kernels` did: the kernels compiled in this call and those loaded
-    from the cache (a kernel called only by other kernels is in neither once its callers come
-    from the cache: it is compiled into them), the cache folders, and the seconds it took."""
+    """What :func:`compile_kernels` did: of the package's ``total`` kernels, those compiled in
+    this call, those loaded from the cache, and those in neither (``inlined``: a kernel called
+    only by other kernels, once its callers come from the cache, is compiled into them and
+    never loaded on its own); the three add up to ``total``. Also the cache folders and the
+    seconds it took."""
 
+    total: int = 0
     compiled: list[str] = field(default_factory=list)
     loaded: list[str] = field(default_factory=list)
+    inlined: list[str] = field(default_factory=list)
     cache_dirs: set[str] = field(default_factory=set)
     seconds: float = 0.0
 
@@ -39,12 +45,13 @@ def _textured(h: int, w: int, channels: int) -> np.ndarray:
     return img[..., 0] if channels == 1 else img
 
 
-def _exercise() -> None:
+def _exercise() -> Iterator[str]:
     """Every path of the CPU enhancer that reaches a kernel, on small frames: foveation
     (simulated, given as a blur-rate or a sigma map), contrast, noise, every map, both presets
     and the viewing-geometry models, colour and grey, full screen and a viewport, a frame with
     flat regions (skipping), the engine options' float64 and variant paths, and the stereo
-    warp of ``fovexp stereo``."""
+    warp of ``fovexp stereo``. A generator: it yields after each path, so that the caller
+    counts the kernels ready so far."""
     from .foveation import foveate_exact
     from .geometry import load_display
     from .params import EngineOptions, EnhanceParams
@@ -62,10 +69,12 @@ def _exercise() -> None:
             res = enh.enhance((0.5, 0.5), params)
             for name in MAP_NAMES:
                 res.map(name)
+            yield f"{preset} preset, {channels} channel(s)"
         enh.set_image(_textured(48, 80, 3))  # the frame fills the screen
         enh.enhance((0.3, 0.6), params)
         for method in ("foveated", "contrast"):
             enh.enhance((0.5, 0.5), params.model_copy(update={"method": method}))
+        yield f"{preset} preset, full screen"
     enh = Enhancer(display)
     frame = _textured(96, 160, 3)
     enh.set_image(frame, foveated=True, viewport=viewport)
@@ -74,6 +83,7 @@ def _exercise() -> None:
     enh.set_image(frame, sigma_px=sigma, viewport=viewport)
     enh.enhance((0.5, 0.5), EnhanceParams(impulses=4))
     foveate_exact(frame[:8, :8], sigma[:8, :8])  # the reference the benchmarks measure against
+    yield "foveated input"
     # Skipping's own kernels (flat blocks left out of the contrast and the foveation) run only
     # on a frame with flat regions: sky, walls, black borders.
     # (A frame filling the screen: its blur is small enough in its own pixels that whole
@@ -82,6 +92,7 @@ def _exercise() -> None:
     mixed[:, :80] = 0.5
     enh.set_image(mixed)
     enh.enhance((0.5, 0.5), EnhanceParams(impulses=4))
+    yield "flat regions"
     # The engine options' other paths (fovexp bench, the reference configuration): float64
     # stages, the exact clipping extremes, the noise variants.
     for options in (EngineOptions(dtype="float64", clipping="exact"),
@@ -90,10 +101,12 @@ def _exercise() -> None:
         for img, vp in ((frame, viewport), (mixed, None)):
             enh.set_image(img, viewport=vp)
             enh.enhance((0.5, 0.5), EnhanceParams(impulses=4))
+        yield "engine options"
 
     # fovexp stereo's warp (section 6.4), a kernel of the evaluation package
     from .evaluation.stereo import forward_warp
     forward_warp(np.zeros((4, 8), np.float32), np.ones((4, 8)))
+    yield "stereo warp"
 
 
 def kernels() -> dict[str, object]:
@@ -110,20 +123,69 @@ def kernels() -> dict[str, object]:
     return out
 
 
-def compile_kernels() -> CompileReport:
-    """Compile (or load from the cache) every kernel; see the module docstring."""
+def _import_kernel_modules() -> None:
+    """Every module that defines a kernel, so that :func:`kernels` knows them all before the
+    first is compiled (the count the progress shows)."""
+    from . import foveation, pipeline  # noqa: F401 (pipeline imports every stage module)
+    from .evaluation import stereo  # noqa: F401
+
+
+def _is_ready(dispatcher: Any) -> bool:
+    """Compiled or loaded in this process (a kernel compiled into its callers is neither)."""
+    return bool(dispatcher.overloads)
+
+
+def compile_kernels(show_progress: bool = False) -> CompileReport:
+    """Compile (or load from the cache) every kernel; see the module docstring. With
+    ``show_progress``, a bar on stderr counts the kernels ready, kernel by kernel
+    (:mod:`fovexp.progress`), naming each as Numba compiles it."""
+    from numba.core import event
+
+    from .progress import progress_bar
+
     t0 = time.perf_counter()
-    _exercise()
-    report = CompileReport()
-    for name, disp in kernels().items():
+    _import_kernel_modules()
+    every = kernels()
+    by_dispatcher = {id(d): name for name, d in every.items()}
+    bar = progress_bar(total=len(every), desc="fovexp compile", unit="kernel") \
+        if show_progress else None
+
+    def recount() -> None:
+        if bar is not None:  # update(), not a redraw: a log gets a line every few seconds
+            bar.update(sum(_is_ready(d) for d in every.values()) - bar.n)
+
+    class _Compiling(event.Listener):
+        """Names the kernel Numba is compiling (its callees compile inside it)."""
+
+        def on_start(self, ev: Any) -> None:
+            name = by_dispatcher.get(id(ev.data.get("dispatcher")))
+            if bar is not None and name is not None:
+                bar.set_postfix_str(name.removeprefix("fovexp."), refresh=False)
+                recount()
+
+        def on_end(self, ev: Any) -> None:
+            recount()
+
+    with event.install_listener("numba:compile", _Compiling()):
+        for _path in _exercise():
+            recount()
+    report = CompileReport(total=len(every))
+    for name, disp in every.items():
         stats = disp.stats  # type: ignore[attr-defined]
         if stats.cache_misses:
             report.compiled.append(name)
         elif stats.cache_hits:
             report.loaded.append(name)
+        else:
+            report.inlined.append(name)
         cache = getattr(disp, "_cache", None)
         path = getattr(cache, "cache_path", None)
         if path:
             report.cache_dirs.add(str(path))
+    if bar is not None:  # the kernels inside their callers are done with them
+        bar.set_postfix_str(f"{len(report.compiled)} compiled, {len(report.loaded)} loaded, "
+                            f"{len(report.inlined)} inside their callers", refresh=False)
+        bar.update(report.total - bar.n)
+        bar.close()
     report.seconds = time.perf_counter() - t0
     return report

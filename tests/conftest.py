@@ -6,6 +6,10 @@ import pytest
 
 from engine_helpers import sponza  # noqa: F401  (fixture)
 
+# Progress bars (fovexp.progress) off in the tests and the commands they start, whose stderr
+# many tests read line for line; tests/test_progress.py and the compile test turn them on.
+os.environ.setdefault("FOVEXP_PROGRESS", "0")
+
 
 @pytest.fixture(scope="session", autouse=True)
 def dry_run_scenes(tmp_path_factory) -> Iterator[Path]:

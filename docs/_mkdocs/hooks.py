@@ -15,6 +15,7 @@ from __future__ import annotations
 import logging
 import posixpath
 import re
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -24,6 +25,8 @@ from mkdocs.structure.files import File, Files
 log = logging.getLogger("mkdocs.plugins.fovexp")
 
 ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT / "build_backend"))
+from site_inputs import STAMP_PREFIX, site_inputs_digest  # noqa: E402 (the path just above)
 
 #: The reference pages: path -> (title, introduction, directives). A directive is an object's
 #: dotted path, optionally with the members to show.
@@ -87,6 +90,14 @@ _FENCE = re.compile(r"^(```|~~~)")
 _LINK = re.compile(r"(?<!!)\[([^\]]+)\]\(([^)\s]+)\)")
 _CODE = re.compile(r"(`+)(.+?)\1")
 _DOC_MENTION = re.compile(r"(?<![\w/.`-])docs/([A-Za-z0-9_-]+\.md)\b")
+#: a file of the source repository that no installation has (issue 32): the tests, the
+#: benchmarks' records and scripts, CI's scripts, the development script
+_REPO_ONLY = re.compile(r"(?:tests|benchmarks|\.ci)/[\w./-]*|\./dev\b[^`]*")
+_REPO_MENTION = re.compile(r"(?<![\w/.`-])((?:tests|benchmarks)/[\w/-]+(?:\.[a-z]+)?)")
+#: what a repository-only path gets in the site: a marker that says so, linking the index's
+#: paragraph on it
+_REPO_MARK = ('<sup title="a file of the source repository, not of an installed fovexp">'
+              "[repo]({index}#files-of-the-source-repository)</sup>")
 
 
 def _outside_link(match: re.Match[str], page_dir: Path, docs: Path, where: str) -> str:
@@ -111,6 +122,23 @@ def _mention(match: re.Match[str], pages: set[str], docs: Path, page: str, where
     if name not in pages or name == page:
         return match.group(0)
     return f"[docs/{name}]({_rel(name, page)})"
+
+
+def _repo_mark(page: str) -> str:
+    return _REPO_MARK.format(index=_rel("index.md", page))
+
+
+def _mark_repo_mentions(line: str, page: str) -> str:
+    """A repository-only path named in prose (outside code spans, links and the markers
+    already made) gets the marker too."""
+    pieces, last = [], 0
+    for m in re.finditer(r"`+.+?`+|\[[^\]]*\]\([^)]*\)|<sup[^>]*>.*?</sup>", line):
+        pieces.append(_REPO_MENTION.sub(lambda x: x.group(1) + _repo_mark(page),
+                                        line[last:m.start()]))
+        pieces.append(m.group(0))
+        last = m.end()
+    pieces.append(_REPO_MENTION.sub(lambda x: x.group(1) + _repo_mark(page), line[last:]))
+    return "".join(pieces)
 
 
 def _rel(target: str, page: str) -> str:
@@ -144,11 +172,14 @@ def on_page_markdown(markdown: str, page: Any, config: Any, files: Files) -> str
                 code = f"[{code}]({_rel(inner.group(1), src)})"
             elif inner and not (docs / inner.group(1)).is_file():
                 log.warning(f"{src}: names docs/{inner.group(1)}, which does not exist")
+            elif _REPO_ONLY.fullmatch(m.group(2)) and not line[m.end():].startswith(
+                    " in the source repository"):
+                code += _repo_mark(src)
             pieces.append(code)
             last = m.end()
         pieces.append(_DOC_MENTION.sub(lambda x: _mention(x, pages, docs, src, src),
                                        line[last:]))
-        out.append("".join(pieces))
+        out.append(_mark_repo_mentions("".join(pieces), src))
     return "".join(out)
 
 
@@ -176,5 +207,8 @@ def on_post_build(config: Any) -> None:
         for path in sorted(site.rglob("*")):
             if path.is_file():
                 zf.write(path, path.relative_to(site).as_posix())
+        # stamped with its sources' digest: the wheel's build uses a site that is up to date
+        # and rebuilds a stale one (build_backend/fovexp_build.py)
+        zf.comment = STAMP_PREFIX + site_inputs_digest(ROOT).encode("ascii")
     tmp.replace(SITE_ZIP)
     log.info(f"fovexp: the site packed into {SITE_ZIP} ({SITE_ZIP.stat().st_size / 1e6:.2f} MB)")

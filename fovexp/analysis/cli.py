@@ -18,7 +18,8 @@ def _configure(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
                    help="results folder (<experiment>/<participant>/trials.csv), or one "
                         "experiment's folder")
     p.add_argument("--out", type=Path, default=Path("report"),
-                   help="output folder for report.md, tables/, figures/ (default: report)")
+                   help="output folder for report.md, report.html, tables/, figures/ "
+                        "(default: report)")
     p.add_argument("--include-incomplete", action="store_true",
                    help="keep incomplete sessions (rule R10 then only reports them)")
     p.add_argument("--include-pilots", action="store_true",
@@ -39,7 +40,8 @@ def add_analyze_parser(subparsers: argparse._SubParsersAction) -> argparse.Argum
     p = subparsers.add_parser(
         "analyze", help="turn trial logs into the paper's results (Table 2, validation tests)",
         description="Load and validate trial logs, compute the calibration (Table 2) and "
-                    "validation statistics, write tables, figures and report.md.",
+                    "validation statistics, write tables, figures, report.md and report.html "
+                    "(the same report as a page).",
     )
     return _configure(p)
 
@@ -74,7 +76,7 @@ def analyze_command(args: argparse.Namespace) -> int:
         return 2
     n_excl = sum(e.n_trials for e in ana.data.exclusions if e.rule != "note")
     print(f"analysed {len(ana.data.trials)} trials ({n_excl} excluded, see the report's "
-          f"exclusions); report: {ana.report}")
+          f"exclusions); report: {ana.report} and {ana.report.with_suffix('.html')}")
     if ana.calibration is not None:
         print(f"Table 2 (ParameterTable): {ana.out / 'table2.yaml'}")
     return 0

@@ -42,7 +42,7 @@ from typing import Any
 
 import numpy as np
 
-from fovexp import FovexpError, read_image
+from fovexp import FovexpError, progress_bar, read_image
 from fovexp.results.loading import impulse_count
 
 from .outputs import OutFolder, Setup, colour_of, pyplot, table_md
@@ -260,7 +260,8 @@ def analyse(results: Path, setup: Setup, experiment: str | None = None,
         warnings.warn(choice.warning, UserWarning, stacklevel=2)
     enh = setup.enhancer()
     rows, ratio_rows, pair_rows, notes = [], [], [], []
-    for image_id, m in means.iterrows():
+    for image_id, m in progress_bar(means.iterrows(), total=len(means),
+                                    desc="fovexp evaluate compression", unit="scene"):
         img = read_image(files[str(image_id)])
         h, w = img.shape[:2]
         if (w, h) != (setup.display.width_px, setup.display.height_px):

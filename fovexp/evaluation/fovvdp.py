@@ -187,7 +187,7 @@ def analyse(paths: Sequence[Path], setup: Setup, blur_rate: float,
     enh = setup.enhancer()
     metrics: dict[str, Metric] = {}
     rows, names = [], []
-    for name, image in read_images(paths):
+    for name, image in read_images(paths, desc="fovexp evaluate fovvdp"):
         h, w = image.shape[:2]
         if not metrics:
             metrics = {m: Metric(setup.display, w, h, contrast_ratio, device,

@@ -101,7 +101,9 @@ def run(out: Path, *, protocol: str = "calibration-fe",
                     f"timeout, {1e3 * rule.timeout_s:g} ms: the stimulus is never shown)")
                 rows.append({"behaviour": b, "latency_ms": lat, "never_shown": True})
                 continue
-            say(f"fovexp evaluate gating: {b}, {lat:g} ms ({pid})")
+            n_run = i * len(latencies_ms) + k + 1  # a line per dry run: each takes minutes
+            say(f"fovexp evaluate gating: run {n_run}/{len(behaviours) * len(latencies_ms)}: "
+                f"{b}, {lat:g} ms ({pid})")
             run_session(results, pid, protocol=protocol, behaviour=b, latency_ms=lat,
                         trials=trials, seed=seed, sim_speed=sim_speed, stimuli=stimuli)
             folder = next(results.glob(f"*/{pid}"))

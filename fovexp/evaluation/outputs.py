@@ -19,6 +19,7 @@ from fovexp import (
     load_display,
     make_enhancer,
     make_params,
+    progress_bar,
     read_image,
     write_bytes_atomic,
 )
@@ -178,19 +179,33 @@ def pyplot() -> Any:
     return plt
 
 
-def read_images(paths: Sequence[Path]) -> Iterator[tuple[str, np.ndarray]]:
+def read_images(paths: Sequence[Path], desc: str | None = None
+                ) -> Iterator[tuple[str, np.ndarray]]:
     """``(name, image)`` of each file named, a folder standing for its images (sorted by
-    name, as a sequence's frames); the name is the file's stem. Read one at a time."""
+    name, as a sequence's frames); the name is the file's stem. Read one at a time. Every path
+    is checked before the first image is read (a missing one is said at once, not after
+    minutes of work on the others); with ``desc``, a progress bar counts the images as the
+    caller is done with each (``fovexp.progress_bar``)."""
     if not paths:
         raise FovexpError("no images given")
-    for p in paths:
-        if p.is_dir():
-            for name, image, _depth in iter_frames(p)[2]:
-                yield name, image
-        elif p.is_file():
-            yield p.stem, read_image(p)
-        else:
-            raise FovexpError(f"{p}: no such file or folder")
+    missing = [str(p) for p in paths if not p.exists()]
+    if missing:
+        raise FovexpError(f"{', '.join(missing)}: no such file or folder")
+    counts = [iter_frames(p)[0] if p.is_dir() else 1 for p in paths]
+    total = None if any(c is None for c in counts) else sum(counts)
+
+    def images() -> Iterator[tuple[str, np.ndarray]]:
+        for p in paths:
+            if p.is_dir():
+                for name, image, _depth in iter_frames(p)[2]:
+                    yield name, image
+            else:
+                yield p.stem, read_image(p)
+
+    if desc is None:
+        yield from images()
+    else:
+        yield from progress_bar(images(), total=total, desc=desc, unit="image")
 
 
 def table_md(rows: Sequence[Sequence[Any]], header: Sequence[str]) -> str:

@@ -257,7 +257,7 @@ def analyse(paths: Sequence[Path], setup: Setup, blur_rates: Sequence[float],
     acc: dict[tuple[str, float, str, str], tuple[np.ndarray, np.ndarray]] = {}
     names: list[str] = []
     grid: _Grid | None = None
-    for name, image in read_images(paths):
+    for name, image in read_images(paths, desc="fovexp evaluate spectra"):
         names.append(name)
         h, w = image.shape[:2]
         if grid is None:

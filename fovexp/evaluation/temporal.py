@@ -41,7 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fovexp import FovexpError, iter_frames, ssim
+from fovexp import FovexpError, iter_frames, progress_bar, ssim
 
 from .outputs import METHODS3, OutFolder, Setup, grey, pyplot, table_md
 
@@ -199,6 +199,8 @@ def analyse(source: Path, setup: Setup, blur_rates: Sequence[float],
                if (c != "full" or k == 0) and (c != "ours-reseeded" or reseed)}
         count, _fps, frames = iter_frames(source)
         n = 0
+        frames = progress_bar(frames, total=count, unit="frame",
+                              desc=f"fovexp evaluate temporal, blur-rate {br:g}")
         for i, (_name, image, _depth) in enumerate(frames):
             h, w = image.shape[:2]
             if size is None:

@@ -3,6 +3,10 @@
 ``fovexp.cli`` registers it with :func:`add_run_parser`; :func:`run_command` returns the exit
 status: 0 finished, 2 bad input (one line on stderr, nothing opened), 3 aborted by the operator,
 130 interrupted by a signal. The last two leave a session that ``--resume`` continues.
+
+``fovexp tracker example [FAMILY]`` (:func:`add_tracker_parser`) prints the shipped example of
+the ioHub configuration ``--tracker iohub --tracker-config`` reads, one per tracker family, for
+a lab to save and edit (``--tracker-config example:FAMILY`` reads one as it is).
 """
 
 from __future__ import annotations
@@ -42,7 +46,9 @@ def add_run_parser(subparsers: Any) -> argparse.ArgumentParser:
                         "Labs, EyeLogic, MouseGaze), configured by --tracker-config")
     p.add_argument("--tracker-config", type=Path, default=None, metavar="FILE",
                    help="--tracker iohub: the ioHub configuration, the YAML PsychoPy Builder "
-                        "or ioHub uses (default: the protocol's tracker.iohub_config)")
+                        "or ioHub uses (default: the protocol's tracker.iohub_config); "
+                        "example:FAMILY reads the shipped example of a tracker family "
+                        "(fovexp tracker example prints them)")
     p.add_argument("--tracker-address", default=None,
                    help="Tobii tracker address or serial number (default: the first found)")
     p.add_argument("--dry-run", action="store_true",
@@ -80,7 +86,8 @@ def add_run_parser(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument("--limit-trials", type=int, default=None, metavar="N",
                    help="only the first N main trials of the randomised order, each scene's "
                    "methods together so that they still pair (N rounded up to whole scenes; "
-                   "tests, pilots)")
+                   "tests, pilots). The protocol's practice trials come on top: add "
+                   "--practice 0 for exactly these")
     p.add_argument("--practice", type=int, default=None, metavar="N",
                    help="practice trials (default: the protocol's)")
     m = p.add_argument_group("the operator's live view (docs/EXPERIMENT.md)")
@@ -102,8 +109,10 @@ def add_run_parser(subparsers: Any) -> argparse.ArgumentParser:
                    help="vision correction: none, glasses, contact lenses or other")
     f.add_argument("--no-form", action="store_true", help="do not ask the form (recorded)")
     g = p.add_argument_group("simulated participant (--dry-run)")
-    g.add_argument("--sim-truth", type=Path, default=None,
-                   help="YAML ground truth (table, sk_slope, validation_blur_rate, noise_sd)")
+    g.add_argument("--sim-truth", default=None, metavar="FILE|quick",
+                   help="YAML ground truth (table, sk_slope, validation_blur_rate, noise_sd), "
+                   "or 'quick': each trial confirmed two wheel steps from its start (a "
+                   "rehearsal: a few renders per trial; its values mean nothing)")
     g.add_argument("--sim-noise-scale", type=float, default=1.0,
                    help="multiply the truth file's noise sd (0: noise-free)")
     g.add_argument("--sim-speed", type=float, default=4.0,
@@ -214,6 +223,7 @@ def run_command(args: argparse.Namespace) -> int:
         from .protocol.spec import load_protocol
         from .records.participant_id import check_participant
         from .tasks.simulated_participant import SimTruth
+        from .trackers import iohub_config_path
 
         check_participant(args.participant)
         if args.monitor or args.monitor_host or args.monitor_port is not None:
@@ -236,13 +246,17 @@ def run_command(args: argparse.Namespace) -> int:
         from .tasks.operator import parse_form
 
         parse_form({"age": args.age, "sex": args.sex, "vision_correction": args.vision})
-        truth = SimTruth.load(args.sim_truth) if args.sim_truth else SimTruth()
+        truth = SimTruth.named(args.sim_truth) if args.sim_truth else SimTruth()
         # dependencies come from the same results root; a participant's never from dry runs
         protocol = load_protocol(find_protocol(args.protocol), results_root=args.results,
                                  real_only=not args.dry_run and tracker != SIMULATED_TRACKER,
                                  stimuli=args.stimuli,
                                  include_pilots=args.include_pilots)
         sim_gaze = sim_gaze_params(args, tracker, protocol.spec.tracker.sampling_hz)
+        if tracker == "iohub":  # a missing file said at once, not after the images are read
+            config = iohub_config_path(protocol, args.tracker_config)
+            if not config.is_file():
+                raise FovexpError(f"{config}: no such ioHub configuration file")
         # Every image's sha256 and size, for the frames this run shows, before any window.
         frame_size = args.window or (DRY_RUN_SIZE if args.dry_run else protocol.native_size)
         images = protocol.prepare_images(frame_size, args.dry_run)
@@ -310,3 +324,40 @@ def run_command(args: argparse.Namespace) -> int:
                 130: "interrupted; continue with --resume"}
     print(f"fovexp run: session {session.session_id} {messages.get(code, code)}", file=sys.stderr)
     return code
+
+
+def add_tracker_parser(subparsers: Any) -> argparse.ArgumentParser:
+    """Add the ``tracker`` command (its one subcommand: ``example``)."""
+    p = subparsers.add_parser(
+        "tracker", help="example ioHub configurations of the eye-tracker families",
+        description="The eye trackers of --tracker iohub (docs/EXPERIMENT.md, \"Eye trackers\").")
+    sub = p.add_subparsers(dest="tracker_command", required=True, parser_class=type(p))
+    e = sub.add_parser(
+        "example", help="print the example ioHub configuration of a tracker family",
+        description="Print the shipped example ioHub configuration of a tracker family (the "
+        "YAML --tracker-config reads), to save, edit (the tracker's address, model, rate, "
+        "eyes) and pass to --tracker iohub --tracker-config FILE; without FAMILY, list the "
+        "families. --tracker-config example:FAMILY reads an example as it is.")
+    e.add_argument("family", nargs="?", default=None, metavar="FAMILY",
+                   help="eyelink, tobii, gazepoint, pupil-labs, eyelogic or mousegaze")
+    e.set_defaults(func=tracker_example_command)
+    return p
+
+
+def tracker_example_command(args: argparse.Namespace) -> int:
+    """The example of ``args.family`` on stdout (``> lab/eyelink.yaml``), or the families (key,
+    label, device class path, what installs the plugin); an unknown family is one line naming
+    them (exit 2)."""
+    from .trackers.families import FAMILIES, example_path
+
+    if args.family is None:
+        for fam in FAMILIES:
+            print(f"{fam.key:<11} {fam.label}: {fam.device_class} ({fam.install})")
+        return 0
+    try:
+        path = example_path(args.family)
+    except FovexpError as exc:
+        print(f"fovexp tracker example: error: {exc}", file=sys.stderr)
+        return 2
+    sys.stdout.write(path.read_text(encoding="utf-8"))
+    return 0

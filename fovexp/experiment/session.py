@@ -19,9 +19,8 @@ from typing import Any
 
 import numpy as np
 
-from fovexp import FovexpError
+from fovexp import FovexpError, Steps
 from fovexp.results.format import SIMULATED_TRACKER, now_iso
-from fovexp.results.rigcheck import session_rig_record
 from fovexp.stimuli.folder import load_stimulus, split_screen
 
 from .display import checks
@@ -47,6 +46,8 @@ EXIT_OK = 0
 EXIT_ERROR = 2
 EXIT_ABORTED = 3
 EXIT_INTERRUPTED = 130
+#: the steps before the first trial, as the operator's console shows them
+PREPARATION = ["renderer", "tracker", "display checklist", "render budget", "tracker set-up"]
 
 
 def _quietly(*steps: Callable[[], Any] | None) -> None:
@@ -274,21 +275,28 @@ class Session:
 
     def _before_trials(self) -> None:
         """The renderer, the tracker's stream, the display checklist, the keyboard, the rig
-        check, the render budget, the tracker's set-up and the instructions, in this order."""
+        check, the render budget, the tracker's set-up and the instructions, in this order;
+        the operator sees each step start (``fovexp.progress``: minutes at 4K on a CPU)."""
         opts, spec = self.opts, self.protocol.spec
-        self.renderer = checks.start_renderer(self.display, spec, opts.backend, self.screen)
-        self.file.update(render=self.renderer.info())
-        self.gaze.start()
-        self.file.update(tracker=self.gaze.info())
-        self.tracker = self._make_tracker_setup()
-        self.screens.display_checklist(opts.dry_run)
-        window = self.screen.info()
-        self.file.set_in_run("window", window)
-        self._operator_note(checks.keyboard_note(window, opts.dry_run, opts.accept_poll_keys))
-        self._check_rig()
-        self._check_render_budget()
-        self.live.set_state("calibrating")
-        self.tracker.setup()
+        with Steps(PREPARATION, desc="fovexp run: preparing") as step:
+            step("renderer")
+            self.renderer = checks.start_renderer(self.display, spec, opts.backend, self.screen)
+            self.file.update(render=self.renderer.info())
+            step("tracker")
+            self.gaze.start()
+            self.file.update(tracker=self.gaze.info())
+            self.tracker = self._make_tracker_setup()
+            step("display checklist")
+            self.screens.display_checklist(opts.dry_run)
+            window = self.screen.info()
+            self.file.set_in_run("window", window)
+            self._operator_note(checks.keyboard_note(window, opts.dry_run, opts.accept_poll_keys))
+            self._operator_note(checks.rig_note(opts.results_root, opts.dry_run, self.file))
+            step("render budget")
+            self._check_render_budget()
+            step("tracker set-up")
+            self.live.set_state("calibrating")
+            self.tracker.setup()
         self.live.tracker_quality(self.info.get("tracker_quality"))
         self.screens.instructions(spec.title, spec.instructions, bool(self.done),
                                   self._operator_notes)
@@ -363,16 +371,6 @@ class Session:
         self._say(f"fovexp run: warning: {text}")
         self._operator_notes.append(text)
         self.file.event(event, **detail)
-
-    def _check_rig(self) -> None:
-        """The newest rig check under the results root (``fovexp rig check``): its name and
-        sha256 in this run's entry (``runs[].rig_check``); a warning for the operator when
-        there is none from today, it failed, or it was only a dry run."""
-        rec, warning = session_rig_record(self.opts.results_root, now_iso()[:10],
-                                          self.opts.dry_run)
-        self.file.set_in_run("rig_check", rec)
-        if warning is not None and not self.opts.dry_run:
-            self._operator_note((warning, "rig_check_warning", {"warning": warning}))
 
     def _check_render_budget(self) -> None:
         """The renderer's own warnings, then the wheel step's render time against the

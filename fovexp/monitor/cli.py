@@ -5,6 +5,7 @@ it beside a session (:func:`start_beside`)."""
 from __future__ import annotations
 
 import argparse
+import logging
 import os
 import secrets
 import socket
@@ -22,6 +23,22 @@ DEFAULT_PORT = 8765
 #: the monitor's niceness above the session's when ``fovexp run --monitor`` starts it
 MONITOR_NICE = 10
 MISSING_EXTRA = ("fovexp monitor needs starlette and uvicorn: pip install 'fovexp[monitor]'")
+
+
+class _SayHandler(logging.Handler):
+    """The server's log lines (a refused request: :data:`fovexp.monitor.server.LOG`), said
+    where the monitor's own lines go (stderr; the session's console under ``fovexp run
+    --monitor``)."""
+
+    def __init__(self, say: Any) -> None:
+        super().__init__(logging.INFO)
+        self.say = say
+
+    def emit(self, record: logging.LogRecord) -> None:
+        try:
+            self.say(record.getMessage())
+        except Exception:
+            self.handleError(record)
 
 
 def require_server() -> None:
@@ -99,7 +116,7 @@ def serve(results: Path, host: str | None = None, port: int = DEFAULT_PORT,
     require_server()
     import uvicorn
 
-    from .server import create_app, is_loopback
+    from .server import LOG, create_app, is_loopback
     from .view import ResultsView
 
     say = say or (lambda t: print(t, file=sys.stderr, flush=True))
@@ -134,9 +151,12 @@ def serve(results: Path, host: str | None = None, port: int = DEFAULT_PORT,
     server = Server(config)
     if ready is not None:
         threading.Thread(target=_wait_started, args=(server, ready), daemon=True).start()
+    said = _SayHandler(say)
+    LOG.addHandler(said)
     try:
         server.run(sockets=[sock])
     finally:
+        LOG.removeHandler(said)
         stopping.set()
         sock.close()
     return 0

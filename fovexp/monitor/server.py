@@ -16,19 +16,28 @@ a request body, an over-long address, a missing or wrong token (when the server 
 the network), a Host header other than the loopback's (when it is not: a web page elsewhere
 cannot reach it by a DNS name pointing at 127.0.0.1). A session is named by its key, which must
 be one of the sessions found under the results folder, whose folder must lie inside it.
+
+Every refused request (the guard's refusals, and a route's 4xx: a path or session that is not
+there) is logged as one line on the ``fovexp.monitor`` logger (``fovexp monitor`` prints it on
+stderr): the time, the client's address, the method, the path with any ``token`` value in the
+query replaced by ``REDACTED`` (and the token itself wherever else it appears), and why, so the
+operator sees every attempt without the log giving the token away.
 """
 
 from __future__ import annotations
 
 import asyncio
 import hmac
+import http
 import ipaddress
 import json
+import logging
 import threading
+import time
 from collections.abc import AsyncIterator, Awaitable, Callable, MutableMapping
 from pathlib import Path
 from typing import Any
-from urllib.parse import parse_qs
+from urllib.parse import parse_qs, quote, unquote_plus
 
 from starlette.applications import Starlette
 from starlette.requests import Request
@@ -52,6 +61,12 @@ MAX_PATH, MAX_QUERY = 1024, 2048
 #: how often the stream looks for changes, and the longest silence between two events (s)
 STREAM_TICK_S, STREAM_KEEPALIVE_S = 0.25, 2.0
 LOOPBACK_HOSTS = frozenset({"127.0.0.1", "localhost", "::1", "[::1]"})
+#: the logger of refused requests (module docstring)
+LOG = logging.getLogger("fovexp.monitor")
+#: what stands in a logged address for a token
+REDACTED = "REDACTED"
+#: the longest path a log line shows (characters; the rest is counted)
+MAX_LOGGED_PATH = 300
 
 _HEADERS = [
     (b"x-content-type-options", b"nosniff"),
@@ -103,10 +118,39 @@ class Guard:
 
         if refusal is not None:
             status, text = refusal
+            self._log_refusal(scope, status, text)
             await Response(text + "\n", status_code=status, media_type="text/plain")(
                 scope, receive, send_with_headers)
             return
-        await self.app(scope, receive, send_with_headers)
+        answered: list[int] = []
+
+        async def send_noting_status(message: Message) -> None:
+            if message["type"] == "http.response.start":
+                answered.append(int(message.get("status", 200)))
+            await send_with_headers(message)
+
+        await self.app(scope, receive, send_noting_status)
+        if answered and 400 <= answered[0] < 500:  # a path or session that is not there
+            self._log_refusal(scope, answered[0], _phrase(answered[0]))
+
+    def _log_refusal(self, scope: Scope, status: int, reason: str) -> None:
+        """One line for a refused request (module docstring); never the token."""
+        client = scope.get("client")
+        if client:
+            host = str(client[0])
+            where = f"[{host}]:{client[1]}" if ":" in host else f"{host}:{client[1]}"
+        else:
+            where = "?"
+        method = _printable(str(scope.get("method", "?")))[:20]
+        line = (f"fovexp monitor: refused {time.strftime('%Y-%m-%d %H:%M:%S')} {where} "
+                f"{method} {redacted_target(scope, self.token)}: {status} {reason}")
+        LOG.warning(self._redact(line))
+
+    def _redact(self, text: str) -> str:
+        if self.token:
+            for form in {self.token, quote(self.token, safe="")}:
+                text = text.replace(form, REDACTED)
+        return text
 
     def _check(self, scope: Scope) -> tuple[tuple[int, str] | None, bool]:
         """(status, reason) of a refusal or None; and whether to set the token's cookie."""
@@ -138,6 +182,41 @@ class Guard:
             return None, False
         return (403, "this server needs the token it printed at its start: open the address "
                      "with ?token=..."), False
+
+
+def _phrase(status: int) -> str:
+    try:
+        return http.HTTPStatus(status).phrase.lower()
+    except ValueError:
+        return "refused"
+
+
+def _printable(text: str) -> str:
+    """``text`` with control and non-ASCII characters escaped: one log line, as sent."""
+    return "".join(c if " " <= c <= "~" else f"\\x{ord(c):02x}" for c in text)
+
+
+def redacted_target(scope: Scope, token: str | None = None) -> str:
+    """The request's path and query as sent, for a log line: the value of every ``token``
+    parameter (however its name is encoded or capitalised) replaced by :data:`REDACTED`, and
+    ``token`` itself wherever else it appears; escaped to one printable line, and cut at
+    :data:`MAX_LOGGED_PATH` characters (the rest counted)."""
+    path = (scope.get("raw_path") or scope.get("path", "").encode()).decode("latin-1")
+    query = scope.get("query_string", b"").decode("latin-1")
+    pairs = []
+    for pair in query.split("&") if query else []:
+        name, eq, _ = pair.partition("=")
+        if unquote_plus(name).strip().lower() == "token":
+            pair = f"{name}={REDACTED}" if eq else name
+        pairs.append(pair)
+    target = path + ("?" + "&".join(pairs) if query else "")
+    if token:
+        for form in {token, quote(token, safe="")}:
+            target = target.replace(form, REDACTED)
+    target = _printable(target)
+    if len(target) > MAX_LOGGED_PATH:
+        target = f"{target[:MAX_LOGGED_PATH]}... ({len(target)} characters)"
+    return target
 
 
 def _cookie(header: str, name: str) -> str | None:
@@ -221,5 +300,5 @@ def create_app(view: ResultsView, token: str | None = None, loopback_only: bool 
     return Guard(app, token, loopback_only)
 
 
-__all__ = ["Guard", "MAX_PATH", "MAX_QUERY", "STATIC", "TOKEN_COOKIE", "create_app",
-           "is_loopback"]
+__all__ = ["Guard", "LOG", "MAX_LOGGED_PATH", "MAX_PATH", "MAX_QUERY", "REDACTED", "STATIC",
+           "TOKEN_COOKIE", "create_app", "is_loopback", "redacted_target"]

@@ -26,7 +26,7 @@ from typing import Any
 from fovexp import FovexpError
 from fovexp.results.format import SIMULATED_TRACKER, is_participant_id, read_trials_file
 from fovexp.results.limits import R11, R12, R13, TrialLimits
-from fovexp.results.live import FINAL_STATES, STALE_AFTER_S, LiveRead, read_live
+from fovexp.results.live import ENDINGS, FINAL_STATES, STALE_AFTER_S, LiveRead, read_live
 
 #: a session file larger than this is not read (one is tens of kB)
 MAX_SESSION_BYTES = 8 << 20
@@ -96,6 +96,30 @@ def _read_json(path: Path, max_bytes: int) -> tuple[dict[str, Any] | None, str |
     if not isinstance(data, dict):
         return None, "not a JSON object"
     return data, None
+
+
+def _end(live: Mapping[str, Any], info: Mapping[str, Any]) -> dict[str, Any]:
+    """How and when a finished session ended: the status file's last write (its final
+    ``state``, and ``ended``, or ``since`` in a file written before ``ended`` was), else the
+    session file's (``state``, ``ended``). ``how`` in words (:data:`fovexp.results.live
+    .ENDINGS`), ``time`` in s since the epoch, ``at`` that time on this machine's clock face
+    (None where neither file says)."""
+    state = _str(live.get("state"))
+    when: float | None = None
+    if state in FINAL_STATES:
+        when = _num(live.get("ended")) or _num(live.get("since"))
+    else:
+        state = "completed" if info.get("completed") is True else _str(info.get("state"))
+    if when is None and isinstance(info.get("ended"), str):
+        from datetime import datetime
+
+        try:
+            when = datetime.fromisoformat(info["ended"]).timestamp()
+        except ValueError:
+            pass
+    at = (time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(when)) if when is not None
+          else None)
+    return {"state": state, "how": ENDINGS.get(state or "", state), "time": when, "at": at}
 
 
 class ResultsView:
@@ -366,6 +390,11 @@ class ResultsView:
         info = info or {}
         tracker_info: Mapping[str, Any] = info["tracker"] if isinstance(info.get("tracker"),
                                                                         Mapping) else {}
+        gaze = self._gaze(live.get("gaze"), skipped) if live else None
+        if gaze is not None and status != "running":
+            # rates of a stream that has stopped (the last write's, or a killed runner's):
+            # not shown as if live
+            gaze.update(samples_last_s=None, newest_age_s=None)
         out = {
             **self._overview(ref, live, info, status, why, trial),
             "protocol": _str(live.get("protocol_title")) or _str(info.get("protocol_path")),
@@ -374,7 +403,7 @@ class ResultsView:
             "radius_deg": _num(live.get("radius_deg")) or 1.25,
             "text": _str(live.get("text")),
             "trial": trial,
-            "gaze": self._gaze(live.get("gaze"), skipped) if live else None,
+            "gaze": gaze,
             "attempts": attempts[-50:],
             "trials": trials,
             "totals": live.get("totals") if isinstance(live.get("totals"), Mapping) else {},
@@ -404,7 +433,8 @@ class ResultsView:
             "dry_run": bool(live.get("dry_run")) if "dry_run" in live else None,
             "updated": _num(live.get("updated")),
             "since": _num(live.get("since")),
-            "eta_s": _num(live.get("eta_s")),
+            "eta_s": _num(live.get("eta_s")) if status == "running" else None,
+            "end": _end(live, info) if status == "finished" else None,
             "position": trial["position"] if trial else None,
             "total": trial["total"] if trial else None,
             "practice": trial["practice"] if trial else None,

@@ -28,8 +28,17 @@ GAZE_MAX_RATE_HZ = 100.0
 STALE_AFTER_S = 3.0
 #: a status file larger than this is not read (it is a few kB)
 MAX_LIVE_BYTES = 1 << 20
-#: the ``state`` of a run that has ended (the session file's ``state`` values)
-FINAL_STATES = frozenset({"completed", "incomplete", "aborted", "interrupted", "failed"})
+#: how a run ended, by the ``state`` of its last write (the session file's ``state`` values),
+#: in the words the monitor's page says it with
+ENDINGS = {
+    "completed": "completed",
+    "incomplete": "ended with trials left (fovexp run --resume continues)",
+    "aborted": "quit by the operator",
+    "interrupted": "interrupted (Ctrl-C or a signal)",
+    "failed": "crashed (an error; the session file names it)",
+}
+#: the ``state`` of a run that has ended
+FINAL_STATES = frozenset(ENDINGS)
 #: what a running session may be doing (``state``)
 RUN_STATES = frozenset({"starting", "calibrating", "message", "trial", "between trials",
                         "break", "paused", "disconnected"})
@@ -93,6 +102,6 @@ def read_live(path: str | Path, max_bytes: int = MAX_LIVE_BYTES) -> LiveRead:
     return LiveRead(data, None, st.st_mtime)
 
 
-__all__ = ["FINAL_STATES", "GAZE_MAX_RATE_HZ", "GAZE_WINDOW_S", "LIVE_FORMAT", "LIVE_PERIOD_S",
-           "MAX_LIVE_BYTES", "RUN_STATES", "STALE_AFTER_S", "LiveRead", "live_path",
-           "read_live", "write_live"]
+__all__ = ["ENDINGS", "FINAL_STATES", "GAZE_MAX_RATE_HZ", "GAZE_WINDOW_S", "LIVE_FORMAT",
+           "LIVE_PERIOD_S", "MAX_LIVE_BYTES", "RUN_STATES", "STALE_AFTER_S", "LiveRead",
+           "live_path", "read_live", "write_live"]

@@ -18,7 +18,7 @@ RIG_FOLDER = "rig"
 #: ``rig-YYYYmmdd-HHMMSS.json`` (and ``.md`` beside it)
 REPORT_PREFIX = "rig-"
 #: the JSON report's format version
-REPORT_VERSION = 1
+REPORT_VERSION = 2  # 2: percent units, tracker.clock_jitter, the protocol section (issue 32)
 
 
 def report_folder(results_root: str | Path) -> Path:

@@ -66,6 +66,19 @@ def _judge(passed: bool | None, advice: str) -> str:
     return advice if passed is False else ""
 
 
+def _hz_band(nominal_hz: float, tolerance: float) -> str:
+    """A rate's limit in the unit of the measured rate (Hz), the tolerance after it: a
+    threshold reads against the value beside it without converting a percentage."""
+    return (f"{nominal_hz * (1 - tolerance):.6g} to {nominal_hz * (1 + tolerance):.6g} Hz "
+            f"({nominal_hz:g} Hz +/- {100 * tolerance:g} %)")
+
+
+def source_name(kind: str, name: str) -> str:
+    """The gaze source as the report names it: ``--tracker``'s kind, and the source's own
+    name only where it says more (``iohub (mouse)``, not ``simulated: simulated``)."""
+    return kind if name in ("", kind) else f"{kind} ({name})"
+
+
 def interval_stats(flip_times_s: Sequence[float], refresh_hz: float) -> dict[str, Any]:
     """Frame intervals (ms: p50, p99, max) and the dropped frames (an interval longer than
     :data:`DROPPED_PERIODS` refresh periods, as the frame log counts them)."""
@@ -130,8 +143,8 @@ def photodiode_pattern(n: int) -> list[bool]:
 
 def refresh_check(measured_hz: float | None, nominal_hz: float, seconds: float,
                   profile: str, virtual: bool) -> Check:
-    thr = (f"within {100 * REFRESH_TOLERANCE:g} % of {nominal_hz:g} Hz, measured over at "
-           f"least {MIN_REFRESH_S:g} s")
+    thr = (f"{_hz_band(nominal_hz, REFRESH_TOLERANCE)}, measured over at least "
+           f"{MIN_REFRESH_S:g} s")
     if measured_hz is None:
         passed: bool | None = False
     elif seconds < MIN_REFRESH_S:
@@ -165,7 +178,7 @@ def dropped_check(stats: dict[str, Any], virtual: bool) -> Check:
               "the full-screen window (or 'unredirect fullscreen windows'), and that the "
               "render thread does not share the display thread's core")
     return Check("display.dropped", "display", "dropped frames under the session's load",
-                 frac, "fraction", f"at most {100 * MAX_DROPPED_FRACTION:g} % of the frames",
+                 100 * frac, "%", f"at most {100 * MAX_DROPPED_FRACTION:g} % of the frames",
                  passed, _judge(passed, advice), VIRTUAL if virtual else "")
 
 
@@ -231,9 +244,10 @@ def rate_check(measured_hz: float | None, nominal_hz: float | None, simulated: b
     advice = (f"the tracker samples at {measured_hz} Hz, not {nominal_hz} Hz: set its "
               "sampling rate (its software, or the ioHub configuration's sampling_rate), or "
               "correct the protocol's tracker.sampling_hz")
+    thr = (_hz_band(nominal_hz, RATE_TOLERANCE) if nominal_hz
+           else f"within {100 * RATE_TOLERANCE:g} % of the nominal rate (not known)")
     return Check("tracker.rate", "tracker", "sampling rate (device clock)", measured_hz, "Hz",
-                 f"within {100 * RATE_TOLERANCE:g} % of {nominal_hz} Hz", passed,
-                 _judge(passed, advice), "a simulated tracker" if simulated else "")
+                 thr, passed, _judge(passed, advice), "a simulated tracker" if simulated else "")
 
 
 def loss_check(loss: float | None, simulated: bool) -> Check:
@@ -241,8 +255,9 @@ def loss_check(loss: float | None, simulated: bool) -> Check:
     advice = ("samples the tracker should have sent never arrived: check its connection "
               "(a dedicated network port or USB 3 port), its host software's load, and the "
               "sampling rate it is set to")
-    return Check("tracker.loss", "tracker", "samples missing (never delivered)", loss,
-                 "fraction", f"at most {100 * MAX_SAMPLE_LOSS:g} % of the nominal rate's",
+    return Check("tracker.loss", "tracker", "samples missing (never delivered)",
+                 None if loss is None else 100 * loss, "%",
+                 f"at most {100 * MAX_SAMPLE_LOSS:g} % of the samples the nominal rate promises",
                  passed, _judge(passed, advice), "a simulated tracker" if simulated else "")
 
 
@@ -256,22 +271,36 @@ def latency_check(p95_ms: float | None, virtual: bool) -> Check:
 
 
 def clock_check(fit: dict[str, float], virtual: bool) -> Check:
-    drift, jitter = fit["drift_ppm"], fit["jitter_ms"]
-    passed = (None if math.isnan(drift) else abs(drift) <= MAX_CLOCK_DRIFT_PPM
-              and jitter <= MAX_CLOCK_JITTER_MS)
-    advice = ("the gaze source's clock and PsychoPy's drift apart or jump: flips are put on "
-              "the tracker's clock with it; check the tracker's time synchronisation (its "
-              "host software, or the ioHub plugin's)")
+    """The drift of the gaze source's clock against PsychoPy's (ppm); its jitter is
+    :func:`clock_jitter_check`'s: each figure beside a limit in its own unit."""
+    drift = fit["drift_ppm"]
+    passed = None if math.isnan(drift) else abs(drift) <= MAX_CLOCK_DRIFT_PPM
+    advice = ("the gaze source's clock and PsychoPy's drift apart: flips are put on the "
+              "tracker's clock with it; check the tracker's time synchronisation (its host "
+              "software, or the ioHub plugin's)")
     return Check("tracker.clock", "tracker", "tracker clock against PsychoPy's: drift",
-                 drift, "ppm", f"drift within +/-{MAX_CLOCK_DRIFT_PPM:g} ppm and jitter at most "
-                 f"{MAX_CLOCK_JITTER_MS:g} ms", passed, _judge(passed, advice),
-                 VIRTUAL if virtual else "")
+                 drift, "ppm", f"within +/-{MAX_CLOCK_DRIFT_PPM:g} ppm", passed,
+                 _judge(passed, advice), VIRTUAL if virtual else "")
+
+
+def clock_jitter_check(fit: dict[str, float], virtual: bool) -> Check:
+    """The largest distance of the gaze source's clock from its fitted line against
+    PsychoPy's (ms): a jump the drift does not show."""
+    jitter = fit["jitter_ms"]
+    passed = None if math.isnan(jitter) else jitter <= MAX_CLOCK_JITTER_MS
+    advice = ("the gaze source's clock jumps against PsychoPy's: flips are put on the "
+              "tracker's clock with it; check the tracker's time synchronisation (its host "
+              "software, or the ioHub plugin's) and the host's load")
+    return Check("tracker.clock_jitter", "tracker",
+                 "tracker clock against PsychoPy's: jitter (largest jump from the fit)",
+                 jitter, "ms", f"at most {MAX_CLOCK_JITTER_MS:g} ms", passed,
+                 _judge(passed, advice), VIRTUAL if virtual else "")
 
 
 __all__ = ["Check", "DROPPED_PERIODS", "MAX_CLOCK_DRIFT_PPM", "MAX_CLOCK_JITTER_MS",
            "MAX_DROPPED_FRACTION", "MAX_HANDOVER_PERIODS", "MAX_LATENCY_P95_MS",
            "MAX_SAMPLE_LOSS", "MIN_REFRESH_S", "RATE_TOLERANCE", "REFRESH_TOLERANCE", "VIRTUAL",
-           "auto_backend_check", "clock_check", "clock_fit", "dropped_check", "gpu_frame_check",
-           "handover_check", "interval_stats", "latency_check", "loss_check",
-           "photodiode_pattern", "rate_check", "refresh_check", "refresh_rate_hz",
-           "tracker_found_check", "wheel_step_check"]
+           "auto_backend_check", "clock_check", "clock_fit", "clock_jitter_check",
+           "dropped_check", "gpu_frame_check", "handover_check", "interval_stats",
+           "latency_check", "loss_check", "photodiode_pattern", "rate_check", "refresh_check",
+           "refresh_rate_hz", "source_name", "tracker_found_check", "wheel_step_check"]

@@ -10,11 +10,51 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from fovexp import BACKENDS, FovexpError
+from fovexp import BACKENDS, FovexpError, find_protocol, read_yaml
 from fovexp.results.format import TRACKERS
 
 from ..experiment.cli import window_size
 from .checks import MIN_REFRESH_S
+
+#: the protocol measured outside a study folder without ``--protocol``
+DEFAULT_PROTOCOL = "validation"
+
+
+def study_protocol(study: Path) -> Path:
+    """The protocol of the study folder ``study`` (``fovexp init``) that the rig check
+    measures: among those its ``fovexp-study.yaml`` lists, the one whose wheel adjusts the
+    blur-rate (the study's validation, which ``init`` names after the study: its steps load
+    the enhancer most, as the shipped validation's do outside a study), else the first."""
+    from fovexp.experiment.protocol.spec import read_protocol
+    from fovexp.stimuli.folder import STUDY_FILE
+
+    marker = read_yaml(study / STUDY_FILE, "study file")
+    listed = marker.get("protocols") if isinstance(marker, dict) else None
+    paths = [study / str(p) for p in listed] if isinstance(listed, (dict, list)) else []
+    found = [p for p in paths if p.is_file()]
+    if not found:
+        raise FovexpError(f"the study folder {study} lists no protocol file that exists "
+                          f"({STUDY_FILE}: protocols); name one with --protocol")
+    for path in found:
+        if read_protocol(path)[1].adjust.parameter == "blur_rate":
+            return path
+    return found[0]
+
+
+def rig_protocol(name: str | None, cwd: Path | None = None) -> tuple[Path, str]:
+    """The protocol file ``fovexp rig check`` measures with, and why that one (the report
+    says both): ``--protocol`` as ``fovexp run`` finds it; without it, inside a study folder
+    (found as every command finds it: :func:`fovexp.stimuli.folder.find_study`, from ``cwd``
+    or any folder below the study's) the study's own (:func:`study_protocol`); elsewhere
+    :data:`DEFAULT_PROTOCOL`."""
+    from fovexp.stimuli.folder import find_study
+
+    if name is not None:
+        return find_protocol(name), f"--protocol {name}"
+    study = find_study(cwd if cwd is not None else Path.cwd())
+    if study is not None:
+        return study_protocol(study), f"the study folder {study}'s own"
+    return find_protocol(DEFAULT_PROTOCOL), "the default outside a study folder"
 
 
 def add_rig_parser(subparsers: Any) -> argparse.ArgumentParser:
@@ -30,9 +70,11 @@ def add_rig_parser(subparsers: Any) -> argparse.ArgumentParser:
         "load, the GPU, the tracker (rate, loss, gaze-to-flip latency, clock), each against a "
         "stated threshold; write rig/rig-<time>.json and .md under the results root "
         "(fovexp run records the newest). Exit 0 passed, 1 a check failed, 2 bad input.")
-    c.add_argument("--protocol", default="validation",
-                   help="the protocol whose display, images, wheel steps and limits to use "
-                        "(default: validation, whose blur-rate steps load the enhancer most)")
+    c.add_argument("--protocol", default=None,
+                   help="the protocol whose display, images, tracker, wheel steps and limits "
+                        "to use (default: inside a study folder, the study's own protocol "
+                        f"(fovexp init); elsewhere {DEFAULT_PROTOCOL}, whose blur-rate steps "
+                        "load the enhancer most)")
     c.add_argument("--results", type=Path, default=Path("results"),
                    help="results root; the report goes to its rig/ folder (default ./results)")
     c.add_argument("--dry-run", action="store_true",
@@ -64,7 +106,7 @@ def rig_check_command(args: argparse.Namespace) -> int:
     from fovexp.experiment.records.sessionfile import versions
 
     from .measure import RigOptions, run_measurements
-    from .report import build_report, write_report
+    from .report import build_report, check_line, write_report
 
     def say(line: str) -> None:
         print(line, file=sys.stderr, flush=True)
@@ -78,7 +120,8 @@ def rig_check_command(args: argparse.Namespace) -> int:
             raise FovexpError("--tracker-config is for --tracker iohub")
         if args.dry_run and args.tracker not in (None, "simulated", "iohub"):
             raise FovexpError("--dry-run uses simulated gaze (or --tracker iohub)")
-        opts = RigOptions(results_root=args.results, protocol=args.protocol,
+        protocol, chosen = rig_protocol(args.protocol)
+        opts = RigOptions(results_root=args.results, protocol=protocol, protocol_chosen=chosen,
                           dry_run=args.dry_run, duration_s=args.duration, tracker=args.tracker,
                           tracker_config=args.tracker_config,
                           tracker_address=args.tracker_address, backend=args.backend,
@@ -94,6 +137,8 @@ def rig_check_command(args: argparse.Namespace) -> int:
     except FovexpError as exc:
         print(f"fovexp rig check: error: {exc}", file=sys.stderr)
         return 2
+    for c in report["checks"]:
+        say(f"fovexp rig check: {check_line(c)}")
     verdict = {True: "passed", False: "FAILED", None: "not judged"}[report["passed"]]
     failed = [c["title"] for c in report["checks"] if c["passed"] is False]
     label = " (dry run: a virtual display's figures)" if args.dry_run else ""
@@ -102,4 +147,5 @@ def rig_check_command(args: argparse.Namespace) -> int:
     return 1 if report["passed"] is False else 0
 
 
-__all__ = ["add_rig_parser", "rig_check_command"]
+__all__ = ["DEFAULT_PROTOCOL", "add_rig_parser", "rig_check_command", "rig_protocol",
+           "study_protocol"]

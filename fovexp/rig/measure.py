@@ -30,6 +30,7 @@ import numpy as np
 from fovexp import FovexpError, find_protocol, load_display, make_enhancer
 
 from . import checks as C
+from .report import protocol_text
 
 #: the simulated participant turns the wheel this often during the load phase (s)
 WHEEL_EVERY_S = 0.1
@@ -40,7 +41,10 @@ class RigOptions:
     """What ``fovexp rig check`` was asked (docs/EXPERIMENT.md, "The rig check")."""
 
     results_root: Path = Path("results")
-    protocol: str = "validation"
+    #: a protocol's name or file (``fovexp.rig.cli.rig_protocol`` chooses it)
+    protocol: str | Path = "validation"
+    #: why that protocol, for the report ("the study folder's own", "--protocol", ...)
+    protocol_chosen: str = "the default"
     dry_run: bool = False
     duration_s: float = C.MIN_REFRESH_S
     tracker: str | None = None
@@ -67,13 +71,25 @@ def _pct(v: list[float], q: float) -> float:
     return float(np.percentile(v, q)) if v else math.nan
 
 
+def load_rig_protocol(opts: RigOptions) -> tuple[Any, dict[str, Any]]:
+    """The protocol ``opts`` names, loaded as for a session (its display, stimulus folder,
+    tracker settings; not its dependencies: a rig check runs no trial), and the report's
+    ``protocol`` section: which one, from which file, and why that one."""
+    from fovexp.experiment.protocol.spec import load_protocol
+
+    path = find_protocol(opts.protocol)
+    protocol = load_protocol(path, check_dependencies=False, results_root=opts.results_root,
+                             stimuli=opts.stimuli)
+    return protocol, {"experiment": protocol.experiment, "path": str(path),
+                      "sha256": protocol.sha256, "chosen": opts.protocol_chosen}
+
+
 def run_measurements(opts: RigOptions) -> Measured:
     """The whole check (module docstring); returns the figures and verdicts."""
     from fovexp.experiment.display.checks import cross_px, keys_at_poll
     from fovexp.experiment.display.render import TestRenderer
     from fovexp.experiment.display.render_budget import step_values, time_renders
     from fovexp.experiment.display.window import PsychoScreen
-    from fovexp.experiment.protocol.spec import load_protocol
     from fovexp.experiment.tasks.frameloop import (
         LateLatch,
         TrialIO,
@@ -97,9 +113,9 @@ def run_measurements(opts: RigOptions) -> Measured:
 
     out = Measured()
     say = opts.console
-    protocol = load_protocol(find_protocol(opts.protocol), check_dependencies=False,
-                             results_root=opts.results_root, stimuli=opts.stimuli)
+    protocol, about = load_rig_protocol(opts)
     spec = protocol.spec
+    say(f"fovexp rig check: protocol {protocol_text(about)}")
     display = load_display(protocol.display_name)
     fixation = FixationGeometry(display)
     w_px, h_px = opts.window or (DRY_RUN_SIZE if opts.dry_run else protocol.native_size)
@@ -125,12 +141,13 @@ def run_measurements(opts: RigOptions) -> Measured:
         say(f"fovexp rig check: tracker: {exc}; the display and GPU are checked with "
             "simulated gaze")
         gaze = SimulatedGaze(fixation, seed=1)
-    out.checks.append(C.tracker_found_check(found, f"{kind}: {gaze.name}", error))
+    out.checks.append(C.tracker_found_check(found, C.source_name(kind, gaze.name), error))
 
     screen = PsychoScreen(size=size, fullscreen=not opts.dry_run,
                           cross_px=cross_px(size, display, fixation.ppd_centre,
                                             spec.fixation.cross_size_deg),
-                          dry_run=opts.dry_run, refresh_hz=display.refresh_hz, screen=opts.screen)
+                          dry_run=opts.dry_run, refresh_hz=display.refresh_hz, screen=opts.screen,
+                          command="fovexp rig check")
     window = screen.info()
     out.checks.append(C.keyboard_check((window.get("keyboard") or {}).get("backend"),
                                        keys_at_poll(window), virtual))
@@ -293,6 +310,7 @@ def run_measurements(opts: RigOptions) -> Measured:
             out.checks.append(C.latency_check(_pct(latency, 95) if latency else None, virtual))
             fit = C.clock_fit(clock_x, clock_y)
             out.checks.append(C.clock_check(fit, virtual))
+            out.checks.append(C.clock_jitter_check(fit, virtual))
         else:
             fit = C.clock_fit([], [])
             loss = None
@@ -301,6 +319,7 @@ def run_measurements(opts: RigOptions) -> Measured:
         invalid = (sum(not s.valid for s in samples) / len(samples)) if samples else None
 
         out.sections = {
+            "protocol": about,
             "display": {
                 "profile": display.name, "profile_refresh_hz": display.refresh_hz,
                 "profile_size": [display.width_px, display.height_px],
@@ -382,4 +401,4 @@ def _gl_version() -> dict[str, str | None]:
         return {"version": None, "renderer": None, "vendor": None}
 
 
-__all__ = ["Measured", "RigOptions", "run_measurements"]
+__all__ = ["Measured", "RigOptions", "load_rig_protocol", "run_measurements"]

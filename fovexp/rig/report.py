@@ -9,6 +9,7 @@ import datetime as _dt
 import io
 import json
 import math
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -48,12 +49,38 @@ def build_report(checks: list[Check], sections: dict[str, Any], *, dry_run: bool
     })
 
 
+#: a check's verdict in words (the Markdown bolds a failure)
+RESULT = {True: "pass", False: "FAIL", None: "not judged"}
+
+
 def _fmt(v: Any) -> str:
     if v is None:
         return "-"
     if isinstance(v, float):
         return f"{v:.4g}"
     return str(v)
+
+
+def value_text(check: Mapping[str, Any]) -> str:
+    """A check's measured value with its unit, which is the unit its threshold states (a
+    share as a percentage against a limit in percent): the Markdown's and the console's one
+    rendering of it."""
+    if check["value"] is None:
+        return "-"
+    return f"{_fmt(check['value'])} {check['unit']}" if check["unit"] else _fmt(check["value"])
+
+
+def check_line(check: Mapping[str, Any]) -> str:
+    """One check as the console says it: its title, value, threshold and verdict (the
+    Markdown table's row, in the same words)."""
+    return (f"{check['title']}: {value_text(check)}; threshold: {check['threshold']}; "
+            f"{RESULT[check['passed']]}")
+
+
+def protocol_text(protocol: Mapping[str, Any]) -> str:
+    """Which protocol a report measured with, and why that one (the study folder's own,
+    ``--protocol``, or the default)."""
+    return f"{protocol.get('experiment')} ({protocol.get('path')}; {protocol.get('chosen')})"
 
 
 def markdown(report: dict[str, Any]) -> str:
@@ -63,12 +90,13 @@ def markdown(report: dict[str, Any]) -> str:
     lines = [f"# Rig check {report['created']}: {verdict}", ""]
     if report["dry_run"]:
         lines += [f"**Dry run: every figure was {report['virtual_display']}.**", ""]
-    lines += [f"`{report['command']}`", "", "| check | value | threshold | result |",
-              "|---|---|---|---|"]
+    lines += [f"`{report['command']}`", ""]
+    if isinstance(report.get("protocol"), Mapping):
+        lines += [f"Protocol: {protocol_text(report['protocol'])}", ""]
+    lines += ["| check | value | threshold | result |", "|---|---|---|---|"]
     for c in report["checks"]:
-        res = {True: "pass", False: "**FAIL**", None: "not judged"}[c["passed"]]
-        unit = f" {c['unit']}" if c["unit"] and c["value"] is not None else ""
-        cells = (c["title"], f"{_fmt(c['value'])}{unit}", c["threshold"], res)
+        res = "**FAIL**" if c["passed"] is False else RESULT[c["passed"]]
+        cells = (c["title"], value_text(c), c["threshold"], res)
         lines.append("| " + " | ".join(str(x).replace("|", "\\|") for x in cells) + " |")
     failed = [c for c in report["checks"] if c["passed"] is False]
     if failed:
@@ -78,7 +106,7 @@ def markdown(report: dict[str, Any]) -> str:
     if notes:
         lines += ["", "## Notes", ""]
         lines += [f"- {c['title']}: {c['note']}" for c in notes]
-    for part in ("display", "gpu", "tracker", "photodiode", "machine"):
+    for part in ("protocol", "display", "gpu", "tracker", "photodiode", "machine"):
         if part in report:
             lines += ["", f"## {part}", "", "```json",
                       json.dumps(report[part], indent=1, sort_keys=True)[:6000], "```"]
@@ -107,4 +135,5 @@ def write_report(results_root: str | Path, report: dict[str, Any], created: _dt.
     return path
 
 
-__all__ = ["PHOTODIODE_COLUMNS", "build_report", "markdown", "write_report"]
+__all__ = ["PHOTODIODE_COLUMNS", "RESULT", "build_report", "check_line", "markdown",
+           "protocol_text", "value_text", "write_report"]

@@ -151,9 +151,24 @@ def _generate(args: argparse.Namespace) -> int:
     stim = StimulusSet.find(args.stimuli)
     jobs = args.jobs or min(os.cpu_count() or 1, 8)
     print(f"fovexp stimuli generate: {size_text(size)} into {stim.describe()}", flush=True)
-    done = generate_scenes(
-        stim, size, ids, force=args.force, jobs=jobs,
-        progress=lambda i, n, sha: print(f"  {i}  {n / 1e6:5.1f} MB  {sha}", flush=True))
+    from fovexp import progress_bar
+
+    bars: list[Any] = []
+
+    def started(todo: list[str]) -> None:
+        bars.append(progress_bar(total=len(todo), desc="fovexp stimuli generate",
+                                 unit="scene"))
+
+    def wrote(image_id: str, n_bytes: int, sha256: str) -> None:
+        bars[0].set_postfix_str(f"{image_id} {n_bytes / 1e6:.1f} MB", refresh=False)
+        bars[0].update(1)
+
+    try:
+        done = generate_scenes(stim, size, ids, force=args.force, jobs=jobs, progress=wrote,
+                               on_todo=started)
+    finally:
+        for bar in bars:
+            bar.close()
     if done.recorded:
         print(f"fovexp stimuli generate: {size_text(size)} is not a pinned resolution; the "
               f"scenes' sha256 were recorded in {stim.manifest_path}")

@@ -510,12 +510,13 @@ def _render_png(index: int, size: Size) -> tuple[bytes, str]:
 
 def generate_scenes(stim: StimulusSet, size: Size, ids: list[str] | None = None,
                     force: bool = False, jobs: int = 1,
-                    progress: Any = None) -> Generated:
+                    progress: Any = None, on_todo: Any = None) -> Generated:
     """Write the generated scenes ``ids`` (default: all) at ``size`` into the folder of
     ``stim``; a file that checks out is kept unless ``force``. At a pinned resolution every
     scene's pixels must hash to the pin (else nothing is written for it and FovexpError says
     so); at any other its sha256 are recorded in the folder's manifest. ``progress(id,
-    n_bytes, sha256)`` is called after each file."""
+    n_bytes, sha256)`` is called after each file, ``on_todo(ids)`` once before the first with
+    the scenes to draw (those that check out are left out)."""
     import time
     from concurrent.futures import ProcessPoolExecutor
 
@@ -531,6 +532,8 @@ def generate_scenes(stim: StimulusSet, size: Size, ids: list[str] | None = None,
         path = stim.scene_path(i, size)
         ok = path.is_file() and not force and stim.verify_scene(i, size, path)[0].startswith("ok")
         (kept if ok else todo).append(i)
+    if on_todo is not None:
+        on_todo(todo)
     t0 = time.perf_counter()
     out = Generated(size, stim.folder / GENERATED / size_text(size), [], kept, 0, 0.0,
                     min(jobs, max(1, len(todo))), False, [])

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 
@@ -91,10 +92,17 @@ def test_same_seed_same_bytes_however_the_kernels_were_compiled(tmp_path):
         "cached, 1 thread": _enhance(src, tmp_path / "c.png", fresh, threads=1),
     }
     # what ./dev setup does (fovexp compile), then the first run after it
-    proc = subprocess.run([sys.executable, "-m", "fovexp", "compile"], env=_env(ahead, 2),
+    proc = subprocess.run([sys.executable, "-m", "fovexp", "compile"],
+                          env={**_env(ahead, 2), "FOVEXP_PROGRESS": "1"},
                           capture_output=True, text=True, timeout=900)
     assert proc.returncode == 0, proc.stderr
-    assert "kernels compiled" in proc.stdout
+    # its counts add up (issue 32): every kernel compiled, loaded or inside its callers
+    counts = re.search(r"(\d+) kernels: (\d+) compiled, (\d+) loaded from the cache, (\d+) "
+                       r"inside the kernels that call them", proc.stdout)
+    assert counts, proc.stdout
+    total, compiled, loaded, inlined = map(int, counts.groups())
+    assert compiled > 0 and compiled + loaded + inlined == total
+    assert f"{total}/{total}" in proc.stderr  # the progress reached its total, in a log
     runs["compiled by fovexp compile"] = _enhance(src, tmp_path / "d.png", ahead, threads=2)
 
     assert runs["compiled here"]["compiled"]  # the scenario holds: that run compiled ...

@@ -225,3 +225,39 @@ def test_report_html_renders_with_every_figure(driver: Any, tmp_path: Path) -> N
     finally:
         driver.get("about:blank")
         mon.stop()
+
+
+def test_a_finished_session_says_so_and_shows_no_live_rates(driver: Any, tmp_path: Path
+                                                            ) -> None:
+    """Issue 32: the page of a session that ended (its status file's last write, with the rates
+    it had then) says how and when it finished, not "no trial on screen yet" or "671 samples
+    in the last second"."""
+    from monitor_helpers import live, session_file, write_live_file
+
+    sid = "20261124-101010"
+    folder = tmp_path / "results" / "calibration-sk" / "P01"
+    session_file(folder, sid, state="aborted", ended="2026-11-24T10:30:00+00:00")
+    ended = time.time() - 90
+    data = live(sid, state="aborted", trial=None, since=ended, ended=ended, eta_s=40.0)
+    data["gaze"]["samples_last_s"] = 671
+    write_live_file(folder, data)
+    mon = MonitorProcess([str(tmp_path / "results"), "--port", "0"])
+    try:
+        js_errors(driver)  # what earlier pages logged
+        driver.get(mon.url)
+        state = wait_for("the end on the page", lambda: text(driver, "state").startswith(
+            "the session finished: ") and text(driver, "state"), timeout_s=15)
+        at = time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(ended))
+        assert state.startswith(f"the session finished: quit by the operator at {at} (1 min ")
+        assert state.endswith(" s ago)")
+        assert text(driver, "status") == "finished" and text(driver, "counter") == "finished"
+        assert text(driver, "rules").startswith("no trial on screen: the session has ended")
+        gaze = text(driver, "gaze-info")
+        assert "samples in the last second" not in gaze and "before the end" in gaze
+        assert text(driver, "eta") == "" and "yet" not in text(driver, "rules")
+        assert "quit by the operator" in driver.find_element("css selector", "#finished li").text
+        shot(driver, "monitor-finished.png", tmp_path)
+        assert js_errors(driver) == []
+    finally:
+        driver.get("about:blank")
+        mon.stop()

@@ -6,6 +6,8 @@ report folder."""
 from __future__ import annotations
 
 import json
+import logging
+import re
 import socket
 import time
 from pathlib import Path
@@ -18,7 +20,12 @@ httpx = pytest.importorskip("httpx2", reason="httpx2 is not installed (the test 
 
 from starlette.testclient import TestClient  # noqa: E402
 
-from fovexp.monitor.server import TOKEN_COOKIE, create_app  # noqa: E402
+from fovexp.monitor.server import (  # noqa: E402
+    MAX_LOGGED_PATH,
+    TOKEN_COOKIE,
+    create_app,
+    redacted_target,
+)
 from fovexp.monitor.view import ResultsView  # noqa: E402
 from fovexp.results.limits import TrialLimits  # noqa: E402
 
@@ -216,6 +223,62 @@ def test_the_token_in_the_query_opens_the_page(root: Path) -> None:
     assert r.headers["set-cookie"].startswith(f"{TOKEN_COOKIE}={TOKEN};")
 
 
+#: a refused request's log line: time, client address, method, path, status and reason
+REFUSED = re.compile(r"\Afovexp monitor: refused \d{4}-\d\d-\d\d \d\d:\d\d:\d\d "
+                     r"(?P<client>\S+) (?P<method>\S+) (?P<path>\S+): (?P<why>.+)\Z")
+
+
+def test_every_refused_request_is_logged_without_the_token(root: Path, report: Path,
+                                                            caplog) -> None:
+    """A missing or wrong token, a wrong method, a path or session that is not there, a
+    foreign Host: one line each, the token's value (right or a near miss) never in it; an
+    answered request logs nothing."""
+    caplog.set_level(logging.WARNING, logger="fovexp.monitor")
+    c = client(root, token=TOKEN, report=report, loopback_only=False, host="10.0.0.5")
+    local = client(root, host="attacker.example")
+    requests = [
+        (c, "GET", "/api/sessions", 403),                      # no token
+        (c, "GET", f"/?token={TOKEN[:-1]}", 403),              # a near miss
+        (c, "GET", f"/?key=x&TOKEN={TOKEN[:4]}&a=1", 403),     # not the token's name
+        (c, "POST", f"/?token={TOKEN}", 405),                  # another method
+        (c, "GET", f"/api/session?key=../../etc&token={TOKEN}", 404),  # no such session
+        (c, "GET", f"/report/%2e%2e/secret.txt?token={TOKEN}", 404),   # out of the folder
+        (local, "GET", "/", 400),                              # a foreign Host
+        (c, "GET", f"/?token={TOKEN}", 200),                   # answered: not logged
+    ]
+    for who, method, path, status in requests:
+        assert who.request(method, path).status_code == status, path
+    lines = [r.getMessage() for r in caplog.records if r.name == "fovexp.monitor"]
+    assert len(lines) == len(requests) - 1, lines
+    got = [REFUSED.match(line) for line in lines]
+    assert all(got), lines
+    assert [(m["client"], m["method"], m["path"]) for m in got] == [
+        ("testclient:50000", "GET", "/api/sessions"),
+        ("testclient:50000", "GET", "/?token=REDACTED"),
+        ("testclient:50000", "GET", "/?key=x&TOKEN=REDACTED&a=1"),
+        ("testclient:50000", "POST", "/?token=REDACTED"),
+        ("testclient:50000", "GET", "/api/session?key=../../etc&token=REDACTED"),
+        ("testclient:50000", "GET", "/report/%2e%2e/secret.txt?token=REDACTED"),
+        ("testclient:50000", "GET", "/")]
+    missing = ("403 this server needs the token it printed at its start: open the address "
+               "with ?token=...")
+    assert [m["why"] for m in got] == [
+        missing, "403 wrong token", missing, "405 read-only: only GET and HEAD",
+        "404 not found", "404 not found",
+        "400 Host 'attacker.example:8765': this server answers 127.0.0.1 only"]
+    assert TOKEN[:4] not in caplog.text  # nor any part of it
+
+
+def test_a_logged_path_is_one_line_and_short() -> None:
+    scope = {"raw_path": b"/a\nb" + b"x" * 1000, "query_string": b"tok%65n=abc&t=s3cret"}
+    text = redacted_target(scope, token="s3cret")
+    assert "\n" not in text and text.startswith("/a\\x0ab")
+    assert text.endswith("... (1035 characters)")  # the escaped, redacted address's
+    assert len(text) < MAX_LOGGED_PATH + 30
+    assert redacted_target({"path": "/s3cret", "query_string": b"tok%65n=abc&t=s3cret"},
+                           token="s3cret") == "/REDACTED?tok%65n=REDACTED&t=REDACTED"
+
+
 def _free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
@@ -276,8 +339,19 @@ def test_the_lab_network_needs_the_token(root: Path) -> None:
         assert httpx.get(base + "/", params={"token": mon.token}).status_code == 200
         events = _events(base, None, 0.5, token=mon.token)
         assert events and events[0]["view"]["key"] == KEY
+        assert httpx.get(base + "/nothing", params={"token": mon.token}).status_code == 404
     finally:
         mon.stop()
+    # the operator's console: one line per refused request, the token never in it
+    assert mon.proc.stderr is not None
+    said = mon.proc.stderr.read()
+    refused = [line for line in said.splitlines() if line.startswith("fovexp monitor: refused")]
+    assert len(refused) == 3, said
+    assert refused[0].endswith(" GET /: 403 this server needs the token it printed at its "
+                               "start: open the address with ?token=...")
+    assert refused[1].endswith(" GET /?token=REDACTED: 403 wrong token")
+    assert refused[2].endswith(" GET /nothing?token=REDACTED: 404 not found")
+    assert mon.token not in said
 
 
 def test_command_errors(root: Path, tmp_path: Path) -> None:

@@ -5,6 +5,7 @@ results folder."""
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 import time
@@ -186,3 +187,67 @@ def test_the_snapshot_views_the_latest_running_session(root: Path) -> None:
     assert ResultsView(root).snapshot("nonsense")["view"]["participant"] == "P02"
     assert ResultsView(root).snapshot(f"calibration-sk/P01/{SID}")["view"]["participant"] \
         == "P01"
+
+
+# -- a session that has ended (issue 32) ----------------------------------------------------------
+@pytest.mark.parametrize(("state", "how"), [
+    ("completed", "completed"), ("aborted", "quit by the operator"),
+    ("interrupted", "interrupted (Ctrl-C or a signal)"),
+    ("failed", "crashed (an error; the session file names it)"),
+])
+def test_an_ended_session_says_how_and_when_and_shows_no_live_rates(root: Path, state: str,
+                                                                    how: str) -> None:
+    """The last write of a run that ended, from a runner that wrote no ``ended`` yet (a file
+    kept from before): its final state and ``since`` say how and when; the rates it wrote
+    last (the issue's "671 samples in the last second") and the ETA are not passed on."""
+    f = _folder(root)
+    ended = time.time() - 30
+    session_file(f, SID, state=state, ended="2026-11-24T10:30:00+00:00")
+    data = live(SID, state=state, trial=None, since=ended)
+    data["gaze"]["samples_last_s"] = 671
+    write_live_file(f, data)
+    view = ResultsView(root)
+    v = view.session(f"calibration-sk/P01/{SID}")
+    assert v["status"] == "finished" and v["trial"] is None
+    assert v["end"] == {"state": state, "how": how, "time": pytest.approx(ended, abs=1e-3),
+                        "at": time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(ended))}
+    assert v["gaze"]["samples_last_s"] is None and v["gaze"]["newest_age_s"] is None
+    assert v["gaze"]["x_deg"] == [0.1, None, 0.3]  # the last seconds are still shown
+    assert v["eta_s"] is None
+    (s,) = view.sessions()
+    assert s["end"]["how"] == how
+
+
+def test_the_runners_last_write_says_the_run_ended(root: Path) -> None:
+    """The publisher's own last write (``stop``): ``ended``, the final state, no samples per
+    second, no ETA; the view says how and when from it."""
+    from fovexp import load_display
+    from fovexp.experiment.records.live import LivePublisher
+    from fovexp.experiment.trackers.gaze import FixationGeometry, GazeSample
+
+    f = _folder(root)
+    session_file(f, SID, state="aborted")
+    pub = LivePublisher(f, SID, {"participant": "P01"},
+                        FixationGeometry(load_display("lg-oled55cx")))
+    pub.gaze([(0, 0, GazeSample(i * 1666, i * 1666, 0.5, 0.5, True, 0.5, 0.5, True))
+              for i in range(600)])
+    pub.set_eta(120.0)
+    running = pub.snapshot()
+    assert running["ended"] is None and running["gaze"]["samples_last_s"] == 600
+    t0 = time.time()
+    pub.stop("aborted")
+    data = json.loads((f / f"live-{SID}.json").read_text())
+    assert data["state"] == "aborted" and t0 <= data["ended"] <= time.time()
+    assert data["gaze"]["samples_last_s"] is None and data["eta_s"] is None
+    assert data["gaze"]["t"]  # the last seconds of gaze are kept
+    v = ResultsView(root).session(f"calibration-sk/P01/{SID}")
+    assert v["status"] == "finished"
+    assert (v["end"]["how"], v["end"]["time"]) == ("quit by the operator", data["ended"])
+
+
+def test_a_session_file_alone_says_how_it_ended(root: Path) -> None:
+    """No status file (a run from before it had one): the session file's state and ISO end."""
+    f = _folder(root)
+    session_file(f, SID, state="interrupted", ended="2026-11-24T10:30:00+00:00")
+    end = ResultsView(root).session(f"calibration-sk/P01/{SID}")["end"]
+    assert end["how"].startswith("interrupted") and end["time"] == 1795516200.0

@@ -8,6 +8,7 @@ import datetime as dt
 import hashlib
 import json
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -15,7 +16,7 @@ import pytest
 
 from fovexp.results.rigcheck import newest_report, session_rig_record
 from fovexp.rig import checks as C
-from fovexp.rig.report import build_report, markdown, write_report
+from fovexp.rig.report import build_report, check_line, markdown, value_text, write_report
 
 
 def test_interval_stats_and_dropped_frames() -> None:
@@ -149,3 +150,73 @@ def test_newest_report_and_what_a_session_records(tmp_path: Path) -> None:
     assert session_rig_record(tmp_path, "2026-11-25", dry_run=True)[1] is None
     (tmp_path / "rig" / "rig-20261125-120000.json").write_text("{torn")
     assert newest_report(tmp_path).path.name == "rig-20261125-110000.json"  # unreadable: skipped
+
+
+# -- the report's text: a value in its threshold's unit (issue 32) -----------------------------
+def _row(check: C.Check) -> str:
+    """The Markdown table's row of ``check`` alone."""
+    rep = build_report([check], {}, dry_run=False, command="fovexp rig check",
+                       versions={}, created=dt.datetime(2026, 11, 25, 9, 0), duration_s=10.0)
+    (row,) = [line for line in markdown(rep).splitlines()
+              if line.startswith("| ") and not line.startswith("| check |")]
+    return row
+
+
+def test_a_share_is_shown_in_percent_against_its_percent_limit() -> None:
+    """The issue's "0.5417 fraction" against "at most 1 %": the same figure as a percentage,
+    in the Markdown and on the console."""
+    dropped = C.dropped_check({"dropped_fraction": 0.005417}, virtual=False)
+    assert _row(dropped) == ("| dropped frames under the session's load | 0.5417 % | at most "
+                             "1 % of the frames | pass |")
+    assert check_line(dropped.to_dict()) == ("dropped frames under the session's load: "
+                                             "0.5417 %; threshold: at most 1 % of the frames; "
+                                             "pass")
+    assert dropped.to_dict()["unit"] == "%" and dropped.passed is True
+    loss = C.loss_check(0.5417, simulated=False)
+    assert _row(loss) == ("| samples missing (never delivered) | 54.17 % | at most 2 % of the "
+                          "samples the nominal rate promises | **FAIL** |")
+    assert C.loss_check(None, False).value is None and value_text(
+        C.loss_check(None, False).to_dict()) == "-"
+
+
+def test_rates_are_judged_against_a_band_in_hz() -> None:
+    assert _row(C.refresh_check(120.2, 120.0, 10.0, "lg", False)) == (
+        "| refresh rate | 120.2 Hz | 119.4 to 120.6 Hz (120 Hz +/- 0.5 %), measured over at "
+        "least 10 s | pass |")
+    assert _row(C.rate_check(612.1, 600.0, False)) == (
+        "| sampling rate (device clock) | 612.1 Hz | 588 to 612 Hz (600 Hz +/- 2 %) | "
+        "**FAIL** |")
+
+
+def test_every_value_is_in_its_thresholds_unit() -> None:
+    """Each check with a numeric value states its limit in the value's own unit; the clock's
+    drift (ppm) and jitter (ms) are two checks, each against its own limit."""
+    fit = C.clock_fit(np.linspace(0, 10, 101), (np.linspace(0, 10, 101) + 0.001) * 1e6)
+    checks = [C.refresh_check(120.0, 120.0, 10.0, "lg", False),
+              C.dropped_check({"dropped_fraction": 0.002}, False),
+              C.wheel_step_check(12.0, 100.0, "gpu", False),
+              C.gpu_frame_check(3.0, 120.0, (1920, 2160), False),
+              C.handover_check(0.5, 120.0, "texture", False),
+              C.rate_check(600.0, 600.0, False), C.loss_check(0.001, False),
+              C.latency_check(9.0, False), C.clock_check(fit, False),
+              C.clock_jitter_check(fit, False)]
+    units = {"Hz", "%", "ms", "ppm"}
+    for c in checks:
+        assert isinstance(c.value, float) and c.unit in units, c
+        stated = c.threshold.split("(")[0]  # the limit; a tolerance may follow in brackets
+        assert re.search(rf"\d {re.escape(c.unit)}(?!\w)", stated), c
+        assert not any(re.search(rf"\d {re.escape(u)}(?!\w)", stated)
+                       for u in units - {c.unit}), c
+    jump = C.clock_jitter_check({**fit, "jitter_ms": 1.5}, False)
+    assert jump.passed is False and jump.advice and C.clock_check(fit, False).passed
+
+
+def test_the_tracker_is_named_once() -> None:
+    """The issue's "tracker found: simulated: simulated"."""
+    assert C.source_name("simulated", "simulated") == "simulated"
+    assert C.source_name("iohub", "mouse") == "iohub (mouse)"
+    found = C.tracker_found_check(True, C.source_name("simulated", "simulated"), "")
+    assert _row(found) == ("| tracker found | simulated | the gaze source starts and sends "
+                           "samples | pass |")
+    md = markdown(_report(passed=False))
+    assert not re.search(r"\b(\w+): \1\b", md)  # no word said twice in a row

@@ -20,7 +20,7 @@ pytestmark = [pytest.mark.gui, pytest.mark.slow]
 
 CHECK_IDS = ["tracker.found", "display.keyboard", "display.refresh", "render.wheel_step",
              "gpu.auto", "display.dropped", "gpu.handover", "gpu.stages", "tracker.rate",
-             "tracker.loss", "tracker.latency", "tracker.clock"]
+             "tracker.loss", "tracker.latency", "tracker.clock", "tracker.clock_jitter"]
 MOUSEGAZE = """\
 eyetracker.hw.mouse.EyeTracker:
   name: tracker
@@ -44,11 +44,15 @@ def _check(ws: Path, *extra: str) -> tuple[dict, Path]:
 
 def _common(rep: dict) -> None:
     assert rep["dry_run"] and rep["virtual_display"] == VIRTUAL
+    # outside a study folder: the validation, ./protocols' before the shipped one (issue 32)
+    assert rep["protocol"]["experiment"] == "validation"
+    assert rep["protocol"]["chosen"] == "the default outside a study folder"
     assert [c["id"] for c in rep["checks"]] == CHECK_IDS
     for c in rep["checks"]:
         assert c["threshold"] and c["passed"] in (True, False, None)
         assert (c["passed"] is False) == bool(c["advice"])
-        if c["group"] in ("display", "gpu") or c["id"] in ("tracker.latency", "tracker.clock"):
+        if c["group"] in ("display", "gpu") or c["id"] in ("tracker.latency", "tracker.clock",
+                                                           "tracker.clock_jitter"):
             assert VIRTUAL in c["note"], c  # every figure of the virtual display says so
     refresh = next(c for c in rep["checks"] if c["id"] == "display.refresh")
     assert refresh["passed"] is None and re.search(r"measured over 2\.\d s only", refresh["note"])

@@ -112,6 +112,21 @@ def keyboard_note(info: dict[str, Any], dry_run: bool, accept: bool = False) -> 
             {"backend": (info.get("keyboard") or {}).get("backend"), "accepted": True})
 
 
+def rig_note(results_root: Any, dry_run: bool, file: Any) -> Note | None:
+    """The newest rig check under the results root (``fovexp rig check``): its name and sha256
+    into this run's entry of the session ``file`` (``runs[].rig_check``); a warning for the
+    operator of a real session when there is none from today, it failed, or it was only a dry
+    run."""
+    from fovexp.results.format import now_iso
+    from fovexp.results.rigcheck import session_rig_record
+
+    rec, warning = session_rig_record(results_root, now_iso()[:10], dry_run)
+    file.set_in_run("rig_check", rec)
+    if warning is None or dry_run:
+        return None
+    return (warning, "rig_check_warning", {"warning": warning})
+
+
 def renderer_notes(info: dict[str, Any]) -> list[Note]:
     """The renderer's own warnings (``info``: its :meth:`Renderer.info`): ``auto`` fell back to
     the CPU, and any note the backend made."""

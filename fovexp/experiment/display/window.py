@@ -193,16 +193,24 @@ class SharedGLContext:
             self._context.glx_context = None
 
 
+def no_display_hint(command: str) -> str:
+    """What to do without a display, for ``command`` (``fovexp run``, ``fovexp rig check``):
+    the one wording of it, each command naming itself."""
+    return f"a dry run on a server needs Xvfb: xvfb-run -a {command} ..."
+
+
 class PsychoScreen:
     """A PsychoPy window of ``size`` pixels (the stimulus fills it) on monitor ``screen``.
 
     ``pace_hz`` emulates vsync at that rate where there is none (Xvfb); a dry run paces at
     :data:`DRY_RUN_REFRESH_HZ` by default. ``refresh_hz`` is then the paced rate.
+    ``command``: the command that opens it (``fovexp run``, ``fovexp rig check``), which the
+    error without a display tells the user to run under Xvfb.
     """
 
     def __init__(self, size: tuple[int, int], fullscreen: bool = True, cross_px: float = 20.0,
                  dry_run: bool = False, refresh_hz: float = 60.0, screen: int = 0,
-                 pace_hz: float | None = None) -> None:
+                 pace_hz: float | None = None, command: str = "fovexp run") -> None:
         try:  # importing PsychoPy's window module already connects to the X display
             import pyglet
 
@@ -222,8 +230,7 @@ class PsychoScreen:
                               "'fovexp[experiment]'") from None
         except Exception as exc:
             raise FovexpError(f"cannot open a window ({type(exc).__name__}: {exc}); is DISPLAY "
-                              "set? (a dry run on a server needs Xvfb: xvfb-run -a fovexp run "
-                              "...)") from None
+                              f"set? ({no_display_hint(command)})") from None
         self._event = event
         self._gl = gl
         self._clock = plog.defaultClock  # win.flip() returns times on this clock
@@ -244,7 +251,7 @@ class PsychoScreen:
             )
         except Exception as exc:
             raise FovexpError(f"cannot open a window on screen {self.screen} ({exc}); is "
-                              "DISPLAY set? (a dry run on a server needs Xvfb)") from None
+                              f"DISPLAY set? ({no_display_hint(command)})") from None
         self._keys = pkey.KeyStateHandler()
         self._pkey = pkey
         self._wheel: list[tuple[float, bool]] = []

@@ -197,22 +197,36 @@ def _size(size: tuple[int, int]) -> str:
     return f"{size[0]}x{size[1]}"
 
 
+#: the comment that ends the commands a machine without the rig can run (``.ci/study-walk``
+#: runs the printed commands up to it)
+ON_THE_RIG = "# on the rig:"
+
+
 def next_commands(study: Study) -> str:
-    """The study's next commands, run from its folder (printed by ``init``, in its README)."""
+    """The study's next commands, run from its folder (printed by ``init``, in its README, and
+    docs/STUDY.md's recipe; ``.ci/study-walk`` runs them as printed). The test runs (the rig
+    check's and the session's rehearsals) write into ``test-results/``, so that the study's
+    ``results/`` holds only its participants."""
     size = _size(study.size)
     calib = [p for p, e in study.protocols.items() if e.startswith("calibration-")]
     valid = [p for p in study.protocols if p not in calib]
     main = valid[0] if valid else calib[0]
+    main_name = Path(main).stem
+    xvfb = f"xvfb-run -a -s '-screen 0 {size}x24'"
     lines = [
         f"cd {study.folder}",
-        f"fovexp stimuli add FRAME.png --id lab-01 --licence CC-BY-4.0"
-        f"    # each frame, {size} ({study.display})",
+        f"fovexp stimuli add FRAME.png --id lab-01 --licence CC-BY-4.0    # each frame, {size}",
         f"#   then name their ids in {main}: images: [lab-01, ...]",
-        f"fovexp stimuli check {' '.join(study.protocols)}",
-        f"xvfb-run -a -s '-screen 0 {size}x24' fovexp run {main} --participant SIM01 --dry-run "
-        f"--window {size} --limit-trials 2    # a rehearsal at the display's size",
+        f"fovexp stimuli check {' '.join(Path(p).stem for p in study.protocols)}",
+        f"{xvfb} fovexp rig check --dry-run --results test-results    # the rig check, rehearsed",
+        f"{xvfb} fovexp run {main_name} --participant SIM01 --dry-run --window {size} "
+        "--limit-trials 2 --practice 0 --sim-truth quick --results test-results"
+        "    # a rehearsal at the display's size",
+        "fovexp analyze test-results --out test-report",
+        f"{ON_THE_RIG} the rig check, then each participant's session, then the analysis",
+        "fovexp rig check",
+        f"fovexp run {main_name} --participant P01",
         "fovexp analyze results --out report",
-        f"fovexp run {main} --participant P01    # the real session, on the rig",
     ]
     return "\n".join(lines)
 

@@ -167,6 +167,8 @@ class LivePublisher:
         self.publish_cpu_s: collections.deque[float] = collections.deque(maxlen=1000)
         self.write_errors = 0
         self.last_error: str | None = None
+        #: when the run ended (s since the epoch; :meth:`stop`), None while it runs
+        self._ended: float | None = None
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="fovexp-live", daemon=True)
 
@@ -264,14 +266,19 @@ class LivePublisher:
         return self
 
     def stop(self, state: str) -> None:
-        """The run ended with ``state`` (the session file's): the last write."""
+        """The run ended with ``state`` (the session file's: :data:`fovexp.results.live
+        .ENDINGS`): the last write, which says when (``ended``) and carries no rates (no
+        samples per second, no ETA): a reader of the kept file sees a finished run, not a
+        frozen live one."""
         self._stop.set()
         if self._thread.is_alive():
             self._thread.join(timeout=5)
         self._take_frames()
         self._close_attempt()  # the last attempt joins the list
+        now = time.time()
         with self._lock:
-            self._status = {"state": state, "text": None, "since": time.time()}
+            self._status = {"state": state, "text": None, "since": now}
+            self._ended = now
         self._publish()
 
     # -- the publisher thread ------------------------------------------------------------------
@@ -362,7 +369,9 @@ class LivePublisher:
             out[i] = (float(ecc[k] * unit[k, 0]), float(ecc[k] * unit[k, 1]))
         return out
 
-    def _gaze_view(self) -> dict[str, Any]:
+    def _gaze_view(self, ended: bool = False) -> dict[str, Any]:
+        """The last seconds of gaze; after the end (``ended``) without the arrival figures,
+        which describe a running stream."""
         g = list(self._gaze)
         t_us = np.array([s[0] for s in g], dtype=np.int64)
         first = int(np.searchsorted(t_us, t_us[-1] - GAZE_WINDOW_S * 1e6)) if g else 0
@@ -374,8 +383,8 @@ class LivePublisher:
             "t": np.round((t_us[first:] - t_us[-1]) / 1e6, 3).tolist() if g else [],
             "x_deg": [s[1] for s in keep], "y_deg": [s[2] for s in keep],
             "newest_age_s": (_num(now - self._gaze_arrived, 3)
-                             if self._gaze_arrived is not None else None),
-            "samples_last_s": recent,
+                             if self._gaze_arrived is not None and not ended else None),
+            "samples_last_s": None if ended else recent,
         }
 
     def snapshot(self) -> dict[str, Any]:
@@ -388,6 +397,7 @@ class LivePublisher:
             counts = dict(self._counts)
             tracker = {**self._tracker, "events": list(self._tracker["events"])}
             eta = self._eta
+            ended = self._ended
             meta_now = dict(self._meta.get(current, {})) if current is not None else None
         a = self._attempt
         trial = None
@@ -412,13 +422,15 @@ class LivePublisher:
         return {
             **self.header, "updated": round(now, 3), "seq": self.writes + 1,
             "state": status["state"], "text": status["text"], "since": round(status["since"], 3),
+            "ended": None if ended is None else round(ended, 3),
             "trial": trial,
             "attempts": list(self._finished),
-            "gaze": self._gaze_view(),
+            "gaze": self._gaze_view(ended is not None),
             "totals": {"frames": self._frames_total, "dropped": self._dropped_total,
                        "latency_ms": total_lat, **counts},
             "tracker": tracker,
-            "eta_s": None if eta is None else _num(max(0.0, eta[0] - (now - eta[1])), 1),
+            "eta_s": (None if eta is None or ended is not None
+                      else _num(max(0.0, eta[0] - (now - eta[1])), 1)),
             "write_errors": self.write_errors,
         }
 

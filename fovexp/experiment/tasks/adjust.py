@@ -97,6 +97,10 @@ class AdjustmentTask:
             self.sink.raise_error()
             for text in self.seq.before(trial):
                 self.screens.message(text, ["space"])
+            position, total = self.seq.position(trial)
+            # said as it starts too: a trial can take minutes (a 4K dry run on a CPU)
+            self.say(f"{'practice ' if trial.practice else ''}trial {position}/{total}: "
+                     f"{trial.image}, {trial.method}, on screen")
             t0 = time.monotonic()
             st, latency_ms = self._attempts_until_done(trial)
             self._trial_seconds.append(time.monotonic() - t0)
@@ -185,7 +189,8 @@ class AdjustmentTask:
         participant = None
         if self.sim is not None:
             self.sim.begin(adj.parameter, trial.method, trial.blur_rate, trial.s_f,
-                           adj.range[0], adj.range[1], adj.step, adj.fine_step)
+                           adj.range[0], adj.range[1], adj.step, adj.fine_step,
+                           start=adjuster.value)
             participant = self.sim.poll
         latency_ms: list[float] = []
 

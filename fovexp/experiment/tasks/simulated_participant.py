@@ -37,6 +37,15 @@ class SimTruth(BaseModel):
     #: participant noise sd per parameter
     noise_sd: dict[str, float] = Field(
         default_factory=lambda: {"f_e": 0.02, "s_k": 1.5, "s_f": 0.25, "blur_rate": 0.04})
+    #: a rehearsal's participant: each trial confirmed two wheel steps from its start value,
+    #: so a trial renders a handful of steps (``--sim-truth quick``: a 4K rehearsal on a CPU
+    #: in minutes, not tens of minutes; its values mean nothing)
+    quick: bool = False
+
+    @classmethod
+    def named(cls, name: str) -> SimTruth:
+        """``--sim-truth``'s value: ``quick`` (:attr:`quick`), else a YAML file's path."""
+        return cls(quick=True) if name == "quick" else cls.load(name)
 
     def value(self, parameter: str, method: str, blur_rate: float | None,
               s_f: float | None) -> float:
@@ -76,16 +85,21 @@ class SimulatedParticipant:
         self.log: list[dict[str, Any]] = []
 
     def begin(self, parameter: str, method: str, blur_rate: float | None, s_f: float | None,
-              lo: float, hi: float, step: float, fine_step: float) -> float:
-        """Start a trial; returns this trial's personal target."""
+              lo: float, hi: float, step: float, fine_step: float,
+              start: float | None = None) -> float:
+        """Start a trial (its value at ``start``); returns this trial's personal target."""
         rng = self.rng
         true = self.truth.value(parameter, method, blur_rate, s_f)
         sd = self.truth.noise_sd.get(parameter, 0.0) * self.noise_scale
+        if self.truth.quick and start is not None:
+            true, sd = start + 2 * step * (1 if start + 2 * step <= hi else -1), 0.0
         self.target = float(np.clip(true + rng.normal(0.0, sd) if sd > 0 else true, lo, hi))
         self.lo, self.hi, self.step, self.fine_step = lo, hi, step, fine_step
         self.phase = "react"
         self.next_t = rng.uniform(0.4, 1.0) / self.speed
         self.overshoot = int(rng.integers(1, 4)) * step
+        if self.truth.quick:  # one coarse step past: the fewest renders that still adjust
+            self.overshoot = step
         self.notches = 0
         self.log.append({"truth": true, "target": self.target})
         return self.target

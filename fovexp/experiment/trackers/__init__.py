@@ -39,7 +39,13 @@ if TYPE_CHECKING:
 
 def iohub_config_path(protocol: Any, tracker_config: str | Path | None) -> Path:
     """The ioHub configuration: ``--tracker-config``, else the protocol's
-    ``tracker.iohub_config`` (relative to the protocol file)."""
+    ``tracker.iohub_config`` (relative to the protocol file); either may name a shipped
+    example, ``example:FAMILY`` (:func:`.families.example_path`)."""
+    from .families import EXAMPLE_PREFIX, example_path
+
+    given = tracker_config if tracker_config is not None else protocol.spec.tracker.iohub_config
+    if given is not None and str(given).startswith(EXAMPLE_PREFIX):
+        return example_path(str(given)[len(EXAMPLE_PREFIX):])
     if tracker_config is not None:
         return Path(tracker_config)
     name = protocol.spec.tracker.iohub_config

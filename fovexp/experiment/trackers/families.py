@@ -20,17 +20,34 @@ The configuration is the YAML a lab already uses for PsychoPy or ioHub
 The ``Display`` device is always fovexp's (:func:`hub_config`): its physical size and
 viewing distance are the display profile's, its unit ``pix``, its screen the session's (a
 tracker that maps gaze through ioHub's display, as EyeLink's plugin does, then measures the
-same screen the blanking window is computed on). No PsychoPy import here.
+same screen the blanking window is computed on).
+
+Every family has an example in the keyword form, shipped as package data
+(``configs/<family>.yaml``, :func:`example_path`): a lab starts from it (``fovexp tracker
+example FAMILY`` prints it) instead of from ioHub's defaults, and ``--tracker-config
+example:FAMILY`` reads it as it is. Before ioHub's server starts, :func:`check_device_module`
+makes sure the class path names a module ioHub can import: the server would print some fifty
+lines of tracebacks and then create no tracker. No PsychoPy import at import time here.
 """
 
 from __future__ import annotations
 
 import hashlib
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from fovexp import FovexpError, parse_yaml
+from fovexp import FovexpError, did_you_mean, parse_yaml
+
+#: The shipped example configurations, ``<family key>.yaml`` (package data of the wheel).
+EXAMPLES_DIR = Path(__file__).resolve().parent / "configs"
+#: ``--tracker-config example:eyelink``: the shipped example of a family, not a file.
+EXAMPLE_PREFIX = "example:"
+#: How a user gets an example (named in the one-line errors below).
+EXAMPLE_HINT = "fovexp tracker example FAMILY prints an example"
+#: The package ioHub imports device modules from (its server's rule: :func:`device_module`).
+IOHUB_DEVICES = "psychopy.iohub.devices"
 
 
 @dataclass(frozen=True)
@@ -53,6 +70,13 @@ class TrackerFamily:
     clock: str
     #: the mouse: a pilot session, not an eye tracker (the analysis leaves it out)
     pilot: bool = False
+    #: the ioHub device class path of the family's example (``configs/<key>.yaml``)
+    device_class: str = ""
+
+    @property
+    def install(self) -> str:
+        """How the family's plugin is installed, for one-line messages."""
+        return f"pip install 'fovexp[{self.extra}]'" if self.extra else "built into PsychoPy"
 
 
 FAMILIES: tuple[TrackerFamily, ...] = (
@@ -60,28 +84,35 @@ FAMILIES: tuple[TrackerFamily, ...] = (
         "eyelink", "SR Research EyeLink (1000 Plus, Portable Duo, ...)", ("sr_research", "eyelink"),
         "eyelink", "psychopy-eyetracker-sr-research", "psychopy_eyetracker_sr_research",
         "own", "the EyeLink host PC's clock (ms); ioHub subtracts the link delay it measures "
-        "against the host's clock"),
+        "against the host's clock",
+        device_class="eyetracker.hw.sr_research.eyelink.EyeTracker"),
     TrackerFamily(
         "tobii", "Tobii Pro (through ioHub)", ("tobii",), "tobii-iohub",
         "psychopy-eyetracker-tobii", "psychopy_eyetracker_tobii", "own",
-        "the Tobii SDK's system_time_stamp (us), mapped by the plugin"),
+        "the Tobii SDK's system_time_stamp (us), mapped by the plugin",
+        device_class="eyetracker.hw.tobii.EyeTracker"),
     TrackerFamily(
         "gazepoint", "Gazepoint GP3", ("gazepoint", "gp3"), "gazepoint",
         "psychopy-eyetracker-gazepoint", "psychopy_eyetracker_gazepoint", "own",
-        "Gazepoint Control's TIME (s since it started)"),
+        "Gazepoint Control's TIME (s since it started)",
+        device_class="eyetracker.hw.gazepoint.gp3.EyeTracker"),
     TrackerFamily(
         "pupil-labs", "Pupil Labs (Core, Neon)", ("pupil_labs", "pupil_core", "neon"),
         "pupil-labs", "psychopy-eyetracker-pupil-labs", "psychopy_eyetracker_pupil_labs", "own",
-        "Pupil's clock, synchronised by the plugin"),
+        "Pupil's clock, synchronised by the plugin",
+        device_class="eyetracker.hw.pupil_labs.pupil_core.EyeTracker"),
     TrackerFamily(
         "eyelogic", "EyeLogic", ("eyelogic",), "eyelogic", "psychopy-eyetracker-eyelogic",
-        "psychopy_eyetracker_eyelogic", "own", "the EyeLogic server's clock (ns)"),
+        "psychopy_eyetracker_eyelogic", "own", "the EyeLogic server's clock (ns)",
+        device_class="eyetracker.eyelogic.psychopy.eyetracker.EyeTracker"),
     TrackerFamily(
         "mousegaze", "ioHub MouseGaze (the mouse as gaze)", ("mouse",), None, None, None, "none",
-        "PsychoPy's clock (the samples are made by the ioHub server)", pilot=True),
+        "PsychoPy's clock (the samples are made by the ioHub server)", pilot=True,
+        device_class="eyetracker.hw.mouse.EyeTracker"),
 )
 #: A device class path no family names (a third-party ioHub tracker): installed by the lab.
-OTHER = TrackerFamily("other", "another ioHub eye tracker", (), None, None, None, "own",
+#: Its label reads after "the" in messages ("the ioHub eye tracker (eyetracker.hw.acme...)").
+OTHER = TrackerFamily("other", "ioHub eye tracker", (), None, None, None, "own",
                       "the tracker's own")
 
 
@@ -112,6 +143,84 @@ def check_plugin(family: TrackerFamily, find: Any = None) -> str | None:
         return importlib.metadata.version(family.distribution or "")
     except importlib.metadata.PackageNotFoundError:
         return "unknown"
+
+
+def example_path(family_key: str) -> Path:
+    """The shipped example configuration of the family ``family_key`` (``eyelink``, ...);
+    a one-line FovexpError naming the families for any other name."""
+    keys = [f.key for f in FAMILIES]
+    if family_key not in keys:
+        raise FovexpError(f"no example ioHub configuration {family_key!r}"
+                          f"{did_you_mean(family_key, keys)}: the families are "
+                          f"{', '.join(keys)}")
+    return EXAMPLES_DIR / f"{family_key}.yaml"
+
+
+def device_module(device_class: str) -> str:
+    """The module ioHub's server imports for a device class path, by the server's own rule
+    (``ioServer.addDeviceToMonitor``): :data:`IOHUB_DEVICES`, a dot, the path without its class
+    name in lower case (``eyetracker.hw.mouse.EyeTracker`` ->
+    ``psychopy.iohub.devices.eyetracker.hw.mouse``)."""
+    head = device_class.rpartition(".")[0]
+    return f"{IOHUB_DEVICES}.{head.lower()}" if head else f"{IOHUB_DEVICES}.{device_class.lower()}"
+
+
+def plugin_device_modules() -> set[str]:
+    """The device modules plugins add to ioHub through entry points (group
+    ``psychopy.iohub.devices[.sub]``, name -> ``group.name``): the second place ioHub's
+    ``importDeviceModule`` looks, EyeLogic's plugin among them."""
+    import importlib.metadata
+
+    eps: Any = importlib.metadata.entry_points()
+    groups = eps.groups if hasattr(eps, "groups") else list(eps)  # Python 3.10's dict form
+    out: set[str] = set()
+    for group in groups:
+        if group == IOHUB_DEVICES or group.startswith(IOHUB_DEVICES + "."):
+            out.update(f"{group}.{ep.name}" for ep in importlib.metadata.entry_points(group=group))
+    return out
+
+
+def check_device_module(config: IoHubConfig, find: Callable[[str], Any] | None = None,
+                        plugin_modules: Iterable[str] | None = None) -> str | None:
+    """The device module of ``config``'s tracker (:func:`device_module`), checked before the
+    server starts: when neither PsychoPy nor a plugin provides it (or the class name is
+    ``EyeTracker`` in another case), ioHub's server prints some fifty lines of tracebacks and
+    creates no tracker, so a one-line FovexpError names the module and the class paths fovexp
+    knows instead. None when PsychoPy's ioHub itself is not installed (starting the server
+    says so, naming the extra). ``find`` (a module finder) and ``plugin_modules``
+    (:func:`plugin_device_modules`) are for the tests. Imports PsychoPy's ``psychopy.iohub``
+    (a module's parents are imported to find it; no window, no display)."""
+    import importlib.util
+
+    finder = find or importlib.util.find_spec
+
+    def found(name: str) -> bool:
+        try:
+            return finder(name) is not None
+        except (ImportError, ValueError):  # a parent package is missing
+            return False
+
+    if not found(IOHUB_DEVICES):
+        return None
+    head, _, name = config.device_class.rpartition(".")
+    if name.lower() == "eyetracker" and name != "EyeTracker":  # ioHub looks it up as written
+        raise FovexpError(f"ioHub configuration {config.path}: {config.device_class}: ioHub's "
+                          f"eye-tracker class is EyeTracker ({head}.EyeTracker)")
+    module = device_module(config.device_class)
+    if found(module):
+        return module
+    mods = plugin_device_modules() if plugin_modules is None else set(plugin_modules)
+    if any(module == m or module.startswith(m + ".") for m in mods):
+        return module
+    what = f"ioHub has no device module {module} for {config.device_class} ({config.path})"
+    fam = config.family
+    if fam is not OTHER:
+        raise FovexpError(f"{what}: the class path of the {fam.label} is {fam.device_class} "
+                          f"({fam.install}); fovexp tracker example {fam.key} prints its "
+                          "example")
+    known = ", ".join(f"{f.device_class} ({f.install})" for f in FAMILIES)
+    raise FovexpError(f"{what}: a misspelt class path, or a plugin that is not installed; "
+                      f"the class paths fovexp knows: {known}; {EXAMPLE_HINT}")
 
 
 @dataclass(frozen=True)
@@ -191,6 +300,11 @@ def parse_iohub_config(text: str, path: Path) -> IoHubConfig:
     """An ioHub configuration from its YAML text (``path`` names it in errors and records)."""
     what = f"ioHub configuration {path}"
     raw = parse_yaml(text, what)
+    if raw is None:  # an empty file, or comments only: YAML's null
+        raise FovexpError(
+            f"{what} is empty (or only comments): it must name one eye tracker by its ioHub "
+            "device class path, with its settings, e.g. 'eyetracker.hw.mouse.EyeTracker: "
+            f"{{name: tracker}}'; {EXAMPLE_HINT}")
     devices = _devices(raw, what)
     trackers = [k for k in devices if str(k).lower().startswith("eyetracker.")]
     if len(trackers) != 1:
@@ -213,7 +327,10 @@ def parse_iohub_config(text: str, path: Path) -> IoHubConfig:
 
 
 def load_iohub_config(path: str | Path) -> IoHubConfig:
-    """:func:`parse_iohub_config` of the file ``path`` (one-line errors naming it)."""
+    """:func:`parse_iohub_config` of the file ``path`` (one-line errors naming it), or of a
+    family's shipped example when ``path`` is ``example:FAMILY`` (:func:`example_path`)."""
+    if str(path).startswith(EXAMPLE_PREFIX):
+        path = example_path(str(path)[len(EXAMPLE_PREFIX):])
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8")
@@ -257,6 +374,7 @@ def hub_config(config: IoHubConfig, display: Any, screen: int,
     return {"monitor_devices": devices}
 
 
-__all__ = ["FAMILIES", "OTHER", "IoHubConfig", "TrackerFamily", "check_plugin",
-           "display_config", "family_of", "hub_config", "load_iohub_config",
-           "parse_iohub_config"]
+__all__ = ["EXAMPLES_DIR", "EXAMPLE_PREFIX", "FAMILIES", "OTHER", "IoHubConfig", "TrackerFamily",
+           "check_device_module", "check_plugin", "device_module", "display_config",
+           "example_path", "family_of", "hub_config", "load_iohub_config",
+           "parse_iohub_config", "plugin_device_modules"]

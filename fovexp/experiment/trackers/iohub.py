@@ -64,7 +64,7 @@ from typing import Any
 from fovexp import FovexpError
 
 from .calibration import CalibrationOutcome, TrackerOwnCalibration
-from .families import IoHubConfig, check_plugin, hub_config
+from .families import IoHubConfig, check_device_module, check_plugin, hub_config
 from .gaze import GAZE_BUFFER_S, GazeSample, SampleBuffer, SourceEvent
 
 #: ioHub's status flags of a binocular sample (its plugins' convention)
@@ -237,6 +237,8 @@ class IoHubGaze:
         self.config, self.display, self.screen = config, display, int(screen)
         self.family = config.family
         self.plugin_version = check_plugin(self.family)
+        # a class path no module answers to: one line here, not ioHub's tracebacks
+        check_device_module(config)
         self.pilot = self.family.pilot
         self.pointer = bool(pointer and self.pilot)
         #: the trials' ``tracker`` column: a mouse is a pilot whatever carries it
@@ -331,8 +333,11 @@ class IoHubGaze:
         self.device_config = dict(cfg)
         rt = cfg.get("runtime_settings") or {}
         if self.rate_hz is None and rt.get("sampling_rate") is not None:
-            self.rate_hz = float(rt["sampling_rate"])
-            self.meter = RateMeter(self.rate_hz)
+            try:
+                self.rate_hz = float(rt["sampling_rate"])
+                self.meter = RateMeter(self.rate_hz)
+            except (TypeError, ValueError):  # a plugin's "Auto", "default": no rate stated
+                pass
         self.display_px = (int(res[0]), int(res[1]))
         if not hasattr(self, "pixels"):
             self.pixels = PixelMap.whole(self.display_px)

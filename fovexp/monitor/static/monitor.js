@@ -48,6 +48,17 @@ function ago(serverTime, t) {
   return d < 1.5 ? "just now" : `${duration(d)} ago`;
 }
 
+// how and when a finished session ended (the view's "end"), in one phrase
+function ending(end, serverTime) {
+  if (!end) return "";
+  let text = end.how || end.state || "ended";
+  if (end.at) {
+    text += ` at ${end.at}`;
+    if (end.time && serverTime - end.time < 3600) text += ` (${ago(serverTime, end.time)})`;
+  }
+  return text;
+}
+
 function setConn(text, cls) {
   const c = $("conn");
   c.textContent = text;
@@ -94,7 +105,8 @@ setInterval(() => {
 
 function sessionItem(s, data, selected) {
   const state = s.status === "running" ? (s.state || "") :
-                s.status === "stopped" ? "not responding" : (s.file_state || s.state || "");
+                s.status === "stopped" ? "not responding" :
+                (s.end && s.end.how) || s.file_state || s.state || "";
   let sub = state;
   if (s.position && s.total) {
     sub = (state === "trial" ? "" : state + " · ") +
@@ -135,7 +147,8 @@ function renderGaze(view) {
   if (!g || !g.t.length) {
     trail.setAttribute("d", "");
     now.setAttribute("visibility", "hidden");
-    $("gaze-info").textContent = "no gaze samples yet";
+    $("gaze-info").textContent = view.status === "running" ? "no gaze samples yet" :
+      "no gaze samples " + (view.status === "finished" ? "at the end" : "when it stopped");
     $("gaze").dataset.newest = "";
     return;
   }
@@ -170,6 +183,11 @@ function renderGaze(view) {
   if (view.status === "running" && view.state === "trial" && t) {
     parts.push(t.blank ? "screen BLACK (gaze check)" : "stimulus shown");
     if (t.gaze_ecc_deg !== null) parts.push(`gaze ${t.gaze_ecc_deg.toFixed(2)}° from the cross`);
+  }
+  if (view.status !== "running") {
+    // the view sends no rates for a run that is not running: the trail is its last seconds
+    parts.push(view.status === "finished" ? "the last seconds before the end" :
+               "the last seconds it wrote");
   }
   if (g.samples_last_s !== null) parts.push(`${g.samples_last_s} samples in the last second`);
   if (invalid) parts.push(`${invalid} without an eye (shown as gaps)`);
@@ -228,10 +246,15 @@ function renderTrial(view, data) {
   let state = view.state || "";
   if (view.text) state += `: “${view.text}”`;
   if (view.since && view.status === "running") state += ` (${ago(data.server_time, view.since)})`;
-  $("state").textContent = state ? (view.status === "running" ? "now: " : "last state: ") + state
-                                  : "";
+  if (view.end) {
+    $("state").textContent = `the session finished: ${ending(view.end, data.server_time)}`;
+  } else {
+    $("state").textContent = state ? (view.status === "running" ? "now: " : "last state: ") +
+                                     state : "";
+  }
+  $("state").dataset.end = view.end ? (view.end.state || "") : "";
   $("eta").textContent = view.status === "running" && view.eta_s !== null ?
-    `ETA ${duration(view.eta_s)}` : (view.ended ? `ended ${view.ended}` : "");
+    `ETA ${duration(view.eta_s)}` : "";
   const tot = view.totals || {};
   const lat = tot.latency_ms || {};
   const bits = [];
@@ -246,9 +269,13 @@ function renderTrial(view, data) {
   if (t && t.rules) {
     rules.replaceChildren(...Object.entries(t.rules).map(([rule, r]) => ruleRow(rule, r, t)));
   } else {
-    rules.replaceChildren(el("p", {text: "no trial on screen yet"}));
+    const none = view.end ? "no trial on screen: the session has ended" :
+                 view.status === "stopped" ? "no trial on screen when it stopped" :
+                 "no trial on screen yet";
+    rules.replaceChildren(el("p", {text: none}));
   }
-  const label = view.state === "trial" ? "the trial on screen" : "the last trial";
+  const label = view.status === "running" && view.state === "trial" ? "the trial on screen" :
+                "the last trial";
   $("rules-note").textContent = (t ? `Figures of ${label} (attempt ${t.attempt + 1}), as ` +
     "fovexp analyze will judge it. " : "") + (view.rules_apply ? "" :
     "Dry run: the analysis applies R11-R13 to participants' trials only; the flags show " +

@@ -38,6 +38,19 @@ def _key(path: Path, key: str) -> str | None:
 
 
 # -- fovexp init ----------------------------------------------------------------------------------
+def test_the_guides_recipe_is_what_init_prints(tmp_path: Path, capsys, monkeypatch) -> None:
+    """docs/STUDY.md's recipe is ``fovexp init lab-study --name lab-validation``'s printed
+    commands to the character (issue 32: .ci/study-walk runs them as printed)."""
+    monkeypatch.chdir(tmp_path)
+    r = cli(capsys, ["init", "lab-study", "--name", "lab-validation"])
+    assert r.returncode == 0, r.stderr
+    printed = r.stdout.split("next:\n", 1)[1].splitlines()
+    guide = (REPO / "docs" / "STUDY.md").read_text().split(
+        "<!-- recipe: fovexp init lab-study --name lab-validation", 1)[1]
+    block = guide.split("\n\n", 1)[0].splitlines()[1:]
+    assert [ln.removeprefix("    ") for ln in block] == [ln.removeprefix("  ") for ln in printed]
+
+
 def test_init_makes_a_study_that_loads_where_it_lands(tmp_path: Path, capsys,
                                                       monkeypatch) -> None:
     monkeypatch.chdir(tmp_path)  # no ./protocols/displays of the clone to fall back on
@@ -63,13 +76,17 @@ def test_init_makes_a_study_that_loads_where_it_lands(tmp_path: Path, capsys,
     assert lp.experiment == "lab-validation" and lp.display.name == "lg-oled55cx"
     assert lp.stimuli.folder == (study / "stimuli").resolve()
     # the next commands: printed and in the README, with the rehearsal's --window
-    rehearsal = ("fovexp run protocols/lab-validation.yaml --participant SIM01 --dry-run "
-                 "--window 3840x2160 --limit-trials 2")
+    # (issue 32) exactly two trials (no practice), into test-results/, not the study's results/
+    rehearsal = ("fovexp run lab-validation --participant SIM01 --dry-run --window 3840x2160 "
+                 "--limit-trials 2 --practice 0 --sim-truth quick --results test-results")
     assert rehearsal in r.stdout and rehearsal in (study / "README.md").read_text()
     # a free display number (-a): without it xvfb-run fails wherever :99 is taken (issue 32)
     assert "xvfb-run -a -s '-screen 0 3840x2160x24' " + rehearsal in r.stdout
+    assert "xvfb-run -a -s '-screen 0 3840x2160x24' fovexp rig check --dry-run --results " \
+           "test-results" in r.stdout
     assert "xvfb-run -s" not in r.stdout + (study / "README.md").read_text()
-    for cmd in ("fovexp stimuli add", "fovexp stimuli check", "fovexp analyze results"):
+    for cmd in ("fovexp stimuli add", "fovexp stimuli check", "fovexp analyze test-results",
+                "# on the rig:", "fovexp analyze results"):
         assert cmd in r.stdout
     marker = yaml.safe_load((study / STUDY_FILE).read_text())
     assert marker["study"] == "lab-validation" and marker["display"] == "lg-oled55cx"

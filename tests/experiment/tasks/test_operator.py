@@ -254,6 +254,10 @@ def test_console_line_per_trial(tmp_path: Path, monkeypatch) -> None:
         assert "blanked 0.0 %" in ln and "dropped" in ln and "gaze-to-flip" in ln
         assert "n/a" not in ln.split("gaze-to-flip")[1]  # latencies were measured
     assert per_trial[-1].endswith("ETA 0 s")
+    # each also said as it starts (issue 32: a 4K dry run's trial can take minutes)
+    starts = [ln for ln in lines if ln.endswith("on screen")]
+    assert [ln.split(":")[0] for ln in starts] == [ln.split(":")[0] for ln in per_trial]
+    assert all(lines.index(a) < lines.index(b) for a, b in zip(starts, per_trial, strict=True))
     assert trial_line(position=2, total=9, practice=False, blanked_fraction=0.125, dropped=3,
                       frames=400, latency_ms=np.array([4.0, 6.0, 20.0]), eta_s=125) == (
         "trial 2/9: blanked 12.5 %, dropped 3/400 frames, gaze-to-flip 6.0 ms (max 20.0), "

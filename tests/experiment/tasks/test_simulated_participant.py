@@ -49,6 +49,29 @@ def test_participant_reaches_noise_free_target(param, lo, hi, step, fine, start)
     assert overshoot >= step - 1e-9  # it overshoots with coarse steps, then corrects
 
 
+@pytest.mark.parametrize(("start", "expected"), [(0.0, 0.04), (1.49, 1.45)])
+def test_quick_participant_confirms_two_steps_from_the_start(start, expected) -> None:
+    """``--sim-truth quick`` (a rehearsal): the target is two wheel steps from the trial's
+    start (towards the range's inside), whatever the truth and its noise, so that a trial
+    renders a handful of steps."""
+    truth = SimTruth.named("quick")
+    assert truth.quick and SimTruth.named("quick") == truth
+    p = SimulatedParticipant(truth, seed=3, speed=4.0, noise_scale=1.0)
+    adj = ValueAdjuster(0.0, 1.5, 0.02, 0.005, start)
+    assert p.begin("blur_rate", "ours", None, None, 0.0, 1.5, 0.02, 0.005,
+                   start=start) == pytest.approx(expected)
+    notches, t = 0, 0.0
+    while t < 30:
+        events = p.poll(t, adj.value, True)
+        if any(isinstance(ev, Key) for ev in events):
+            break
+        for ev in events:
+            adj.apply(ev)
+            notches += 1
+        t += 0.01
+    assert t < 30 and abs(adj.value - expected) <= 0.0025 + 1e-9 and notches <= 7
+
+
 def test_participant_waits_while_blanked() -> None:
     p = SimulatedParticipant(SimTruth(), seed=1, speed=1.0)
     p.begin("f_e", "contrast", 0.34, None, 0, 0.4, 0.02, 0.005)

@@ -1,8 +1,10 @@
-"""ioHub for real (issue 22): its server process with the MouseGaze tracker under Xvfb, the
-pointer moved by the test with xdotool. Samples follow the pointer on PsychoPy's clock; a killed
-server is a lost tracker, started again (or one clear line); a session through it keeps the
-blanking rule and logs what was on screen; a missing plugin and a tracker that is not there
-stop before any window. The conversions without a server: test_iohub_format.py."""
+"""ioHub for real (issue 22): its server process with the MouseGaze tracker under Xvfb (the
+shipped example configuration, issue 32), the pointer moved by the test with xdotool. Samples
+follow the pointer on PsychoPy's clock; a killed server is a lost tracker, started again (or
+one clear line); a session through it keeps the blanking rule and logs what was on screen; a
+missing plugin and a tracker that is not there stop before any window. The conversions
+without a server: test_iohub_format.py; the examples and the checks before the server:
+test_iohub_examples.py."""
 
 from __future__ import annotations
 
@@ -26,20 +28,21 @@ from experiment_helpers import make_workspace, popen_cli, run_cli, xvfb_display 
 pytestmark = [pytest.mark.gui]
 
 LG = load_display("lg-oled55cx")
-#: the MouseGaze configuration, in PsychoPy Builder's form (its ioConfig as YAML)
-MOUSEGAZE = """\
-eyetracker.hw.mouse.EyeTracker:
-  name: tracker
-  runtime_settings:
-    sampling_rate: 250
-  device_timer:
-    interval: 0.004
-  controls:
-    move: [CONTINUOUS]
-    blink: [MIDDLE_BUTTON]
-    saccade_threshold: 0.5
-"""
-RATE_HZ, TIMER_S = 250.0, 0.004
+#: the MouseGaze configuration: the shipped example (``fovexp tracker example mousegaze``), in
+#: PsychoPy Builder's form (its ioConfig as YAML), so that these tests run it through ioHub
+MOUSEGAZE = "example:mousegaze"
+
+
+def _example_rates() -> tuple[float, float]:
+    from fovexp.experiment.trackers.families import load_iohub_config
+
+    cfg = load_iohub_config(MOUSEGAZE)
+    assert cfg.sampling_hz is not None
+    return cfg.sampling_hz, float(cfg.tracker["device_timer"]["interval"])
+
+
+#: the example's nominal rate (Hz) and the server's polling interval of the pointer (s)
+RATE_HZ, TIMER_S = _example_rates()
 
 
 def xdotool(*args: str) -> None:
@@ -49,16 +52,14 @@ def xdotool(*args: str) -> None:
 
 
 @pytest.fixture
-def mousegaze(tmp_path, xvfb_display):  # noqa: F811
+def mousegaze(xvfb_display):  # noqa: F811
     from fovexp.experiment.trackers.families import load_iohub_config
     from fovexp.experiment.trackers.iohub import IoHubGaze
 
-    path = tmp_path / "mousegaze.yaml"
-    path.write_text(MOUSEGAZE)
     made = []
 
     def make(**kw):
-        g = IoHubGaze(load_iohub_config(path), LG, 0, **kw)
+        g = IoHubGaze(load_iohub_config(MOUSEGAZE), LG, 0, **kw)
         made.append(g)
         return g
 
@@ -280,9 +281,8 @@ def _check_logs(folder: Path) -> tuple[dict, object, list]:
 
 
 def _start(ws: Path, pid: str, *extra: str):
-    cfg = _write(ws, "mousegaze.yaml", MOUSEGAZE)
     return popen_cli(["run", "calibration-fe", "--participant", pid, "--dry-run", "--tracker",
-                      "iohub", "--tracker-config", str(cfg), "--practice", "0",
+                      "iohub", "--tracker-config", MOUSEGAZE, "--practice", "0",
                       "--results", str(ws / "results"), *extra], cwd=ws)
 
 
