@@ -483,6 +483,8 @@ def _run_job(job: Job) -> dict[str, Any]:
         if gaze != CENTRE:  # the errors at the reference's gaze (not timed)
             res = enh.enhance(CENTRE, params)
         out.update(_errors(job, res))
+    if cfg.backend == "cpu" and cfg.size == DEFAULT_RESOLUTION:  # the roofline's noise taps
+        out["noise_taps"] = noise_taps(enh, res, job.seed, cfg.impulses)
     if job.paired_counts:  # the reference: its options at the other impulse counts
         ref = Path(job.ref_dir)
         for n in job.paired_counts:
@@ -539,6 +541,98 @@ def _errors(job: Job, res: Any) -> dict[str, Any]:
     return out
 
 
+# ----------------------------------------------------------------------------- CPU roofline
+#: Issue 29's CPU roofline: per stage, the full-resolution float32 planes it must read and write
+#: at the least (an RGB image is 3 planes), whatever its algorithm, as (read, written, what). A
+#: stage's floor is those bytes at the machine's measured bandwidth; the noise's is also its
+#: taps' arithmetic at the measured FP32 rate (:func:`noise_taps`). Stages left out work per
+#: impulse or on grids of 1/64 of the frame and less.
+CPU_TRAFFIC_PLANES: dict[str, tuple[float, float, str]] = {
+    "linear": (3, 3, "the frame in, linear light out"),
+    "foveated": (3, 3, "linear light in, the foveated frame out"),
+    "luma": (3, 1, "RGB in, luminance out"),
+    "luma_blocks": (1, 0, "luminance in, its 8 x 8 block extremes out"),
+    "pyramid": (4 / 3, 1 / 3, "each Gaussian level in, the next out"),
+    "abs_laplacian": (5 / 3, 4 / 3, "G_k-1 and G_k in, |L_k| out (k >= 1)"),
+    "contrast": (1, 1, "luminance in, its change out"),
+    "headroom": (2, 0, "luminance and its change in (the paper's rule), block extremes out"),
+    "noise": (0, 1, "the noise out; its taps' multiply-adds"),
+    "output": (5, 3, "foveated RGB, the contrast change and the noise in, the frame out"),
+}
+#: float32 operations per noise tap: ``out += cr * er - ci * ei`` (two fused multiply-adds)
+NOISE_FLOPS_PER_TAP = 4
+
+
+def machine_rates(copy_mb: int = 400, gemm_n: int = 2048, repeats: int = 5) -> dict[str, float]:
+    """The machine's memory bandwidth and FP32 rate, measured now (medians of ``repeats``):
+    ``bandwidth_gb_s`` = bytes read plus written by a ``copy_mb`` MB ``np.copyto`` (one thread,
+    as issue 29 measured it) per second; ``fp32_gflop_s`` = a float32 ``gemm_n``-square matrix
+    product (BLAS, every core: 2 n^3 operations) per second."""
+    src = np.ones(copy_mb * 2**20 // 4, np.float32)
+    dst = np.empty_like(src)
+    np.copyto(dst, src)  # the pages touched before the timing
+    copies = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        np.copyto(dst, src)
+        copies.append(time.perf_counter() - t0)
+    del src, dst
+    rng = np.random.default_rng(0)
+    a = rng.random((gemm_n, gemm_n), dtype=np.float32)
+    b = rng.random((gemm_n, gemm_n), dtype=np.float32)
+    a @ b
+    gemms = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        a @ b
+        gemms.append(time.perf_counter() - t0)
+    return {"bandwidth_gb_s": 2 * copy_mb * 2**20 / float(np.median(copies)) / 1e9,
+            "fp32_gflop_s": 2 * gemm_n**3 / float(np.median(gemms)) / 1e9,
+            "copy_mb": copy_mb, "gemm_n": gemm_n}
+
+
+def noise_taps(enh: Any, res: Any, seed: int, impulses: int) -> int:
+    """The noise stage's taps on a frame (``res``): every impulse whose K is not 0 adds its
+    kernel's fixed-width rows (``gabor._window``) over its 2 ceil(r) + 1 rows."""
+    from . import gabor
+
+    h, w = res.output.shape[:2]
+    o = enh.options
+    imp = gabor.generate_impulses(w, h, impulses, enh.preset.gabor_a_cpp, seed,
+                                  o.impulse_count, o.weights, o.cell_scale)
+    k = res.map("amplitude")
+    xi = np.clip(np.rint(imp.x_px).astype(np.int64), 0, w - 1)
+    yi = np.clip(np.rint(imp.y_px).astype(np.int64), 0, h - 1)
+    active = int(np.count_nonzero(k[yi, xi] > 0))
+    r = gabor.kernel_radius_px(enh.preset.gabor_a_cpp, o.kernel_truncation)
+    return active * gabor._window(r)[0] * (2 * math.ceil(r) + 1)
+
+
+def roofline_rows(row: dict[str, Any], rates: dict[str, float]) -> list[list[str]]:
+    """Per stage of ``row`` (a CPU configuration): its median time, the bytes it must move,
+    its floor (those bytes at the measured bandwidth; for the noise also its taps at the FP32
+    rate) and the time as a multiple of the floor."""
+    w, h = (int(v) for v in row["resolution"].split("x"))
+    plane = w * h * 4
+    stages = dict((k, float(v)) for k, v in (x.split("=") for x in row["stages_s"].split(";")
+                                              if x))
+    out = []
+    for name, (read, written, what) in CPU_TRAFFIC_PLANES.items():
+        if name not in stages:
+            continue
+        t = stages[name]
+        moved = (read + written) * plane
+        floor = moved / (rates["bandwidth_gb_s"] * 1e9)
+        arith = ""
+        if name == "noise" and row.get("noise_taps"):
+            flops = NOISE_FLOPS_PER_TAP * float(row["noise_taps"])
+            arith = f"{flops / 1e9:.2f} GFLOP"
+            floor = max(floor, flops / (rates["fp32_gflop_s"] * 1e9))
+        out.append([name, what, f"{1e3 * t:.1f}", f"{moved / 1e6:.0f}", arith,
+                    f"{1e3 * floor:.1f}", f"{t / floor:.1f}x" if floor > 0 else "-"])
+    return out
+
+
 # ------------------------------------------------------------------------------------- run
 @dataclass
 class BenchSettings:
@@ -586,6 +680,7 @@ def run_all(s: BenchSettings, on_row: Callable[[list[dict[str, Any]]], None] | N
     rows: list[dict[str, Any]] = []
     ctx = mp.get_context("spawn")
     started = time.perf_counter()
+    info["rates"] = machine_rates()  # the roofline's bandwidth and FP32 rate, in this run
     with tempfile.TemporaryDirectory(prefix="fovexp-bench-") as tmp:
         frames: dict[tuple[int, int], str] = {}
         scaled: dict[str, str] = {}
@@ -643,6 +738,7 @@ def _row(cfg: Config, r: dict[str, Any]) -> dict[str, Any]:
     row["timing"] = r.get("timing", "")
     row["stages_s"] = ";".join(f"{k}={v:.4f}" for k, v in
                                sorted(r.get("stages_s", {}).items(), key=lambda kv: -kv[1]))
+    row["noise_taps"] = r.get("noise_taps", float("nan"))
     row["skipped"] = r.get("skipped", "")
     return row
 
@@ -811,6 +907,28 @@ def write_markdown(rows: list[dict[str, Any]], info: dict[str, Any], path: Path,
                   + ", ".join(x.replace("=", " ") for x in r["stages_s"].split(";")[:10])
                   for r in staged]
         parts += [""]
+    rates = info.get("rates")
+    roof = [r for r in ok if r["backend"] == "cpu" and r["knob"] != "resolution"
+            and r["config"] in (base, "impulses=12") and r["resolution"] == "x".join(
+                str(v) for v in DEFAULT_RESOLUTION)]
+    if rates and roof:
+        parts += [
+            "## CPU roofline (issue 29)", "",
+            f"Measured in this run: memory bandwidth {rates['bandwidth_gb_s']:.1f} GB/s (bytes "
+            f"read plus written by a {rates['copy_mb']} MB `np.copyto`, one thread, median of "
+            f"5), FP32 rate {rates['fp32_gflop_s']:.0f} GFLOP/s (a {rates['gemm_n']}-square "
+            "float32 matrix product, BLAS on every core). A stage's floor is the bytes it "
+            "must move at that bandwidth (the full-resolution float32 planes it reads and "
+            "writes at the least, `CPU_TRAFFIC_PLANES` in fovexp/bench.py); the noise's is "
+            "the larger of that and its taps' multiply-adds at the FP32 rate (every impulse "
+            "with K > 0, its kernel's fixed-width rows). *x floor* = the stage's median time "
+            "over its floor: how far it is from what no implementation can beat on this "
+            "machine. Stages left out work per impulse or on small grids.", ""]
+        for r in roof:
+            parts += [f"{r['config']} ({r['device']}; median {r['median_s']:.3f} s per frame, "
+                      "foveation simulated):", "",
+                      _md_table(["stage", "the least it moves", "ms", "MB", "arithmetic",
+                                 "floor ms", "x floor"], roofline_rows(r, rates)), ""]
     parts += [f"![{p}]({p})" for p in plots] + [""]
     parts += ["Written by `fovexp bench` (fovexp/bench.py); the rows are in bench.csv, the "
               "run's description in bench.json.", ""]

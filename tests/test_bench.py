@@ -160,3 +160,22 @@ def test_a_tiny_run_writes_every_file(tmp_path, capsys):
     for png in ("bench_pareto_rmse.png", "bench_pareto_noise.png"):
         assert (out / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert (out / "bench.json").is_file()
+
+
+def test_the_cpu_roofline_puts_each_stage_against_its_floor() -> None:
+    """Issue 29: a stage's floor is its least traffic at the measured bandwidth; the noise's
+    the larger of that and its taps' arithmetic; stages without a per-pixel model are left
+    out. Values hand-computed: a 100 x 50 frame, one float32 plane = 20 000 bytes."""
+    from fovexp.bench import machine_rates, roofline_rows
+
+    row = {"resolution": "100x50", "stages_s": "contrast=0.0020;noise=0.0100;imp_band=0.1000",
+           "noise_taps": 1e6}
+    rates = {"bandwidth_gb_s": 10.0, "fp32_gflop_s": 100.0}
+    got = {r[0]: r for r in roofline_rows(row, rates)}
+    assert sorted(got) == ["contrast", "noise"]
+    # contrast: 1 plane in, 1 out: 40 kB at 10 GB/s = 4 us; 2 ms is 500 times that
+    assert got["contrast"][2:] == ["2.0", "0", "", "0.0", "500.0x"]
+    # noise: 1 plane out (2 us) or 4e6 FLOP at 100 GFLOP/s (40 us): the arithmetic bounds it
+    assert got["noise"][4:] == ["0.00 GFLOP", "0.0", "250.0x"]
+    small = machine_rates(copy_mb=8, gemm_n=64, repeats=2)
+    assert small["bandwidth_gb_s"] > 0.1 and small["fp32_gflop_s"] > 0.01
