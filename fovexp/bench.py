@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import io
 import json
 import math
 import os
@@ -661,7 +662,7 @@ def run_all(s: BenchSettings, on_row: Callable[[list[dict[str, Any]]], None] | N
     what it measured (``info["interrupted"]`` says so)."""
     import multiprocessing as mp
 
-    from tqdm import tqdm
+    from .progress import progress_bar
 
     if s.repeats < 1 or s.budget_s <= 0:
         raise FovexpError("--repeats must be >= 1 and --budget-s > 0")
@@ -685,8 +686,8 @@ def run_all(s: BenchSettings, on_row: Callable[[list[dict[str, Any]]], None] | N
         frames: dict[tuple[int, int], str] = {}
         scaled: dict[str, str] = {}
         todo = ([reference] if needs_ref else []) + configs
-        bar = tqdm(todo, desc="fovexp bench", unit="config", file=sys.stderr,
-                   disable=not s.progress)
+        bar = progress_bar(todo, desc="fovexp bench", unit="config",
+                           stream=sys.stderr if s.progress else io.StringIO())
         info["configurations"] = len(todo)
         try:
             for cfg in bar:
@@ -923,7 +924,9 @@ def write_markdown(rows: list[dict[str, Any]], info: dict[str, Any], path: Path,
             "the larger of that and its taps' multiply-adds at the FP32 rate (every impulse "
             "with K > 0, its kernel's fixed-width rows). *x floor* = the stage's median time "
             "over its floor: how far it is from what no implementation can beat on this "
-            "machine. Stages left out work per impulse or on small grids.", ""]
+            "machine. Stages left out work per impulse or on small grids. Not modelled: the "
+            "transfer function's power per value in `linear` and `output` (a transcendental, "
+            "not a memory access), and the foveation's blur stack beyond one pass.", ""]
         for r in roof:
             parts += [f"{r['config']} ({r['device']}; median {r['median_s']:.3f} s per frame, "
                       "foveation simulated):", "",
