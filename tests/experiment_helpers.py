@@ -35,16 +35,29 @@ def _free_display() -> int:
     raise RuntimeError("no free X display number")
 
 
+def _die_with_parent() -> None:
+    """In the child before it runs: SIGTERM when the process that started it exits (Linux's
+    PR_SET_PDEATHSIG)."""
+    import ctypes
+    import signal
+
+    ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # 1: PR_SET_PDEATHSIG
+
+
 @contextlib.contextmanager
-def private_xvfb(size: str = "1280x720") -> Iterator[str]:
+def private_xvfb(size: str = "1280x720", outlive_block: bool = False) -> Iterator[str]:
     """A private ``Xvfb`` with one ``size`` screen (24-bit) for the block: its DISPLAY name.
-    Skips when Xvfb is not installed; fails when it does not start."""
+    Skips when Xvfb is not installed; fails when it does not start. With ``outlive_block``
+    the server is not stopped at the block's end but when this process exits: PsychoPy's
+    pyglet keeps its connection to the display open until then, and Xlib ends a process whose
+    server went away with exit status 1 (pytest's, after every test passed)."""
     exe = shutil.which("Xvfb")
     if exe is None:
         pytest.skip("Xvfb is not installed (apt-get install xvfb)")
     n = _free_display()
     proc = subprocess.Popen([exe, f":{n}", "-screen", "0", f"{size}x24", "-nolisten", "tcp"],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            preexec_fn=_die_with_parent if outlive_block else None)
     sock = Path(f"/tmp/.X11-unix/X{n}")
     for _ in range(100):
         if sock.exists() or proc.poll() is not None:
@@ -56,11 +69,12 @@ def private_xvfb(size: str = "1280x720") -> Iterator[str]:
     try:
         yield f":{n}"
     finally:
-        proc.terminate()
-        try:
-            proc.wait(timeout=5)
-        except subprocess.TimeoutExpired:
-            proc.kill()
+        if not outlive_block:
+            proc.terminate()
+            try:
+                proc.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                proc.kill()
 
 
 @pytest.fixture(scope="session")
@@ -70,7 +84,7 @@ def xvfb_display():
     if os.environ.get("DISPLAY"):
         yield os.environ["DISPLAY"]
         return
-    with private_xvfb() as display:
+    with private_xvfb(outlive_block=True) as display:
         os.environ["DISPLAY"] = display
         try:
             yield display
