@@ -98,6 +98,19 @@ def _read_json(path: Path, max_bytes: int) -> tuple[dict[str, Any] | None, str |
     return data, None
 
 
+def _ended_time(info: Mapping[str, Any]) -> float | None:
+    """The session file's ``ended`` (an ISO time stamp) in s since the epoch, or None."""
+    ended = _str(info.get("ended"))
+    if not ended:
+        return None
+    from datetime import datetime
+
+    try:
+        return datetime.fromisoformat(ended).timestamp()
+    except ValueError:
+        return None
+
+
 def _end(live: Mapping[str, Any], info: Mapping[str, Any]) -> dict[str, Any]:
     """How and when a finished session ended: the status file's last write (its final
     ``state``, and ``ended``, or ``since`` in a file written before ``ended`` was), else the
@@ -110,13 +123,8 @@ def _end(live: Mapping[str, Any], info: Mapping[str, Any]) -> dict[str, Any]:
         when = _num(live.get("ended")) or _num(live.get("since"))
     else:
         state = "completed" if info.get("completed") is True else _str(info.get("state"))
-    if when is None and isinstance(info.get("ended"), str):
-        from datetime import datetime
-
-        try:
-            when = datetime.fromisoformat(info["ended"]).timestamp()
-        except ValueError:
-            pass
+    if when is None:
+        when = _ended_time(info)
     at = (time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(when)) if when is not None
           else None)
     return {"state": state, "how": ENDINGS.get(state or "", state), "time": when, "at": at}
@@ -454,17 +462,10 @@ class ResultsView:
         if not html.is_file():
             return {"url": None, "note": f"no report.html in {self.report} yet: run fovexp "
                                          f"analyze {self.root} --out {self.report}"}
-        ended = _str(info.get("ended"))
+        end_t = _ended_time(info)
         note = None
-        if ended:
-            from datetime import datetime
-
-            try:
-                end_t = datetime.fromisoformat(ended).timestamp()
-                if html.stat().st_mtime < end_t:
-                    note = "the report is older than this session: run fovexp analyze again"
-            except ValueError:
-                pass
+        if end_t is not None and html.stat().st_mtime < end_t:
+            note = "the report is older than this session: run fovexp analyze again"
         return {"url": "/report/report.html", "note": note}
 
     # -- every session -------------------------------------------------------------------------

@@ -10,7 +10,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from fovexp import BACKENDS, FovexpError, find_protocol, read_yaml
+from fovexp import BACKENDS, FovexpError, find_protocol
 from fovexp.results.format import TRACKERS
 
 from ..experiment.cli import window_size
@@ -26,12 +26,10 @@ def study_protocol(study: Path) -> Path:
     blur-rate (the study's validation, which ``init`` names after the study: its steps load
     the enhancer most, as the shipped validation's do outside a study), else the first."""
     from fovexp.experiment.protocol.spec import read_protocol
+    from fovexp.experiment.protocol.study import study_protocols
     from fovexp.stimuli.folder import STUDY_FILE
 
-    marker = read_yaml(study / STUDY_FILE, "study file")
-    listed = marker.get("protocols") if isinstance(marker, dict) else None
-    paths = [study / str(p) for p in listed] if isinstance(listed, (dict, list)) else []
-    found = [p for p in paths if p.is_file()]
+    found = study_protocols(study)
     if not found:
         raise FovexpError(f"the study folder {study} lists no protocol file that exists "
                           f"({STUDY_FILE}: protocols); name one with --protocol")

@@ -193,6 +193,17 @@ def init_study(folder: str | Path, sources: list[str] | None = None,
     return study
 
 
+def study_protocols(study: Path) -> list[Path]:
+    """The protocol files the study folder ``study`` lists in its :data:`STUDY_FILE` (the
+    ``protocols`` :func:`init_study` wrote), those that exist, in the listed order."""
+    from fovexp import read_yaml
+
+    marker = read_yaml(study / STUDY_FILE, "study file")
+    listed = marker.get("protocols") if isinstance(marker, dict) else None
+    paths = [study / str(p) for p in listed] if isinstance(listed, (dict, list)) else []
+    return [p for p in paths if p.is_file()]
+
+
 def _size(size: tuple[int, int]) -> str:
     return f"{size[0]}x{size[1]}"
 
