@@ -15,11 +15,13 @@ References
 
 from __future__ import annotations
 
+import math
+
 import numba
 import numpy as np
 
 from ._parallel import power
-from .jit import FASTMATH
+from .jit import FASTMATH, MAGIC_BITS, MAGIC_F64, _bits_as_float64, _float64_bits
 
 #: BT.601 luma weights. The release's Y of YCbCr, normalised as (Y - 16/255) / (219/255), equals
 #: 0.299 R + 0.587 G + 0.114 B (docs/METHOD.md, 5.4); its grey for orientation uses the same
@@ -31,21 +33,114 @@ LUMA_BT601 = LUMA_BT601_F64.astype(np.float32)
 _RELEASE_OFFSET = 0.055
 
 
+# ------------------------------------------------------------------ the transfer's power
+# The power of the transfer function is a polynomial here, not libm's pow: NumPy's pow runs
+# one value at a time (no vector pow without Intel's SVML), and the frame's two transfers
+# were a quarter of its time. log2 from the float's exponent and an odd series in
+# t = (m - 1) / (m + 1) of its mantissa m in [sqrt(1/2), sqrt(2)); exp2 of the fractional part
+# in [-1/2, 1/2] by its Taylor series; in float64, so every float32 result is within one unit
+# in the last place of pow's, and 99.9 % the same (tests/enhancer/test_colour.py). It
+# vectorises (fovexp/jit.py's exact conversions).
+_SQRT2 = math.sqrt(2.0)
+_LN2 = math.log(2.0)
+_LOG2E = 1.0 / _LN2
+_MANTISSA = 0x000FFFFFFFFFFFFF
+_EXPONENT_OF_ONE = 0x3FF0000000000000
+
+
+@numba.njit(cache=True, inline="always", fastmath=FASTMATH, nogil=True)
+def _pow01(v, p):  # pragma: no cover - compiled
+    """``v ** p`` for float64 ``v`` in [0, 1] and ``p`` > 0 (a display's gamma or its
+    inverse), relative error below 1e-10: 0 at 0, exactly 1 at 1."""
+    bits = _float64_bits(v)
+    e = np.float64((bits >> 52) - 1023)
+    m = _bits_as_float64((bits & _MANTISSA) | _EXPONENT_OF_ONE)  # in [1, 2)
+    big = m > _SQRT2
+    m = m * 0.5 if big else m
+    e = e + 1.0 if big else e
+    t = (m - 1.0) / (m + 1.0)  # |t| <= 0.172: ln m = 2 (t + t^3/3 + ...), to t^11
+    t2 = t * t
+    ln_m = 2.0 * t * (1.0 + t2 * (1.0 / 3.0 + t2 * (1.0 / 5.0 + t2 * (
+        1.0 / 7.0 + t2 * (1.0 / 9.0 + t2 * (1.0 / 11.0))))))
+    y = p * (e + ln_m * _LOG2E)  # log2(v ** p)
+    shifted = y + MAGIC_F64  # rounds y to the nearest integer n
+    n = shifted - MAGIC_F64
+    x = (y - n) * _LN2  # |x| <= ln(2) / 2: e^x to x^9
+    poly = 1.0 + x * (1.0 + x * (1.0 / 2.0 + x * (1.0 / 6.0 + x * (1.0 / 24.0 + x * (
+        1.0 / 120.0 + x * (1.0 / 720.0 + x * (1.0 / 5040.0 + x * (
+            1.0 / 40320.0 + x * (1.0 / 362880.0)))))))))
+    two_n = _bits_as_float64((_float64_bits(shifted) - MAGIC_BITS + 1023) << 52)
+    return poly * two_n if v > 0.0 else 0.0
+
+
+@numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
+def _linearize_into(encoded, p, offset, out):  # pragma: no cover - compiled
+    """``out = ((encoded + offset) / (1 + offset)) ** p`` of flat float32 arrays (offset 0:
+    the plain power), in float32 up to the power, as NumPy computed it."""
+    n = encoded.size
+    parts = 64  # no reductions: the thread count does not change a value
+    scale = np.float32(1.0 / (1.0 + offset))
+    off = np.float32(offset)
+    for k in numba.prange(parts):
+        for i in range(n * k // parts, n * (k + 1) // parts):
+            u = encoded[i]
+            if offset != 0.0:
+                u = np.float32(u + off) * scale
+            out[i] = np.float32(_pow01(np.float64(u), p))
+    return out
+
+
 def linearize(
     encoded: np.ndarray, gamma: float, transfer: str = "power", dtype: type = np.float32
 ) -> np.ndarray:
     """Display-encoded values in [0, 1] to linear light in [0, 1] (float32, or ``dtype``).
 
     ``power``: ``v ** gamma`` (the display profile's gamma). ``release``: the release's
-    ``((v + 0.055) / 1.055) ** 2.2`` (docs/METHOD.md, 5.1).
+    ``((v + 0.055) / 1.055) ** 2.2`` (docs/METHOD.md, 5.1). Float32 through the polynomial
+    power (within one unit in the last place of pow's); float64 through NumPy's pow.
     """
     scalar = np.dtype(dtype).type
+    src = np.ascontiguousarray(encoded, dtype=dtype)
+    offset = _RELEASE_OFFSET if transfer == "release" else 0.0
+    if scalar is np.float32:
+        out = np.empty(src.shape, np.float32)
+        _linearize_into(src.reshape(-1), np.float64(np.float32(gamma)), offset,
+                        out.reshape(-1))
+        return out
     if transfer != "release":  # straight from the input: no copy
-        return power(np.ascontiguousarray(encoded, dtype=dtype), scalar(gamma))
-    out = np.array(encoded, dtype=dtype)  # a copy: worked on in place below
+        return power(src, scalar(gamma))
+    out = np.array(src, dtype=dtype)  # a copy: worked on in place below
     out += scalar(_RELEASE_OFFSET)
     out *= scalar(1.0 / (1.0 + _RELEASE_OFFSET))
     return power(out, scalar(gamma), out)
+
+
+@numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
+def _encode_into(img, a, b, n_grey, p, offset, out):  # pragma: no cover - compiled
+    """:func:`encode` of float32 (H, W, C) ``img`` in one pass: clip(img + a + b, 0, 1) (the
+    first ``n_grey`` of the grey (H, W) images ``a``, ``b`` added to every channel), to the
+    power ``p``, then the release's offset (``offset`` > 0) and a clip. Each row is clipped
+    into a row of ``out`` first, then raised to the power as one flat run (it vectorises)."""
+    h, w, c = img.shape
+    lo, hi = np.float32(0.0), np.float32(1.0)
+    gain, off = np.float32(1.0 + offset), np.float32(offset)
+    for y in numba.prange(h):
+        row = out[y].reshape(-1)
+        for x in range(w):
+            g = np.float32(0.0)
+            if n_grey == 2:
+                g = a[y, x] + b[y, x]
+            elif n_grey == 1:
+                g = a[y, x]
+            for ch in range(c):
+                v = img[y, x, ch] + g if n_grey else img[y, x, ch]
+                row[x * c + ch] = min(max(v, lo), hi)
+        for i in range(w * c):
+            e = np.float32(_pow01(np.float64(row[i]), p))
+            if offset != 0.0:
+                e = min(max(e * gain - off, lo), hi)
+            row[i] = e
+    return out
 
 
 @numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
@@ -64,22 +159,32 @@ def encode(
 ) -> np.ndarray:
     """Inverse of :func:`linearize`, after adding up to two grey (H, W) images (the contrast
     change, the noise) to every channel; values outside [0, 1] are clipped first (a display
-    shows nothing else). One pass adds and clips, then NumPy's vectorised power (on
-    threads). Float32, or float64 when ``linear`` is."""
+    shows nothing else). Float32 in one pass (the add, the clip and the polynomial power of
+    :func:`linearize`); float64 when ``linear`` is, through NumPy's pow."""
     lin = np.asarray(linear)
     if lin.dtype != np.float64:
         lin = lin.astype(np.float32, copy=False)
     dtype = lin.dtype
     scalar = dtype.type
+    if len(grey) > 2:
+        raise ValueError("encode adds at most two grey images")
     out = np.empty(lin.shape, dtype=dtype)
+    three = lin.ndim == 3
+    if dtype == np.float32:
+        # contiguous: on strided views the compiled loops measured 7x slower than a copy
+        ga = [np.ascontiguousarray(g, dtype=dtype) for g in grey]
+        zero = np.zeros((1, 1), dtype)
+        a, b = (ga + [zero, zero])[:2]
+        # as (H, W, C): grey (H, W) with one channel, any other shape as one row
+        hwc = lin.shape if three else lin.shape + (1,) if lin.ndim == 2 else (1, lin.size, 1)
+        _encode_into(np.ascontiguousarray(lin).reshape(hwc), a, b, len(ga),
+                     np.float64(np.float32(1.0 / gamma)),
+                     _RELEASE_OFFSET if transfer == "release" else 0.0, out.reshape(hwc))
+        return out
     if grey:
-        if len(grey) > 2:
-            raise ValueError("encode adds at most two grey images")
-        # contiguous: on strided views the compiled loop measured 7x slower than a copy
         a = np.ascontiguousarray(grey[0], dtype=dtype)
         b = (np.ascontiguousarray(grey[1], dtype=dtype) if len(grey) == 2
              else np.zeros(a.shape, dtype))
-        three = lin.ndim == 3
         _add_grey_clip(np.ascontiguousarray(lin if three else lin[..., None]), a, b,
                        out if three else out[..., None])
     else:

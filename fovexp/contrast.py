@@ -40,6 +40,7 @@ References
 from __future__ import annotations
 
 import math
+import threading
 
 import numba
 import numpy as np
@@ -47,7 +48,7 @@ import numpy as np
 from ._parallel import interleave
 from .errors import FovexpError
 from .foveation import SigmaOnBlocks, _float_array, per_pixel_sigma
-from .jit import FASTMATH
+from .jit import FASTMATH, MAGIC_EXACT_BELOW, int64_to_float64, rint_to_int64
 from .pyramids import FLAT_BLOCK_LEVEL, blocks_reaching, level_scale
 
 #: Box-filter width per integer blur level (docs/METHOD.md, 5.3): level k averages ceil(4 k) px.
@@ -79,13 +80,17 @@ _INT64_MAX = 2**63 - 1
 
 @numba.njit(cache=True, inline="always", fastmath=FASTMATH, nogil=True)
 def _fixed(v):  # pragma: no cover - compiled
-    """``v`` in the table's fixed point: round(v 2**36) (to nearest, ties to even)."""
-    return np.int64(np.rint(np.float64(v) * _SAT_SCALE))
+    """``v`` in the table's fixed point: round(v 2**36) (to nearest, ties to even), exact for
+    the values :func:`check_sat_fits` admits."""
+    return rint_to_int64(np.float64(v) * _SAT_SCALE)
 
 
 @numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
-def _sat_into(img, pad, y0, y1, x0, x1, s):  # pragma: no cover - compiled
-    """:func:`_sat`, written into ``s`` ((y1 - y0 + 1, x1 - x0 + 1) int64)."""
+def _sat_into(img, pad, y0, y1, x0, x1, s, row_max, parts):  # pragma: no cover - compiled
+    """:func:`_sat`, written into ``s`` ((y1 - y0 + 1, x1 - x0 + 1) int64); each padded row's
+    largest value into ``row_max`` (y1 - y0), for :func:`check_sat_fits`. The column sums
+    go in ``parts`` runs of columns (the thread count: a kernel that asks Numba for it is
+    not cached)."""
     h, w = img.shape
     hp, wp = y1 - y0, x1 - x0
     # every entry past the leading zero row and column is written below: no memset of the
@@ -98,31 +103,65 @@ def _sat_into(img, pad, y0, y1, x0, x1, s):  # pragma: no cover - compiled
     for y in numba.prange(hp):  # row prefix sums, rows in parallel
         sy = _symmetric(y0 + y - pad, h)
         run = np.int64(0)
+        top = -np.inf
         for x in range(wp):
-            run += _fixed(img[sy, cols[x]])
+            v = img[sy, cols[x]]
+            top = max(top, v)
+            run += _fixed(v)
             s[y + 1, x + 1] = run
-    nblk = (wp + 63) // 64
-    for b in numba.prange(nblk):  # then column sums, blocks of columns in parallel
-        x0 = b * 64 + 1
-        x1 = min(x0 + 64, wp + 1)
+        row_max[y] = top
+    # then column sums, row after row in one contiguous run of columns per thread (blocks of
+    # 64 columns, each walked down its rows, measured 2-3x slower: a stride of a row per add)
+    for p in numba.prange(parts):
+        a = 1 + wp * p // parts
+        b = 1 + wp * (p + 1) // parts
         for y in range(1, hp + 1):
-            for x in range(x0, x1):
+            for x in range(a, b):
                 s[y, x] += s[y - 1, x]
     return s
 
 
-def _sat(img: np.ndarray, pad: int, y0: int, y1: int, x0: int, x1: int) -> np.ndarray:
+#: The summed-area table of the last frame of each thread, kept: a table in fresh pages cost
+#: several ms more than one written again (fovexp/jit.py), and a frame needs one.
+_SCRATCH = threading.local()
+
+
+def _table(rows: int, cols: int) -> np.ndarray:
+    """An (rows, cols) int64 array for a summed-area table: this thread's kept one, grown
+    when too small."""
+    buf = getattr(_SCRATCH, "sat", None)
+    if buf is None or buf.size < rows * cols:
+        buf = _SCRATCH.sat = np.empty(rows * cols, np.int64)
+    return buf[: rows * cols].reshape(rows, cols)
+
+
+def _sat(
+    img: np.ndarray, pad: int, y0: int, y1: int, x0: int, x1: int,
+) -> tuple[np.ndarray, float]:
     """Exact summed-area table (int64, leading zero row and column) of a grey image in fixed
     point (:func:`_fixed`), padded by ``pad`` pixels with symmetric borders
     (:func:`_symmetric`), over rows [y0, y1) and columns [x0, x1) of the padded image (the
-    sums start there: the boxes inside it are the same integers)."""
-    return _sat_into(img, pad, y0, y1, x0, x1, np.empty((y1 - y0 + 1, x1 - x0 + 1), np.int64))
+    sums start there: the boxes inside it are the same integers). The table is this thread's
+    scratch (:func:`_table`): valid until its next call. Also the largest value it sums,
+    found on the way; refuses what :func:`check_sat_fits` refuses."""
+    row_max = np.empty(y1 - y0, img.dtype)
+    sat = _sat_into(img, pad, y0, y1, x0, x1, _table(y1 - y0 + 1, x1 - x0 + 1), row_max,
+                    numba.get_num_threads())
+    largest = float(row_max.max()) if row_max.size else 0.0
+    check_sat_fits(img.shape, pad, largest)
+    return sat, largest
 
 
 def check_sat_fits(shape: tuple[int, int], pad: int, max_value: float) -> None:
     """Refuse a frame whose summed-area table would overflow int64 (see
-    :data:`SAT_FRACTION_BITS`): one clear error rather than wrong sums."""
+    :data:`SAT_FRACTION_BITS`), or whose values the fixed point cannot hold exactly
+    (``2**51`` in steps of ``2**-36``: 32768): one clear error rather than wrong sums."""
     hp, wp = int(shape[0]) + 2 * pad, int(shape[1]) + 2 * pad
+    if not max_value * _SAT_SCALE < MAGIC_EXACT_BELOW:
+        raise FovexpError(
+            f"luminance {max_value:g} is too large for the contrast stage's exact sums "
+            f"(at most {MAGIC_EXACT_BELOW / _SAT_SCALE:g}; linear light is at most 1)"
+        )
     if hp * wp * max(float(max_value), 1.0) * _SAT_SCALE >= _INT64_MAX:
         raise FovexpError(
             f"a {shape[1]}x{shape[0]} frame is too large for the contrast stage's exact sums "
@@ -131,55 +170,84 @@ def check_sat_fits(shape: tuple[int, int], pad: int, max_value: float) -> None:
         )
 
 
-@numba.njit(cache=True, fastmath=FASTMATH, inline="always", nogil=True)
-def _pixel_change(img, sigma, sat, y, x, oy, ox, pad, f_e):  # pragma: no cover - compiled
-    """The change of pixel (y, x): per integer level ``k`` of the two bracketing its sigma,
-    ``(1 - f_e (1 + k)) (avg_k - in)``, weighted by the linear interpolation; 0 where
-    sigma = 0. ``sat`` starts at row ``oy``, column ``ox`` of the padded image. A box that
-    is one constant gives exactly 0 (an integer difference of 0)."""
-    s = sigma[y, x]
-    if s <= 0.0:
-        return 0.0
-    k0 = int(s)
-    t = np.float64(s) - k0
-    qv = _fixed(img[y, x])
-    acc = 0.0
-    for j in range(2):
-        k = k0 + j
-        if k == 0:  # width 0: the pixel itself, no change
-            continue
-        wgt = (1.0 - t) if j == 0 else t
-        # width n = box_width_px(k) (k is an integer), MATLAB anchoring:
-        # [x - floor((n - 1) / 2), x + ceil((n - 1) / 2)]
-        n = BOX_WIDTH_PX_PER_LEVEL * k
-        ya = y + pad - (n - 1) // 2 - oy
-        xa = x + pad - (n - 1) // 2 - ox
-        yb = ya + n
-        xb = xa + n
-        box = sat[yb, xb] - sat[ya, xb] - sat[yb, xa] + sat[ya, xa]
-        diff = box - n * n * qv  # exact: n^2 (avg - in), in fixed point
-        acc += wgt * (1.0 - f_e * (1.0 + k)) * (np.float64(diff) / (n * n))
-    return acc * _SAT_STEP
+def _box_sums_exact_as_float(pad: int, max_value: float) -> bool:
+    """Whether every box sum (and its difference from ``n^2`` times the pixel) converts to
+    float64 by :func:`fovexp.jit.int64_to_float64`: below ``2**51`` for the widest box
+    (``2 pad - 2`` px, :func:`sat_pad_px`). Otherwise the kernels convert the slow way."""
+    n = 2 * pad
+    return n * n * max(float(max_value), 1.0) * _SAT_SCALE < MAGIC_EXACT_BELOW
+
+
+@numba.njit(cache=True, inline="always", fastmath=FASTMATH, nogil=True)
+def _to_float(i, magic):  # pragma: no cover - compiled
+    return int64_to_float64(i) if magic else np.float64(i)
+
+
+@numba.njit(cache=True, fastmath=FASTMATH, nogil=True)
+def _row_change(img, sigma, sat, y, xs, xe, oy, ox, pad, f_e, add_input, magic, out):
+    # pragma: no cover - compiled
+    """The change of pixels [xs, xe) of row ``y``: per integer level ``k`` of the two
+    bracketing a pixel's sigma, ``(1 - f_e (1 + k)) (avg_k - in)``, weighted by the linear
+    interpolation; 0 where sigma = 0. Written into ``out`` (plus the input where
+    ``add_input``). ``sat`` starts at row ``oy``, column ``ox`` of the padded image. A box
+    that is one constant gives exactly 0: ``box - n^2 q`` is an integer difference of 0.
+
+    The pixels go in runs of one integer level (sigma changes slowly along a row): within a
+    run both levels' box widths, table rows and weights are fixed, the box corners are
+    contiguous in memory, and the loop vectorises (``magic``: the int64 to float64
+    conversion is :func:`fovexp.jit.int64_to_float64`)."""
+    x = xs
+    while x < xe:
+        k0 = int(sigma[y, x])
+        r = x + 1
+        while r < xe and int(sigma[y, r]) == k0:
+            r += 1
+        # level k0 + 1; level k0 too unless it is 0 (width 0: the pixel itself, no change)
+        # width n = box_width_px(k), MATLAB anchoring: [x - floor((n - 1) / 2), x + ceil(...)]
+        n1 = BOX_WIDTH_PX_PER_LEVEL * (k0 + 1)
+        c1 = (1.0 - f_e * (1.0 + (k0 + 1))) / (n1 * n1)
+        a1 = y + pad - (n1 - 1) // 2 - oy
+        top1, bottom1 = sat[a1], sat[a1 + n1]
+        o1 = pad - (n1 - 1) // 2 - ox
+        nn1 = np.float64(n1 * n1)
+        n0 = BOX_WIDTH_PX_PER_LEVEL * max(k0, 1)
+        c0 = (1.0 - f_e * (1.0 + k0)) / (n0 * n0) if k0 > 0 else 0.0
+        a0 = y + pad - (n0 - 1) // 2 - oy
+        top0, bottom0 = sat[a0], sat[a0 + n0]
+        o0 = pad - (n0 - 1) // 2 - ox
+        nn0 = np.float64(n0 * n0)
+        for i in range(x, r):
+            s = np.float64(sigma[y, i])
+            t = s - k0
+            v = img[y, i]
+            q = np.rint(np.float64(v) * _SAT_SCALE)  # _fixed(v), as a float64: exact
+            # n^2 (avg - in) in fixed point: exact in float64 (integers below 2**53)
+            xa, xb = i + o1, i + o1 + n1
+            d1 = _to_float(bottom1[xb] - top1[xb] - bottom1[xa] + top1[xa], magic) - nn1 * q
+            xa, xb = i + o0, i + o0 + n0
+            d0 = _to_float(bottom0[xb] - top0[xb] - bottom0[xa] + top0[xa], magic) - nn0 * q
+            # from +0.0, as a sum: a flat box's change is +0.0, never -0.0 (the skipped blocks')
+            change = (0.0 + (1.0 - t) * c0 * d0 + t * c1 * d1) * _SAT_STEP if s > 0.0 else 0.0
+            out[y, i] = (np.float64(v) + change) if add_input else change
+        x = r
 
 
 @numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
-def _change(img, sigma, sat, oy, ox, pad, f_e, add_input, out):  # pragma: no cover - compiled
-    """:func:`_pixel_change` of every pixel (plus the input where ``add_input``), written
-    into ``out`` (img's shape)."""
+def _change(img, sigma, sat, oy, ox, pad, f_e, add_input, magic, out):
+    # pragma: no cover - compiled
+    """:func:`_row_change` of every pixel, written into ``out`` (img's shape)."""
     h, w = img.shape
     for y in numba.prange(h):
-        for x in range(w):
-            change = _pixel_change(img, sigma, sat, y, x, oy, ox, pad, f_e)
-            out[y, x] = (np.float64(img[y, x]) + change) if add_input else change
+        _row_change(img, sigma, sat, y, 0, w, oy, ox, pad, f_e, add_input, magic, out)
     return out
 
 
 @numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
-def _change_blocks(img, sigma, sat, oy, ox, pad, f_e, flat, shift, out):  # pragma: no cover
-    """:func:`_pixel_change` of the pixels whose ``2**shift`` square block ``flat`` does not
+def _change_blocks(img, sigma, sat, oy, ox, pad, f_e, flat, shift, magic, out):
+    # pragma: no cover - compiled
+    """:func:`_row_change` of the pixels whose ``2**shift`` square block ``flat`` does not
     mark, written into ``out`` (zeros: the others' boxes are one constant, their change is
-    0), a run of consecutive blocks at a time. (A separate loop: with the block test, the
-    loop over all pixels measured 35 % slower.)"""
+    0), a run of consecutive blocks at a time."""
     h, w = img.shape
     nbx = flat.shape[1]
     # rows in chunks of 8 (consecutive rows share the table's rows), the chunks interleaved:
@@ -196,11 +264,11 @@ def _change_blocks(img, sigma, sat, oy, ox, pad, f_e, flat, shift, out):  # prag
             if flat[by, bx]:
                 bx += 1
                 continue
-            b0 = bx  # a run of blocks to compute: one loop over its pixels, as _change's
+            b0 = bx  # a run of blocks to compute
             while bx < nbx and not flat[by, bx]:
                 bx += 1
-            for x in range(b0 << shift, min(bx << shift, w)):
-                out[y, x] = _pixel_change(img, sigma, sat, y, x, oy, ox, pad, f_e)
+            _row_change(img, sigma, sat, y, b0 << shift, min(bx << shift, w), oy, ox, pad,
+                        f_e, False, magic, out)
     return out
 
 
@@ -218,9 +286,9 @@ def _enhance_channels(img: np.ndarray, sigma: np.ndarray, max_sigma: float, f_e:
     h, w = img.shape[:2]
     for ch in range(img.shape[2]):
         plane = np.ascontiguousarray(img[..., ch])
-        check_sat_fits(plane.shape, pad, float(plane.max()))
-        sat = _sat(plane, pad, 0, h + 2 * pad, 0, w + 2 * pad)
-        out[..., ch] = _change(plane, sigma, sat, 0, 0, pad, f_e, True,
+        sat, largest = _sat(plane, pad, 0, h + 2 * pad, 0, w + 2 * pad)
+        magic = _box_sums_exact_as_float(pad, largest)
+        out[..., ch] = _change(plane, sigma, sat, 0, 0, pad, f_e, True, magic,
                                np.empty(plane.shape, plane.dtype))
     return out
 
@@ -286,12 +354,13 @@ def _change_outside(
     """The change of every pixel outside the level-3 blocks ``flat`` marks (0 there); boxes up
     to level ``floor(max_sigma) + 1``."""
     pad = sat_pad_px(max_sigma)
-    check_sat_fits(img.shape, pad, float(img.max()))
     h, w = img.shape
     f_e = np.float64(f_e)
     if flat is None or not flat.any():  # nothing to leave out
-        return _change(img, sigma, _sat(img, pad, 0, h + 2 * pad, 0, w + 2 * pad), 0, 0, pad,
-                       f_e, False, np.empty(img.shape, img.dtype))
+        sat, largest = _sat(img, pad, 0, h + 2 * pad, 0, w + 2 * pad)
+        magic = _box_sums_exact_as_float(pad, largest)
+        return _change(img, sigma, sat, 0, 0, pad, f_e, False, magic,
+                       np.empty(img.shape, img.dtype))
     # the table only where the boxes of the pixels computed reach: their bounding box, and
     # pad around it (in the padded image's coordinates, [y_lo, y_hi + 2 pad])
     block = level_scale(FLAT_BLOCK_LEVEL)
@@ -300,8 +369,9 @@ def _change_outside(
         return np.zeros(img.shape, dtype=img.dtype)
     y0, y1 = min(rows[0] * block, h), min((rows[-1] + 1) * block, h) + 2 * pad
     x0, x1 = min(cols[0] * block, w), min((cols[-1] + 1) * block, w) + 2 * pad
-    sat = _sat(img, pad, y0, y1, x0, x1)
+    sat, largest = _sat(img, pad, y0, y1, x0, x1)
+    magic = _box_sums_exact_as_float(pad, largest)
     # NumPy's zeros: the flat blocks' pages are never written (calloc)
     out = np.zeros(img.shape, dtype=img.dtype)
-    _change_blocks(img, sigma, sat, y0, x0, pad, f_e, flat, FLAT_BLOCK_LEVEL, out)
+    _change_blocks(img, sigma, sat, y0, x0, pad, f_e, flat, FLAT_BLOCK_LEVEL, magic, out)
     return out

@@ -106,23 +106,41 @@ def _sigma_points(ecc, ppd, blur_rate, fovea, single, out):  # pragma: no cover 
         out[i] = _sigma_at(ecc[i], ppd[i], blur_rate, fovea, single)
 
 
+@numba.njit(cache=True, nogil=True, fastmath=FASTMATH, error_model="numpy")
+def _exact_terms_row(ux, uy, vx, vy, d, pitch, x0, x1, ecc, ppd):  # pragma: no cover
+    """The float32 eccentricity and ppd maps' values (eccentricity_and_ppd_maps) of the
+    pixels [x0, x1) of the row at ``uy``, into ``ecc`` and ``ppd`` from index 0. A loop of
+    its own: it vectorises (geometry._atan2_upper), where the sigma formula's float32
+    steps kept the loop they shared scalar (measured 4x slower)."""
+    for x in range(x0, x1):
+        ecc[x - x0] = np.float32(_angle_deg(ux[x], uy, vx, vy, d))
+        ppd[x - x0] = np.float32(_ppd_at(ux[x], uy, d, pitch))
+
+
 @numba.njit(parallel=True, cache=True, nogil=True, fastmath=FASTMATH)
 def _exact_sigma_blocks(
     ux, uy, vx, vy, d, pitch, blur_rate, fovea, need, shift, out
 ):  # pragma: no cover - compiled
     h, w = uy.shape[0], ux.shape[0]
     stride = interleave(h)  # the blocks needed may be all in one part of the frame
+    nbx = need.shape[1]
     for i in numba.prange(h):
         y = (i * stride) % h
         by = y >> shift
-        for bx in range(need.shape[1]):
+        ecc = np.empty(w, np.float32)
+        ppd = np.empty(w, np.float32)
+        bx = 0
+        while bx < nbx:  # runs of consecutive blocks needed
             if not need[by, bx]:
+                bx += 1
                 continue
-            for x in range(bx << shift, min((bx + 1) << shift, w)):
-                # the float32 eccentricity and ppd maps' values (eccentricity_and_ppd_maps)
-                e = np.float32(_angle_deg(ux[x], uy[y], vx, vy, d))
-                p = np.float32(_ppd_at(ux[x], uy[y], d, pitch))
-                out[y, x] = _sigma_at(e, p, blur_rate, fovea, True)
+            b0 = bx
+            while bx < nbx and need[by, bx]:
+                bx += 1
+            x0, x1 = b0 << shift, min(bx << shift, w)
+            _exact_terms_row(ux, uy[y], vx, vy, d, pitch, x0, x1, ecc, ppd)
+            for x in range(x0, x1):
+                out[y, x] = _sigma_at(ecc[x - x0], ppd[x - x0], blur_rate, fovea, True)
 
 
 def sigma_on_blocks(

@@ -156,7 +156,7 @@ def test_the_contrast_change_is_exactly_zero_on_flat_boxes_and_the_sums_are_exac
     assert np.abs(change[:, 130:]).max() > 1e-3
     # the table's sums are integers: a box from it is the box's own sum of fixed-point values
     pad = contrast.sat_pad_px(3.6)
-    sat = contrast._sat(grey, pad, 0, grey.shape[0] + 2 * pad, 0, grey.shape[1] + 2 * pad)
+    sat, _ = contrast._sat(grey, pad, 0, grey.shape[0] + 2 * pad, 0, grey.shape[1] + 2 * pad)
     q = np.rint(np.pad(grey.astype(np.float64), pad, mode="symmetric") * 2.0**36).astype(
         np.int64)
     ya, xa, n = 17, 33, 16
