@@ -210,17 +210,46 @@ def _abs_laplacian_tiles(fine, coarse, need, tile, out):  # pragma: no cover - c
             _expand_row(coarse, y, ca, cb, row)
             for x in range(xa, xb):
                 diff[y - ya, x - xa] = abs(fine[y, x] - _expand_at(row, x, wc))
+        # columns whose 3 x 3 window lies inside the image: no clamping, a loop that
+        # vectorises; the image's first and last column and row take the clamped one
+        xi0, xi1 = max(x0, 1), min(x1, w - 1)
         for y in range(y0, y1):
+            inner = 0 < y < h - 1
             for x in range(x0, x1):
-                # the sum starts from its first term (0 + a == a), in the dtype of the image
-                acc = diff[max(y - 1, 0) - ya, max(x - 1, 0) - xa]
-                for dy in range(-1, 2):
-                    yy = min(max(y + dy, 0), h - 1) - ya
-                    for dx in range(-1, 2):
-                        if dy != -1 or dx != -1:
-                            acc += diff[yy, min(max(x + dx, 0), w - 1) - xa]
-                out[y, x] = acc / _NINE
+                if inner and xi0 <= x < xi1:
+                    continue
+                out[y, x] = _mean3x3_clamped(diff, y, x, ya, xa, h, w)
+            if inner:
+                r0, r1, r2 = diff[y - 1 - ya], diff[y - ya], diff[y + 1 - ya]
+                for x in range(xi0, xi1):
+                    c = x - xa
+                    # the clamped loop's terms in its order (float addition is not
+                    # associative: the same order gives the same bits)
+                    acc = r0[c - 1]
+                    acc += r0[c]
+                    acc += r0[c + 1]
+                    acc += r1[c - 1]
+                    acc += r1[c]
+                    acc += r1[c + 1]
+                    acc += r2[c - 1]
+                    acc += r2[c]
+                    acc += r2[c + 1]
+                    out[y, x] = acc / _NINE
     return out
+
+
+@numba.njit(cache=True, inline="always", fastmath=FASTMATH, nogil=True)
+def _mean3x3_clamped(diff, y, x, ya, xa, h, w):  # pragma: no cover - compiled
+    """The 3 x 3 mean of the difference at (y, x), borders replicated (``diff`` starts at
+    row ``ya``, column ``xa`` of the image)."""
+    # the sum starts from its first term (0 + a == a), in the dtype of the image
+    acc = diff[max(y - 1, 0) - ya, max(x - 1, 0) - xa]
+    for dy in range(-1, 2):
+        yy = min(max(y + dy, 0), h - 1) - ya
+        for dx in range(-1, 2):
+            if dy != -1 or dx != -1:
+                acc += diff[yy, min(max(x + dx, 0), w - 1) - xa]
+    return acc / _NINE
 
 
 def pyramid_depth(shape: tuple[int, int], levels: int) -> int:
