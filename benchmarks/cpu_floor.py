@@ -85,7 +85,10 @@ def _time_case(image: np.ndarray, foveated: bool, impulses: int, still: bool,
         if j >= 2:
             times.append(elapsed)
             stages.append(dict(res.timings_s))
-    return {"times_s": times, "stages_s": stages}
+    from fovexp.bench import noise_taps
+
+    return {"times_s": times, "stages_s": stages,
+            "noise_taps": noise_taps(enh, res, res.params.seed, impulses)}
 
 
 CASES = {
@@ -212,6 +215,7 @@ def main() -> int:
                     slot = timed[tree_name].setdefault(case, {"times_s": [], "stages_s": []})
                     slot["times_s"] += v["times_s"]
                     slot["stages_s"] += v["stages_s"]
+                    slot["noise_taps"] = v["noise_taps"]
                 cli[tree_name] += _cli_times(tree, args.cli_repeats, work)
         outputs = {}
         for tree_name, tree in trees.items():
@@ -220,8 +224,12 @@ def main() -> int:
         comparison = (compare_outputs(outputs["baseline"], outputs["current"])
                       if "baseline" in trees else [])
     info["load_after"] = os.getloadavg()
+    from fovexp.bench import machine_rates
+
+    info["rates"] = machine_rates()
     summary = summarise(timed, cli)
-    record = {"info": info, "summary": summary, "comparison": comparison}
+    record = {"info": info, "summary": summary, "comparison": comparison,
+              "roofline": roofline(timed, info["rates"])}
     (args.out / "cpu_floor.json").write_text(json.dumps(record, indent=1) + "\n")
     (args.out / "CPU_FLOOR.md").write_text(markdown(record))
     print((args.out / "CPU_FLOOR.md").read_text())
@@ -241,6 +249,22 @@ def summarise(timed: dict[str, dict[str, dict]], cli: dict[str, list[float]]) ->
         rows["cli"] = {"median_s": _median(cli[tree]), "frames": len(cli[tree]),
                        "stages_ms": {}}
         out[tree] = rows
+    return out
+
+
+def roofline(timed: dict[str, dict[str, dict]], rates: dict) -> dict[str, list[list[str]]]:
+    """Each stage of the current tree's already-foveated frames against its floor
+    (:func:`fovexp.bench.roofline_rows`, the machine's rates measured in this run)."""
+    from fovexp.bench import roofline_rows
+
+    out = {}
+    for case in ("foveated-12", "foveated-64", "full-12"):
+        v = timed["current"][case]
+        names = sorted({k for s in v["stages_s"] for k in s})
+        med = {k: _median([s.get(k, 0.0) for s in v["stages_s"]]) for k in names}
+        row = {"resolution": "3840x2160", "noise_taps": v["noise_taps"],
+               "stages_s": ";".join(f"{k}={t}" for k, t in med.items())}
+        out[case] = roofline_rows(row, rates)
     return out
 
 
@@ -302,6 +326,16 @@ def markdown(record: dict) -> str:
               f"- noise at 64 impulses {noise_ms:.1f} ms, target "
               f"{1000 * TARGET_NOISE_64_S:.0f}: {_verdict(noise_ms <= 1000 * TARGET_NOISE_64_S)}",
               ""]
+    rates = info["rates"]
+    lines += ["## Each stage against its floor (current)", "",
+              f"Measured in this run: memory bandwidth {rates['bandwidth_gb_s']:.1f} GB/s, FP32 "
+              f"{rates['fp32_gflop_s']:.0f} GFLOP/s (fovexp.bench.machine_rates); floors as in "
+              "BENCH.md's CPU roofline (fovexp.bench.CPU_TRAFFIC_PLANES).", ""]
+    for case, rows in record["roofline"].items():
+        lines += [f"{case}:", "", "| stage | the least it moves | ms | MB | arithmetic | "
+                  "floor ms | x floor |", "|---|---|---|---|---|---|---|"]
+        lines += ["| " + " | ".join(r) + " |" for r in rows]
+        lines.append("")
     if comparison:
         worst = max(r["max_codes"] for r in comparison)
         lines += ["## The output against the baseline's", "",

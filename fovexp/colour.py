@@ -82,11 +82,14 @@ def _linearize_into(encoded, p, offset, out):  # pragma: no cover - compiled
     scale = np.float32(1.0 / (1.0 + offset))
     off = np.float32(offset)
     for k in numba.prange(parts):
-        for i in range(n * k // parts, n * (k + 1) // parts):
-            u = encoded[i]
+        # slices indexed from 0 (an index of unknown sign keeps a loop scalar: fovexp/gabor.py)
+        src = encoded[n * k // parts:n * (k + 1) // parts]
+        dst = out[n * k // parts:n * (k + 1) // parts]
+        for i in range(src.shape[0]):
+            u = src[i]
             if offset != 0.0:
                 u = np.float32(u + off) * scale
-            out[i] = np.float32(_pow01(np.float64(u), p))
+            dst[i] = np.float32(_pow01(np.float64(u), p))
     return out
 
 

@@ -216,19 +216,25 @@ def _row_change(img, sigma, sat, y, xs, xe, oy, ox, pad, f_e, add_input, magic, 
         top0, bottom0 = sat[a0], sat[a0 + n0]
         o0 = pad - (n0 - 1) // 2 - ox
         nn0 = np.float64(n0 * n0)
-        for i in range(x, r):
-            s = np.float64(sigma[y, i])
+        # the run's rows and table rows as slices indexed from 0: indices of unknown sign
+        # make Numba wrap negative ones, which keeps a loop scalar
+        m = r - x
+        sg, im, ot = sigma[y, x:r], img[y, x:r], out[y, x:r]
+        t1a, t1b = top1[x + o1:x + o1 + m], top1[x + o1 + n1:x + o1 + n1 + m]
+        b1a, b1b = bottom1[x + o1:x + o1 + m], bottom1[x + o1 + n1:x + o1 + n1 + m]
+        t0a, t0b = top0[x + o0:x + o0 + m], top0[x + o0 + n0:x + o0 + n0 + m]
+        b0a, b0b = bottom0[x + o0:x + o0 + m], bottom0[x + o0 + n0:x + o0 + n0 + m]
+        for i in range(m):
+            s = np.float64(sg[i])
             t = s - k0
-            v = img[y, i]
+            v = im[i]
             q = np.rint(np.float64(v) * _SAT_SCALE)  # _fixed(v), as a float64: exact
             # n^2 (avg - in) in fixed point: exact in float64 (integers below 2**53)
-            xa, xb = i + o1, i + o1 + n1
-            d1 = _to_float(bottom1[xb] - top1[xb] - bottom1[xa] + top1[xa], magic) - nn1 * q
-            xa, xb = i + o0, i + o0 + n0
-            d0 = _to_float(bottom0[xb] - top0[xb] - bottom0[xa] + top0[xa], magic) - nn0 * q
+            d1 = _to_float(b1b[i] - t1b[i] - b1a[i] + t1a[i], magic) - nn1 * q
+            d0 = _to_float(b0b[i] - t0b[i] - b0a[i] + t0a[i], magic) - nn0 * q
             # from +0.0, as a sum: a flat box's change is +0.0, never -0.0 (the skipped blocks')
             change = (0.0 + (1.0 - t) * c0 * d0 + t * c1 * d1) * _SAT_STEP if s > 0.0 else 0.0
-            out[y, i] = (np.float64(v) + change) if add_input else change
+            ot[i] = (np.float64(v) + change) if add_input else change
         x = r
 
 

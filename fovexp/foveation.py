@@ -112,9 +112,10 @@ def _exact_terms_row(ux, uy, vx, vy, d, pitch, x0, x1, ecc, ppd):  # pragma: no 
     pixels [x0, x1) of the row at ``uy``, into ``ecc`` and ``ppd`` from index 0. A loop of
     its own: it vectorises (geometry._atan2_upper), where the sigma formula's float32
     steps kept the loop they shared scalar (measured 4x slower)."""
-    for x in range(x0, x1):
-        ecc[x - x0] = np.float32(_angle_deg(ux[x], uy, vx, vy, d))
-        ppd[x - x0] = np.float32(_ppd_at(ux[x], uy, d, pitch))
+    cols = ux[x0:x1]  # indexed from 0: an index of unknown sign keeps a loop scalar
+    for i in range(cols.shape[0]):
+        ecc[i] = np.float32(_angle_deg(cols[i], uy, vx, vy, d))
+        ppd[i] = np.float32(_ppd_at(cols[i], uy, d, pitch))
 
 
 @numba.njit(parallel=True, cache=True, nogil=True, fastmath=FASTMATH)
@@ -139,8 +140,9 @@ def _exact_sigma_blocks(
                 bx += 1
             x0, x1 = b0 << shift, min(bx << shift, w)
             _exact_terms_row(ux, uy[y], vx, vy, d, pitch, x0, x1, ecc, ppd)
-            for x in range(x0, x1):
-                out[y, x] = _sigma_at(ecc[x - x0], ppd[x - x0], blur_rate, fovea, True)
+            dst = out[y, x0:x1]
+            for j in range(x1 - x0):  # (not i: the parallel loop's index)
+                dst[j] = _sigma_at(ecc[j], ppd[j], blur_rate, fovea, True)
 
 
 def sigma_on_blocks(

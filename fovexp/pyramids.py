@@ -220,21 +220,26 @@ def _abs_laplacian_tiles(fine, coarse, need, tile, out):  # pragma: no cover - c
                     continue
                 out[y, x] = _mean3x3_clamped(diff, y, x, ya, xa, h, w)
             if inner:
-                r0, r1, r2 = diff[y - 1 - ya], diff[y - ya], diff[y + 1 - ya]
-                for x in range(xi0, xi1):
-                    c = x - xa
+                # slices indexed from 0: an index of unknown sign keeps a loop scalar
+                # (fovexp/gabor.py); column x - 1 of the image at index 0
+                a, m = xi0 - 1 - xa, xi1 - xi0
+                r0 = diff[y - 1 - ya, a:a + m + 2]
+                r1 = diff[y - ya, a:a + m + 2]
+                r2 = diff[y + 1 - ya, a:a + m + 2]
+                dst = out[y, xi0:xi1]
+                for c in range(m):
                     # the clamped loop's terms in its order (float addition is not
                     # associative: the same order gives the same bits)
-                    acc = r0[c - 1]
-                    acc += r0[c]
+                    acc = r0[c]
                     acc += r0[c + 1]
-                    acc += r1[c - 1]
+                    acc += r0[c + 2]
                     acc += r1[c]
                     acc += r1[c + 1]
-                    acc += r2[c - 1]
+                    acc += r1[c + 2]
                     acc += r2[c]
                     acc += r2[c + 1]
-                    out[y, x] = acc / _NINE
+                    acc += r2[c + 2]
+                    dst[c] = acc / _NINE
     return out
 
 

@@ -133,7 +133,9 @@ def test_the_normalisation_by_hand():
     kept = (math.erf(math.sqrt(2 * math.pi) * a * r5) / math.erf(math.sqrt(2 * math.pi) * a * r))
     assert gabor.normalisation(n, a, "uniform", 0.05) == pytest.approx(
         gabor.normalisation(n, a) / kept, rel=1e-12)
-    assert gabor._window(r) == (48, 22)  # 2 ceil(r) + 2 = 44 columns, rounded up to 16s
+    # 2 ceil(r) + 2 = 44 columns, rounded up to 16s; the pad holds a window that starts up to
+    # 2 ceil(r) + 1 columns left of the image (an impulse r left of it)
+    assert gabor._window(r) == (48, 44)
 
 
 def test_synthesis_without_skipping_and_with_a_closer_cut():
