@@ -11,8 +11,9 @@ spreads every contiguous chunk over the whole frame. (Numba's dynamic chunking,
 The results do not depend on the order: the items are independent.
 
 NumPy's own elementwise loops run on one core; :func:`in_parts` splits one over threads: the
-one the colour stage spends most in (the transfer function's power, twice per frame,
-:func:`power`) and the output's conversion to integer codes (:func:`fovexp.io.write_image`).
+transfer function's power of float64 images (:func:`power`; float32 frames take a compiled
+polynomial, :mod:`fovexp.colour`) and the output's conversion to integer codes
+(:func:`fovexp.io.write_image`).
 """
 
 from __future__ import annotations

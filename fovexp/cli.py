@@ -53,6 +53,8 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
             "measure the rig before the first participant: display, GPU, tracker"),
     "tracker": ("fovexp.experiment.cli", "add_tracker_parser",
                 "print the example ioHub configuration of an eye-tracker family"),
+    "export": ("fovexp.export.bids", "add_export_parser",
+               "share a study: a results folder as a BIDS dataset (docs/SHARING.md)"),
 }
 
 

@@ -32,3 +32,9 @@ def dry_run_scenes(tmp_path_factory) -> Iterator[Path]:
         os.environ.pop(ENV_VAR, None)
     else:
         os.environ[ENV_VAR] = old
+
+
+# The dry-run study (the calibration chain, both validations), made once per test session and
+# read by the recovery tests, the impulse-count comparison and the BIDS export's tests (each
+# imports experiment_helpers' xvfb_display, which the study's fixtures ask for).
+from dry_run_study import dry_run_calibration, dry_run_validations  # noqa: E402, F401, I001

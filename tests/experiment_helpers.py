@@ -241,6 +241,9 @@ class StubScreen:
         """``right``: a render (:class:`fovexp.experiment.display.render.Rendered`) or an image."""
         self.test = getattr(right, "rgba8", right)
 
+    def set_mirrored(self, mirrored: bool) -> None:
+        self.mirrored = mirrored
+
     def prepare(self, blank: bool) -> None:
         self._blank = blank
 

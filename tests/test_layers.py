@@ -172,6 +172,7 @@ def test_the_engine_does_not_import_the_runner_or_the_analysis(graph):
                                                     "fovexp.cli", "fovexp.__main__", "fovexp.bench",
                                                     "fovexp.stimuli",
                                                     "fovexp.evaluation", "fovexp.rig",
+                                                    "fovexp.export",
                                                     # compiles every kernel, the evaluation's too
                                                     "fovexp.warmup"))]
     bad = [(a, b) for a in engine for b in graph[a]
@@ -284,6 +285,21 @@ def test_the_rig_check_sits_on_the_runner(graph):
     assert bad == []
     for part in ("fovexp.experiment", "fovexp.results", "fovexp.analysis"):
         assert _edges(graph, part, "fovexp.rig") == []
+
+
+def test_the_export_reads_through_the_logs_layer(graph):
+    """``fovexp.export`` (``fovexp export bids``) reads the logs through ``fovexp.results``
+    (where the dataset's layout is defined, for the reader too) and runs the analysis for the
+    dataset's derivatives; it never imports the runner, and nothing but the command line,
+    by name, imports it."""
+    assert _edges(graph, "fovexp.export", "fovexp.experiment") == []
+    allowed = ("fovexp.export", "fovexp.results", "fovexp.analysis")
+    bad = [(a, b) for a, b in _edges(graph, "fovexp.export", "fovexp")
+           if not (b == "fovexp" or any(b == p or b.startswith(p + ".") for p in allowed))]
+    assert bad == []
+    users = [a for a, deps in graph.items() for b in deps
+             if b.startswith("fovexp.export") and not a.startswith("fovexp.export")]
+    assert users == []
 
 
 def test_every_subpackage_is_in_the_wheel():

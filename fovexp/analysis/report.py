@@ -28,6 +28,7 @@ from pathlib import Path
 import pandas as pd
 
 from fovexp import FovexpError
+from fovexp.results.choices import forced_choice_experiments
 from fovexp.results.format import PILOT_TRACKER, SIMULATED_TRACKER
 from fovexp.results.loading import TrialLimits, load_results, rules
 
@@ -70,7 +71,8 @@ def run_analysis(
     for section in SECTIONS:
         sections += section(ana)
 
-    analysed = set(CALIBRATION_EXPERIMENTS) | set(validation_experiments(ana))
+    analysed = (set(CALIBRATION_EXPERIMENTS) | set(validation_experiments(ana))
+                | forced_choice_experiments(data.trials))
     other = [e for e in data.experiments if e not in analysed]
     if other:
         ana.notes.append(f"experiments not analysed (no analysis defined): {', '.join(other)}")
@@ -112,7 +114,7 @@ def _report_md(ana: Analysis, sections: list[str], results: Path) -> str:
     if excl:
         frame = pd.DataFrame([{"rule": e.rule, "experiment": e.experiment,
                                "participant": e.participant, "session": e.session,
-                               "trials": e.n_trials, "file": _rel(e.file, results),
+                               "trials": e.n_trials, "file": _rel(e.file, ana.data.root),
                                "detail": e.detail} for e in excl])
         counts = frame.groupby("rule")["trials"].sum().reset_index()
         parts += ["Trials removed per rule:\n", md_table(counts)]

@@ -35,10 +35,11 @@ def add_run_parser(subparsers: Any) -> argparse.ArgumentParser:
     """Add the ``run`` subcommand to ``subparsers`` (an argparse sub-parser action)."""
     p = subparsers.add_parser(
         "run", help="run an experiment protocol with a participant",
-        description="Run one of the paper's adjustment experiments (protocols/*.yaml).")
+        description="Run an experiment protocol (protocols/*.yaml): one of the paper's "
+                    "adjustment experiments, or the forced-choice validation-2afc.")
     p.add_argument("protocol", help="protocol YAML, or the name of one in ./protocols or shipped "
                    "with fovexp (calibration-fe, calibration-sk, calibration-sf, validation, "
-                   "validation-12)")
+                   "validation-12, validation-2afc)")
     p.add_argument("--participant", required=True, help="participant ID ([A-Za-z0-9_-]{1,32})")
     p.add_argument("--tracker", choices=TRACKERS, default=None,
                    help="gaze source (default: tobii; simulated with --dry-run); iohub: any "

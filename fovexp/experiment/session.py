@@ -35,6 +35,7 @@ from .records.resume import attempts_so_far, choose_session, done_trials, resume
 from .records.runlogs import RunLogs
 from .records.sessionfile import SessionFile, end_run, run_entry, start_run
 from .tasks.adjust import AdjustmentTask
+from .tasks.forced_choice import TASKS
 from .tasks.frameloop import Interrupted, LateLatch, display_thread_first, interruptible
 from .tasks.screens import Screens
 from .tasks.simulated_participant import SimulatedParticipant
@@ -223,7 +224,7 @@ class Session:
             self.file.update(display_check={**check, "screen": opts.screen},
                              display_area=area_info, blanking_rule=rule_record(
                                  spec.fixation.radius_deg, spec.fixation.gaze_timeout_s))
-            self.logs = RunLogs(self.folder, self.session_id, self.fixation)
+            self.logs = RunLogs(self.folder, self.session_id, self.fixation, spec.task)
         except BaseException as exc:
             self.file.stop_writer()
             _quietly(self.gaze.stop, self.screen.close)  # the error to report is this one
@@ -308,7 +309,7 @@ class Session:
             opts = self.opts
             sim = SimulatedParticipant(opts.sim_truth, self._sim_seed() + 1, opts.sim_speed,
                                        opts.sim_noise_scale)
-        return AdjustmentTask(
+        return TASKS[self.protocol.spec.task](
             protocol=self.protocol, participant=self.participant, seed=self.seed,
             tracker=SIMULATED_TRACKER if self.opts.dry_run else self.gaze.name,
             trials=self.trials, remaining=self.remaining, done=self.done,

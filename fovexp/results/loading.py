@@ -52,6 +52,7 @@ from __future__ import annotations
 
 import functools
 import json
+import warnings
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -60,6 +61,8 @@ import pandas as pd
 
 from fovexp import FovexpError, parse_yaml
 
+from .bids import is_fovexp_bids, read_bids
+from .choices import FORCED_CHOICE_COLUMNS
 from .format import (
     FLOAT_COLUMNS,
     INT_COLUMNS,
@@ -168,7 +171,7 @@ def read_trials_file(path: Path) -> tuple[pd.DataFrame, list[Exclusion]]:
             n_trials=n_rows,
         )]
     exclusions: list[Exclusion] = []
-    if tf.extra:
+    if tf.extra and tf.extra != list(FORCED_CHOICE_COLUMNS):  # answers: read by .choices
         exclusions.append(
             Exclusion("note", str(path), f"extra columns ignored: {', '.join(tf.extra)}")
         )
@@ -249,6 +252,10 @@ def load_results(
 ) -> Dataset:
     """Load every ``trials.csv`` under ``root`` and apply rules R1-R13 (see module docstring).
 
+    ``root`` may also be a BIDS dataset written by ``fovexp export bids``
+    (:mod:`fovexp.results.bids`): its logs are read back into a temporary results folder
+    (then ``Dataset.root``), and files changed since the export are listed in the notes.
+
     ``include_incomplete`` keeps incomplete sessions (R10 then only reports them);
     ``include_pilots`` keeps mouse-gaze sessions (R7); ``protocol`` maps an experiment to the
     ``protocol_sha256`` (or a prefix) to keep instead of the majority version (R9); ``limits``
@@ -257,11 +264,21 @@ def load_results(
     """
     limits = limits or TrialLimits()
     root = Path(root)
+    notes: list[str] = []
+    if is_fovexp_bids(root):
+        # A dataset of fovexp export bids: its logs written back into a results folder of the
+        # usual layout, read below as any other (the analysis never knows the difference).
+        source = read_bids(root)
+        root = source.results
+        notes += [f"{source.dataset}: {line}" for line in source.changed]
+        if source.changed:
+            warnings.warn(f"{source.dataset}: {len(source.changed)} file(s) changed since "
+                          f"fovexp exported it, e.g. {source.changed[0]} (the report's notes "
+                          "list them)", stacklevel=2)
     files = find_trial_files(root)
     session_state = functools.cache(_session_state)  # R7 and R9 ask about the same sessions
     frames: list[pd.DataFrame] = []
     exclusions: list[Exclusion] = []
-    notes: list[str] = []
     for path in files:
         frame, excl = read_trials_file(path)
         exclusions.extend(excl)

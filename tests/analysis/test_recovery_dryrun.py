@@ -35,90 +35,38 @@ ignored ``--sim-truth`` (its default truth is the paper's table) fails
 
 from __future__ import annotations
 
-import csv
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import pytest
 import yaml
 
 from fovexp import PAPER_TABLE2, ParameterTable
-from fovexp.cli import main as fovexp_main
 from fovexp.experiment.records.logs import read_trials
 
-from experiment_helpers import make_workspace, run_cli, xvfb_display  # noqa: F401
+from dry_run_study import IMAGES, NOISE, PARTICIPANTS, SK_SLOPE, TRUTH
+from dry_run_study import analyze_all as _analyze
+from dry_run_study import read_csv as _csv
+from dry_run_study import run_all as _run_all
+from dry_run_study import shrink as _shrink
+from experiment_helpers import make_workspace, xvfb_display  # noqa: F401
 
 pytestmark = [pytest.mark.gui, pytest.mark.slow]
 
-TRUTH = ParameterTable(source="recovery test ground truth", rows=[
-    {"blur_rate": 0.11, "f_e": 0.10, "s_k": 30.0, "s_f": 1.6},
-    {"blur_rate": 0.34, "f_e": 0.18, "s_k": 24.0, "s_f": 2.8},
-    {"blur_rate": 0.57, "f_e": 0.32, "s_k": 12.0, "s_f": 4.5},
-])
-SK_SLOPE = -2.0
-#: The runner's default per-trial noise sd (SimTruth), written out so the test does not drift.
-NOISE = {"f_e": 0.02, "s_k": 1.5, "s_f": 0.25, "blur_rate": 0.04}
+# The ground truth, the design and the runs: tests/dry_run_study.py (shared with the BIDS
+# export's tests, made once per test session).
 TOLERANCE = {"f_e": 0.021, "s_k": 1.25, "s_f": 0.27}
 SLOPE_TOLERANCE = 0.45
-PARTICIPANTS = ["R01", "R02", "R03", "R04"]
-#: images per protocol copy (fewer than the shipped protocols, to keep the test short)
-IMAGES = {"calibration-fe": ["scene-00", "scene-01", "scene-02"],
-          "calibration-sk": ["scene-02", "scene-03"],
-          "calibration-sf": ["scene-02", "scene-03", "scene-04"],
-          "validation": ["scene-00", "scene-03", "scene-06", "scene-09"]}
-TRIALS = {"calibration-fe": 9, "calibration-sk": 24, "calibration-sf": 9, "validation": 8}
-DRY = ["--dry-run", "--practice", "0", "--window", "160x90", "--sim-speed", "12"]
 
 #: validation truth: highest invisible blur-rate per method (ours 1.5 x contrast)
 VALIDATION_TRUTH = {"contrast": 0.30, "ours": 0.45}
 VALIDATION_PARTICIPANTS = ["V01", "V02", "V03"]
 
 
-def _shrink(ws: Path, experiment: str) -> None:
-    """Keep fewer images in the workspace's copy of a protocol (everything else as shipped)."""
-    path = ws / "protocols" / f"{experiment}.yaml"
-    spec = yaml.safe_load(path.read_text())
-    spec["images"] = IMAGES[experiment]
-    path.write_text(yaml.safe_dump(spec, sort_keys=False))
-
-
-def _run_all(ws: Path, experiment: str, pids: list[str], truth: Path) -> None:
-    """Dry-run one protocol for every participant, two sessions at a time."""
-    def one(pid: str):
-        return pid, run_cli(["run", f"protocols/{experiment}.yaml", "--participant", pid, *DRY,
-                             "--sim-truth", str(truth)], cwd=ws, timeout=300)
-
-    with ThreadPoolExecutor(max_workers=2) as pool:
-        for pid, r in pool.map(one, pids):
-            assert r.returncode == 0, f"{experiment} {pid}:\n{r.stderr[-3000:]}"
-            rows, _ = read_trials(ws / "results" / experiment / pid / "trials.csv")
-            assert len(rows) == TRIALS[experiment] and not any(r["practice"] for r in rows)
-
-
-def _csv(path: Path) -> list[dict[str, str]]:
-    with open(path, newline="") as fh:
-        return list(csv.DictReader(fh))
-
-
-def _analyze(ws: Path, out: Path) -> None:
-    code = fovexp_main(["analyze", str(ws / "results"), "--out", str(out), "--no-figures"])
-    assert code == 0
-    # Every dry-run trial reaches the statistics: complete sessions, no practice, one protocol.
-    assert _csv(out / "tables" / "exclusions.csv") == []
-
-
-@pytest.fixture(scope="module")
-def calibration(tmp_path_factory, xvfb_display) -> Path:  # noqa: F811
-    """The three calibration experiments dry-run in order, then ``fovexp analyze``."""
-    ws = make_workspace(tmp_path_factory.mktemp("recovery") / "project")
-    truth = ws / "truth.yaml"
-    truth.write_text(yaml.safe_dump({
-        "table": TRUTH.model_dump(), "sk_slope": SK_SLOPE, "noise_sd": NOISE}, sort_keys=False))
-    for exp in ("calibration-fe", "calibration-sk", "calibration-sf"):
-        _shrink(ws, exp)
-        _run_all(ws, exp, PARTICIPANTS, truth)
-    _analyze(ws, ws / "report")
-    return ws
+@pytest.fixture
+def calibration(dry_run_calibration: Path) -> Path:
+    """The three calibration experiments dry-run in order, then ``fovexp analyze``
+    (tests/dry_run_study.py)."""
+    return dry_run_calibration
 
 
 def test_truth_is_far_from_the_paper() -> None:

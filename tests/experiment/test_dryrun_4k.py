@@ -115,11 +115,12 @@ def test_generate_then_check_every_protocol_at_the_display(tmp_path: Path) -> No
           f"({os.cpu_count()} CPUs)")
     assert len(list((stim / "generated" / f"{W}x{H}").glob("scene-*.png"))) == 15
     protocols = sorted(str(p.relative_to(ws)) for p in (ws / "protocols").glob("*.yaml"))
-    assert len(protocols) == 5  # the four of sections 5-6.1 and validation-12 (6.3)
+    # the four of sections 5-6.1, validation-12 (6.3) and the forced-choice validation-2afc
+    assert len(protocols) == 6
     r = run_cli(["stimuli", "check", *protocols, "--display", "lg-oled55cx",
                  "--stimuli", str(stim)], cwd=ws)
     assert r.returncode == 0, r.stdout + r.stderr
-    assert r.stdout.count("can be shown by a real session") == 5
+    assert r.stdout.count("can be shown by a real session") == 6
     # one missing scene makes the whole check fail, naming the fix
     (stim / "generated" / f"{W}x{H}" / "scene-07.png").unlink()
     r = run_cli(["stimuli", "check", *protocols, "--display", "lg-oled55cx",

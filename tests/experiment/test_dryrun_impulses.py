@@ -13,31 +13,19 @@ import json
 
 import pytest
 
-from experiment_helpers import make_workspace, run_cli, xvfb_display  # noqa: F401
+from experiment_helpers import xvfb_display  # noqa: F401
 
 pytestmark = [pytest.mark.gui, pytest.mark.slow]
 
 
-def test_both_validations_dry_run_and_the_report_compares_them(tmp_path, xvfb_display):  # noqa: F811
-    ws = make_workspace(tmp_path / "project")
-    for protocol in ("validation", "validation-12"):  # two scenes: both methods on each
-        path = ws / "protocols" / f"{protocol}.yaml"
-        text = path.read_text()
-        start = text.index("images: [")
-        end = text.index("]", start) + 1
-        path.write_text(text[:start] + "images: [scene-05, scene-06]" + text[end:])
-    truth = tmp_path / "truth.yaml"
-    truth.write_text("validation_blur_rate: {contrast: 0.3, ours: 0.5}\n")
-    for protocol in ("validation", "validation-12"):  # one participant, two scenes each
-        r = run_cli(["run", f"protocols/{protocol}.yaml", "--participant", "S01", "--dry-run",
-                     "--sim-speed", "12", "--practice", "0",
-                     "--sim-truth", str(truth), "--sim-noise-scale", "0"], cwd=ws, timeout=600)
-        assert r.returncode == 0, r.stderr[-3000:]
+def test_both_validations_dry_run_and_the_report_compares_them(dry_run_validations):
+    """One participant, two scenes each, the same truth, analysed by ``fovexp analyze``
+    (tests/dry_run_study.py: the dry runs and their report are the test session's, shared with
+    the BIDS export's tests)."""
+    ws = dry_run_validations
     info = json.loads(next((ws / "results" / "validation-12" / "S01").glob(
         "session-*.json")).read_text())
     assert "impulses: 12" in info["protocol"]
-    r = run_cli(["analyze", "results", "--out", "report", "--no-figures"], cwd=ws)
-    assert r.returncode == 0, r.stderr[-3000:]
     md = (ws / "report" / "report.md").read_text()
     assert "## Validation: validation-12" in md
     assert "## Impulses per kernel: 12 against 64" in md

@@ -15,6 +15,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 from .calibration import calibration_section
+from .forced_choice import forced_choice_section
 from .impulses import impulses_section
 from .latency import latency_section
 from .validation import validation_sections
@@ -25,7 +26,7 @@ if TYPE_CHECKING:
 Section = Callable[["Analysis"], list[str]]
 
 #: the report's sections, in order
-SECTIONS: tuple[Section, ...] = (calibration_section, validation_sections, impulses_section,
-                                 latency_section)
+SECTIONS: tuple[Section, ...] = (calibration_section, validation_sections,
+                                 forced_choice_section, impulses_section, latency_section)
 
 __all__ = ["SECTIONS", "Section"]

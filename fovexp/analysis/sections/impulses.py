@@ -111,7 +111,7 @@ def impulses_section(ana: Analysis) -> list[str]:
     counted: list[tuple[int, ValidationResult]] = []
     unknown = []
     for res in ana.validations:
-        n = impulse_count(ana.results, res.experiment)
+        n = impulse_count(ana.data.root, res.experiment)  # a BIDS dataset's logs: read back
         if n is None:
             unknown.append(res.experiment)
         elif len(res.tests):

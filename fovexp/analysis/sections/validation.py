@@ -8,6 +8,8 @@ from typing import TYPE_CHECKING
 
 import pandas as pd
 
+from fovexp.results.choices import forced_choice_experiments
+
 from .. import figures as figs
 from ..validation import TEST_STATISTICS, ValidationResult, validate
 from .common import BLUR_UNITS, md_table, p_text, write_csv
@@ -17,9 +19,11 @@ if TYPE_CHECKING:
 
 
 def validation_experiments(ana: Analysis) -> list[str]:
-    """The experiments analysed as validations: their trials adjust the blur-rate."""
+    """The experiments analysed as validations: their trials adjust the blur-rate (a
+    forced-choice experiment's rows name the blur-rate too, and have their own section)."""
     t = ana.data.trials
-    return sorted(set(t.loc[t["adjusted_parameter"] == "blur_rate", "experiment"]))
+    forced = forced_choice_experiments(t)
+    return sorted(set(t.loc[t["adjusted_parameter"] == "blur_rate", "experiment"]) - forced)
 
 
 def validation_sections(ana: Analysis) -> list[str]:
@@ -82,6 +86,8 @@ def marked_tests(tests: pd.DataFrame, no_test: str | None = None,
 
 def _validation_md(res: ValidationResult, figures: bool) -> str:
     parts = [f"## Validation: {res.experiment} (section 6.1)\n",
+             "Task: adjustment (each participant set the blur-rate until the loss of detail "
+             "was just invisible).\n",
              "Mean selected blur-rate ± SEM across participants, per scene and method:\n",
              md_table(res.summary, units=BLUR_UNITS),
              "Over all scenes (each participant's mean over scenes):\n",

@@ -411,6 +411,15 @@ class PsychoScreen:
         self._use_texture(self.right, self._src_right, name)
         self.last_upload_s = time.perf_counter() - t0
 
+    def set_mirrored(self, mirrored: bool) -> None:
+        """Both halves mirrored about the seam (``mirrored``) or as they are: the test half
+        drawn flipped on the left and the reference flipped on the right, the forced-choice
+        task's degraded left half (:mod:`fovexp.experiment.tasks.forced_choice`)."""
+        w = self.size[0]
+        for stim, x in ((self.left, -w / 4), (self.right, w / 4)):
+            stim.flipHoriz = bool(mirrored)
+            stim.pos = (-x if mirrored else x, 0)
+
     @staticmethod
     def _use_texture(stim: Any, source: _TextureSource, name: Any) -> None:
         if source.colorTexture.value != name.value:

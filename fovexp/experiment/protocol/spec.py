@@ -48,6 +48,7 @@ from .defaults import (
     QualityLimits,
     central_accuracy_limit_deg,
 )
+from .forced_choice import ForcedChoiceSpec, derived_adjust, forced_choice_plan
 
 Parameter = Literal["f_e", "s_k", "s_f", "blur_rate"]
 MethodName = Literal["foveated", "contrast", "ours"]
@@ -196,6 +197,10 @@ class Protocol(_Strict):
     blur_rates: list[float] | None = None
     s_f_values: list[float] | None = None
     adjust: AdjustSpec
+    #: the participant's task: ``adjust`` (the paper's, section 5.1) or ``2afc`` (two-alternative
+    #: forced choice, issue 30: the ``forced_choice`` block; ``adjust`` is then derived from it)
+    task: Literal["adjust", "2afc"] = "adjust"
+    forced_choice: ForcedChoiceSpec | None = None
     parameters: dict[Literal["f_e", "s_k", "s_f"], ParamSource] = Field(default_factory=dict)
     repetitions: int = Field(default=1, ge=1, le=100)
     seed: int = Field(ge=0, le=2**31 - 1)
@@ -233,8 +238,24 @@ class Protocol(_Strict):
         d = self.tracker.max_drift_deg
         return self.quality_limits.max_central_accuracy_deg if d is None else d
 
+    @model_validator(mode="before")
+    @classmethod
+    def _derived_adjust(cls, data: Any) -> Any:
+        if not isinstance(data, dict):
+            return data
+        if (data.get("task") == "2afc") != ("forced_choice" in data):
+            raise ValueError("forced_choice: required with task: 2afc, and only with it")
+        return derived_adjust(data) if data.get("task") == "2afc" else data
+
     @model_validator(mode="after")
     def _consistent(self) -> Protocol:
+        if (self.task == "2afc") != (self.forced_choice is not None):
+            raise ValueError("forced_choice: required with task: 2afc, and only with it")
+        if self.task == "2afc" and self.adjust.parameter != "blur_rate":
+            raise ValueError("adjust: a task: 2afc protocol shows the blur-rate; leave adjust "
+                             "out (it is derived from forced_choice)")
+        if self.task == "2afc" and self.s_f_values:
+            raise ValueError("s_f_values: not with task: 2afc (its conditions are the methods)")
         radius = self.fixation.radius_deg
         for key in ("max_central_accuracy_deg", "max_drift_deg"):
             v = getattr(self.tracker, key)
@@ -427,6 +448,13 @@ class LoadedProtocol:
         seed = session_seed(self.spec.seed, participant)
         rng = np.random.default_rng(seed)
         s = self.spec
+        if s.forced_choice is not None:  # the blur-rate comes from the procedure at run time
+            n = s.practice_trials if practice is None else practice
+            top = s.forced_choice.grid.high
+            return seed, [Trial(k, p, 0, image, method, None, None, top) for k, (p, method, image)
+                          in enumerate(forced_choice_plan(
+                              list(s.methods), s.practice_methods, list(s.images),
+                              s.forced_choice, seed, n, limit))]
         conds = list(itertools.product(
             range(s.repetitions), s.images, s.blur_rates or [None], s.methods,
             s.s_f_values or [None],

@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from fovexp import FovexpError
+from fovexp.results.choices import FORCED_CHOICE_COLUMNS, choice_fields, typed_choice
 from fovexp.results.format import (
     BLANKING_COLUMNS,
     FRAME_COLUMNS,
@@ -33,18 +34,28 @@ from fovexp.results.format import (
 
 __all__ = ["BLANKING_COLUMNS", "FRAME_COLUMNS", "GAZE_COLUMNS", "TRIAL_COLUMNS", "BatchLog",
            "JsonWriter", "PeriodicFlusher", "TrialLog", "format_line", "format_value",
-           "read_trials", "repair_tail", "upgrade_header", "write_json_atomic"]
+           "TRIAL_HEADERS", "read_trials", "repair_tail", "upgrade_header",
+           "write_json_atomic"]
+
+#: the headers a ``trials.csv`` may have: the adjustment task's, the forced-choice task's
+TRIAL_HEADERS = (TRIAL_COLUMNS, (*TRIAL_COLUMNS, *FORCED_CHOICE_COLUMNS))
+
 
 def read_trials(path: Path) -> tuple[list[dict[str, Any]], int]:
     """Rows of a ``trials.csv`` and the byte length of its valid part
     (:func:`fovexp.results.format.read_trials_file`: a torn last row is dropped with a
-    warning naming the file; a bad row elsewhere is an error). The header must be exactly the
-    documented one, since rows are appended in that order.
+    warning naming the file; a bad row elsewhere is an error). The header must be exactly one
+    of :data:`TRIAL_HEADERS`, since rows are appended in that order; a forced-choice file's
+    rows carry its answers too (:func:`fovexp.results.choices.typed_choice`).
     """
     tf = read_trials_file(path)
-    if tf.header and tuple(tf.header) != TRIAL_COLUMNS and tf.torn != "torn header":
+    if tf.header and tuple(tf.header) not in TRIAL_HEADERS and tf.torn != "torn header":
         raise FovexpError(f"{path}: header does not match docs/LOGS.md "
                           f"({','.join(tf.header)[:80]})")
+    if tf.rows and tuple(tf.header) == TRIAL_HEADERS[1]:
+        fields = choice_fields(path) or {}
+        for row, line in zip(tf.rows, tf.lines, strict=True):
+            row.update(typed_choice(fields.get(line, {})))
     return tf.rows, tf.good_len
 
 
@@ -122,15 +133,19 @@ def upgrade_header(path: Path, columns: Sequence[str]) -> bool:
 class TrialLog:
     """Appends one fsync'ed row per completed trial to ``trials.csv``."""
 
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: Path, columns: Sequence[str] = TRIAL_COLUMNS) -> None:
         self.path = Path(path)
+        self.columns = tuple(columns)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         rows, good = read_trials(self.path)
         if self.path.exists():
             repair_tail(self.path, good)
         self.rows = rows
         if good == 0:
-            self._write(format_line(TRIAL_COLUMNS))
+            self._write(format_line(self.columns))
+        elif read_trials_file(self.path).header != list(self.columns):
+            raise FovexpError(f"{self.path}: written by another task (its header is not this "
+                              "protocol's): use another --results folder or experiment name")
 
     def _write(self, line: str) -> None:
         # One write of a whole line, then flush + fsync: at most this line can be torn, and a
@@ -142,10 +157,10 @@ class TrialLog:
                 os.fsync(fh.fileno())
 
     def append(self, row: dict[str, Any]) -> None:
-        missing = set(TRIAL_COLUMNS) - set(row)
+        missing = set(self.columns) - set(row)
         if missing:
             raise KeyError(f"trial row lacks {sorted(missing)}")
-        self._write(format_line([row[k] for k in TRIAL_COLUMNS]))
+        self._write(format_line([row[k] for k in self.columns]))
         self.rows.append(row)
 
 

@@ -75,6 +75,7 @@ def trial_row(protocol: LoadedProtocol, trial: Trial, st: TrialState, *, partici
         "seed": seed,
         "software_version": software_version(),
         "timestamp": now_iso(),
+        **st.extra_columns(),  # a forced-choice trial's answer (tasks.forced_choice)
     }
 
 

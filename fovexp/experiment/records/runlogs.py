@@ -16,16 +16,26 @@ from typing import Any
 from ..protocol.spec import LoadedProtocol, Trial
 from ..tasks.trial import Episode, TrialState
 from ..trackers.gaze import FixationGeometry, GazeSample
-from .logs import BLANKING_COLUMNS, FRAME_COLUMNS, GAZE_COLUMNS, BatchLog, PeriodicFlusher, TrialLog
+from .logs import (
+    BLANKING_COLUMNS,
+    FRAME_COLUMNS,
+    GAZE_COLUMNS,
+    TRIAL_HEADERS,
+    BatchLog,
+    PeriodicFlusher,
+    TrialLog,
+)
 from .rows import GazeItem, blanking_rows, gaze_items, gaze_row, trial_row
 
 
 class RunLogs:
     """The four logs of a run in ``folder`` for session ``session_id``."""
 
-    def __init__(self, folder: Path, session_id: str, fixation: FixationGeometry) -> None:
+    def __init__(self, folder: Path, session_id: str, fixation: FixationGeometry,
+                 task: str = "adjust") -> None:
         self.session_id, self.fixation = session_id, fixation
-        self.trial_log = TrialLog(folder / "trials.csv")
+        # a forced-choice task's rows carry its answers after the documented columns
+        self.trial_log = TrialLog(folder / "trials.csv", TRIAL_HEADERS[task == "2afc"])
         self.gaze_log = BatchLog(folder / f"gaze-{session_id}.csv", GAZE_COLUMNS,
                                  formatter=self._gaze_row)
         self.frame_log = BatchLog(folder / f"frames-{session_id}.csv", FRAME_COLUMNS)
@@ -70,6 +80,11 @@ class RunLogs:
         between trials, with that error."""
         if self.flusher is not None and self.flusher.error is not None:
             raise self.flusher.error
+
+    def session_rows(self) -> list[dict[str, Any]]:
+        """This session's rows of ``trials.csv`` so far (earlier runs' too), in order: what a
+        forced-choice task rebuilds its procedures from."""
+        return [r for r in self.trial_log.rows if r["session"] == self.session_id]
 
     def done(self) -> set[int]:
         """The trials of this session with a row in ``trials.csv``."""

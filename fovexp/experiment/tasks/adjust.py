@@ -50,6 +50,8 @@ class TrialSink(Protocol):
 
     def raise_error(self) -> None: ...
 
+    def session_rows(self) -> list[dict[str, Any]]: ...
+
 
 @dataclass
 class AdjustmentTask:

@@ -34,6 +34,11 @@ class SimTruth(BaseModel):
     #: highest invisible blur-rate per method (validation)
     validation_blur_rate: dict[str, float] = Field(
         default_factory=lambda: {"foveated": 0.25, "contrast": 0.4, "ours": 0.6})
+    #: the forced-choice observer (issue 30, :mod:`.simulated_observer`): its thresholds are
+    #: ``validation_blur_rate``'s, at 75 % correct; the Weibull's shape (on blur-rate) and the
+    #: lapse rate, per method (a method not named: 3.0 and 0.02)
+    forced_choice_slope: dict[str, float] = Field(default_factory=dict)
+    forced_choice_lapse: dict[str, float] = Field(default_factory=dict)
     #: participant noise sd per parameter
     noise_sd: dict[str, float] = Field(
         default_factory=lambda: {"f_e": 0.02, "s_k": 1.5, "s_f": 0.25, "blur_rate": 0.04})

@@ -282,6 +282,11 @@ class TrialState:
         if self.t_start is not None:
             self.blanking.close(t - self.t_start)
 
+    def extra_columns(self) -> dict[str, object]:
+        """Columns a task writes after the documented ones (``trials.csv``): none here; a
+        forced-choice trial's answer (:class:`.forced_choice.ChoiceState`)."""
+        return {}
+
     @property
     def response_time_s(self) -> float:
         end = self.t_confirm if self.t_confirm is not None else self.t_end

@@ -70,6 +70,24 @@ def test_split_screen_is_drawn_as_given(screen) -> None:
     assert screen.last_frame[H // 2, W // 2, 0] == 255  # the red cross on the seam
 
 
+def test_a_mirrored_split_screen_is_the_whole_frame_mirrored(screen) -> None:
+    """The forced-choice task's degraded left half (issue 30): the test half drawn flipped on
+    the left, the reference flipped on the right; and back as given."""
+    rng = np.random.default_rng(1)
+    left = rng.uniform(0, 1, (H, W // 2, 3)).astype(np.float32)
+    right = rng.uniform(0, 1, (H, W // 2, 3)).astype(np.float32)
+    screen.set_reference(left)
+    screen.set_test(right)
+    for mirrored in (True, False):
+        screen.set_mirrored(mirrored)
+        screen.draw(blank=False)
+        f = screen.last_frame.astype(float) / 255
+        expect = np.concatenate([left, right], axis=1)
+        diff = np.abs(f - (expect[:, ::-1] if mirrored else expect))
+        diff[H // 2 - CROSS:H // 2 + CROSS, W // 2 - CROSS:W // 2 + CROSS] = 0
+        assert diff.max() <= 1.5 / 255
+
+
 def point_at(fix: FixationGeometry, ecc: float) -> tuple[float, float]:
     lo, hi = 0.0, 0.4
     for _ in range(80):
