@@ -201,6 +201,10 @@ def main() -> int:
             "baselines": {k: str(v) for k, v in trees.items()},
             "commit": subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT,
                                      capture_output=True, text=True).stdout.strip()}
+    if args.baseline is not None:  # its commit, where it is a git checkout or worktree
+        base = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=trees["baseline"],
+                              capture_output=True, text=True).stdout.strip()
+        info["baselines"]["baseline"] += f" (commit {base})" if base else ""
     timed: dict[str, dict[str, dict]] = {t: {} for t in trees}
     cli: dict[str, list[float]] = {t: [] for t in trees}
     with tempfile.TemporaryDirectory() as tmp:
