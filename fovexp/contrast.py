@@ -88,7 +88,7 @@ def _fixed(v):  # pragma: no cover - compiled
 @numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
 def _sat_into(img, pad, y0, y1, x0, x1, s, row_max, parts):  # pragma: no cover - compiled
     """:func:`_sat`, written into ``s`` ((y1 - y0 + 1, x1 - x0 + 1) int64); each padded row's
-    largest value into ``row_max`` (y1 - y0), for :func:`check_sat_fits`. The column sums
+    largest magnitude into ``row_max`` (y1 - y0), for :func:`check_sat_fits`. The column sums
     go in ``parts`` runs of columns (the thread count: a kernel that asks Numba for it is
     not cached)."""
     h, w = img.shape
@@ -106,7 +106,7 @@ def _sat_into(img, pad, y0, y1, x0, x1, s, row_max, parts):  # pragma: no cover 
         top = -np.inf
         for x in range(wp):
             v = img[sy, cols[x]]
-            top = max(top, v)
+            top = max(top, abs(v))
             run += _fixed(v)
             s[y + 1, x + 1] = run
         row_max[y] = top
@@ -142,7 +142,7 @@ def _sat(
     point (:func:`_fixed`), padded by ``pad`` pixels with symmetric borders
     (:func:`_symmetric`), over rows [y0, y1) and columns [x0, x1) of the padded image (the
     sums start there: the boxes inside it are the same integers). The table is this thread's
-    scratch (:func:`_table`): valid until its next call. Also the largest value it sums,
+    scratch (:func:`_table`): valid until its next call. Also the largest magnitude it sums,
     found on the way; refuses what :func:`check_sat_fits` refuses."""
     row_max = np.empty(y1 - y0, img.dtype)
     sat = _sat_into(img, pad, y0, y1, x0, x1, _table(y1 - y0 + 1, x1 - x0 + 1), row_max,
