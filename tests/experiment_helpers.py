@@ -122,6 +122,27 @@ def make_workspace(root: Path) -> Path:
     return root
 
 
+def edit_protocol(ws: Path, name: str, **changes) -> Path:
+    """A copy of the workspace's protocol ``name`` with ``changes`` (dotted keys for nested
+    ones, ``None`` removes a key), written beside it as ``edited-<name>.yaml``."""
+    import yaml
+
+    path = ws / "protocols" / f"{name}.yaml"
+    data = yaml.safe_load(path.read_text())
+    for key, value in changes.items():
+        node = data
+        *parents, last = key.split(".")
+        for p in parents:
+            node = node[p]
+        if value is None:
+            node.pop(last)
+        else:
+            node[last] = value
+    out = ws / "protocols" / f"edited-{name}.yaml"
+    out.write_text(yaml.safe_dump(data))
+    return out
+
+
 def run_cli(args: list[str], cwd: Path, timeout: float = 300,
             env_update: dict[str, str | None] | None = None) -> subprocess.CompletedProcess:
     """``python -m fovexp ARGS`` in ``cwd``; ``env_update`` sets (or, with None, removes)

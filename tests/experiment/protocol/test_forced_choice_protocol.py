@@ -7,14 +7,13 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-import yaml
 
 from fovexp import FovexpError
 from fovexp.experiment.protocol.forced_choice import degraded_side
 from fovexp.experiment.protocol.spec import load_protocol
 from fovexp.experiment.records.logs import TRIAL_HEADERS, TrialLog
 
-from experiment_helpers import REPO, make_workspace
+from experiment_helpers import REPO, edit_protocol, make_workspace
 
 SHIPPED = REPO / "protocols" / "validation-2afc.yaml"
 
@@ -59,19 +58,7 @@ def test_the_shipped_protocol_states_the_validation_by_forced_choice() -> None:
 ])
 def test_bad_forced_choice_blocks_are_refused_in_one_line(tmp_path: Path, change: dict,
                                                            message: str) -> None:
-    ws = make_workspace(tmp_path / "ws")
-    data = yaml.safe_load(SHIPPED.read_text())
-    for key, value in change.items():
-        node = data
-        *parents, last = key.split(".")
-        for p in parents:
-            node = node[p]
-        if value is None:
-            node.pop(last)
-        else:
-            node[last] = value
-    path = ws / "protocols" / "bad.yaml"
-    path.write_text(yaml.safe_dump(data))
+    path = edit_protocol(make_workspace(tmp_path / "ws"), SHIPPED.stem, **change)
     with pytest.raises(FovexpError, match=message) as err:
         load_protocol(path)
     assert str(path) in str(err.value) and "\n" not in str(err.value).strip()

@@ -14,28 +14,12 @@ from fovexp.experiment.records.participant_id import check_participant
 
 from analysis_fixtures import Truth, write_study
 from experiment_helpers import REPO, make_workspace, run_cli
+from experiment_helpers import edit_protocol as edit
 
 
 @pytest.fixture()
 def ws(tmp_path: Path) -> Path:
     return make_workspace(tmp_path / "ws")
-
-
-def edit(ws: Path, name: str, **changes) -> Path:
-    path = ws / "protocols" / f"{name}.yaml"
-    data = yaml.safe_load(path.read_text())
-    for key, value in changes.items():
-        node = data
-        *parents, last = key.split(".")
-        for p in parents:
-            node = node[p]
-        if value is None:
-            node.pop(last)
-        else:
-            node[last] = value
-    out = ws / "protocols" / f"edited-{name}.yaml"
-    out.write_text(yaml.safe_dump(data))
-    return out
 
 
 def test_shipped_protocols_state_the_paper_design() -> None:
