@@ -50,14 +50,22 @@ def _env(cache_dir, threads: int) -> dict[str, str]:
     return {**os.environ, "NUMBA_CACHE_DIR": str(cache_dir), "NUMBA_NUM_THREADS": str(threads)}
 
 
-def _enhance(src, out, cache_dir, threads: int) -> dict:
-    proc = subprocess.run([sys.executable, "-c", SCRIPT, str(src), str(out)],
-                          env=_env(cache_dir, threads), capture_output=True, text=True,
-                          timeout=900)
-    assert proc.returncode == 0, proc.stderr
-    result = json.loads(proc.stdout.strip().splitlines()[-1])
+def _start_enhance(src, out, cache_dir, threads: int) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-c", SCRIPT, str(src), str(out)],
+                            env=_env(cache_dir, threads), stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+
+
+def _result(proc: subprocess.Popen) -> dict:
+    stdout, stderr = proc.communicate(timeout=900)
+    assert proc.returncode == 0, stderr
+    result = json.loads(stdout.strip().splitlines()[-1])
     assert result["rc"] == 0
     return result
+
+
+def _enhance(src, out, cache_dir, threads: int) -> dict:
+    return _result(_start_enhance(src, out, cache_dir, threads))
 
 
 def test_kernels_are_compiled_without_fast_math():
@@ -65,10 +73,10 @@ def test_kernels_are_compiled_without_fast_math():
     whose reassociation and FMA fusion let two compilations of one loop differ. The engine's
     kernels say so with ``fastmath=FASTMATH``; a kernel of the runner may leave the flag out
     (it may not import fovexp.jit), which is the same."""
-    from fovexp.warmup import _exercise, kernels
+    from fovexp.warmup import _import_kernel_modules, kernels
 
     assert FASTMATH is False
-    _exercise()  # imports every kernel module of the engine
+    _import_kernel_modules()  # every module that defines a kernel
     found = kernels()
     assert len(found) >= 10
     for name, disp in found.items():
@@ -84,25 +92,32 @@ def test_same_seed_same_bytes_however_the_kernels_were_compiled(tmp_path):
     fresh, ahead = tmp_path / "cache-fresh", tmp_path / "cache-ahead"
     fresh.mkdir()
     ahead.mkdir()
-    runs = {
-        # nothing in the cache: this process compiles every kernel it calls
-        "compiled here": _enhance(src, tmp_path / "a.png", fresh, threads=2),
-        # the same folder again: every kernel comes from the cache
-        "cached": _enhance(src, tmp_path / "b.png", fresh, threads=2),
-        "cached, 1 thread": _enhance(src, tmp_path / "c.png", fresh, threads=1),
-    }
-    # what ./dev setup does (fovexp compile), then the first run after it
-    proc = subprocess.run([sys.executable, "-m", "fovexp", "compile"],
-                          env={**_env(ahead, 2), "FOVEXP_PROGRESS": "1"},
-                          capture_output=True, text=True, timeout=900)
-    assert proc.returncode == 0, proc.stderr
+    # The two compilations run side by side: Numba compiles on one thread, so on CI's two
+    # cores this halves the test's time. Nothing in the outputs depends on it.
+    # Nothing in the cache: this process compiles every kernel it calls ...
+    here = _start_enhance(src, tmp_path / "a.png", fresh, threads=2)
+    # ... and what ./dev setup does (fovexp compile), into its own cache
+    # (its output into files: a full pipe would stall it while the other run is awaited)
+    log_out, log_err = tmp_path / "compile.out", tmp_path / "compile.err"
+    with open(log_out, "w") as out, open(log_err, "w") as err:
+        compile_ = subprocess.Popen([sys.executable, "-m", "fovexp", "compile"],
+                                    env={**_env(ahead, 2), "FOVEXP_PROGRESS": "1"},
+                                    stdout=out, stderr=err, text=True)
+    runs = {"compiled here": _result(here)}
+    compile_.wait(timeout=900)
+    stdout, stderr = log_out.read_text(), log_err.read_text()
+    assert compile_.returncode == 0, stderr
+    # the same folder again: every kernel comes from the cache
+    runs["cached"] = _enhance(src, tmp_path / "b.png", fresh, threads=2)
+    runs["cached, 1 thread"] = _enhance(src, tmp_path / "c.png", fresh, threads=1)
     # its counts add up (issue 32): every kernel compiled, loaded or inside its callers
     counts = re.search(r"(\d+) kernels: (\d+) compiled, (\d+) loaded from the cache, (\d+) "
-                       r"inside the kernels that call them", proc.stdout)
-    assert counts, proc.stdout
+                       r"inside the kernels that call them", stdout)
+    assert counts, stdout
     total, compiled, loaded, inlined = map(int, counts.groups())
     assert compiled > 0 and compiled + loaded + inlined == total
-    assert f"{total}/{total}" in proc.stderr  # the progress reached its total, in a log
+    assert f"{total}/{total}" in stderr  # the progress reached its total, in a log
+    # the first run after fovexp compile
     runs["compiled by fovexp compile"] = _enhance(src, tmp_path / "d.png", ahead, threads=2)
 
     assert runs["compiled here"]["compiled"]  # the scenario holds: that run compiled ...

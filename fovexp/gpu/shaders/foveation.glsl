@@ -70,7 +70,8 @@ bool region_needed(ivec2 lo_px, ivec2 hi_px) {
     ivec2 t0 = clamp(max(lo_px, 0) / TILE_PX, ivec2(0), tile_grid_wh - 1);
     ivec2 t1 = clamp(max(hi_px, 0) / TILE_PX, ivec2(0), tile_grid_wh - 1);
     int nx = t1.x - t0.x + 1, n = nx * (t1.y - t0.y + 1);
-    for (int t = int(gl_LocalInvocationIndex); t < n; t += LOCAL_2D_SIZE)
+    // (it stops once one was found: pyramids.glsl's region_constant says why)
+    for (int t = int(gl_LocalInvocationIndex); t < n && group_needed == 0u; t += LOCAL_2D_SIZE)
         if (tile_needed(t0 + ivec2(t % nx, t / nx))) atomicOr(group_needed, 1u);
     barrier();
     return group_needed != 0u;

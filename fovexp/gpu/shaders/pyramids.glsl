@@ -50,7 +50,10 @@ bool region_constant(ivec2 lo_px, ivec2 hi_px) {
     ivec2 t0 = clamp(lo_px / TILE_PX, ivec2(0), wh - 1);
     ivec2 t1 = clamp(hi_px / TILE_PX, ivec2(0), wh - 1);
     int nx = t1.x - t0.x + 1, n = nx * (t1.y - t0.y + 1) * c;
-    for (int t = int(gl_LocalInvocationIndex); t < n; t += LOCAL_2D_SIZE) {
+    // a group stops looking once any of its invocations found a tile that differs: in a
+    // textured region at once, where a wide reach would otherwise read thousands of tiles
+    // (a stale read of the shared flag only looks further)
+    for (int t = int(gl_LocalInvocationIndex); t < n && group_varies == 0u; t += LOCAL_2D_SIZE) {
         int ch = t % c, q = t / c;
         float ref = flat_tiles[(t0.y * wh.x + t0.x) * c + ch].x;
         vec2 e = flat_tiles[((t0.y + q / nx) * wh.x + t0.x + q % nx) * c + ch];
