@@ -522,6 +522,7 @@ class GpuEnhancer(Enhancer):
         tx, ty, _ = self._groups_2d(h, w)
         if not self.options.skip:
             return self._no_skip()
+        assert channels <= 4, channels  # the shader's TILE_MAX_CHANNELS
         tiles = self._buffer(name, tx * ty * channels * 2 * _F4)
         self._run("pyramids.glsl", "TILE_EXTREMES", (tx, ty, 1),
                   {"TILE_SRC": image, "FLAT_TILES": tiles}, image_hwc=(h, w, channels))

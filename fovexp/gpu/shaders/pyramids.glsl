@@ -76,33 +76,43 @@ bool group_flat(int level_scale, int margin) {
 #endif
 
 #ifdef ENTRY_TILE_EXTREMES
-// min and max of each channel of an image (the luminance, the linear image) over each
-// TILE_PX x TILE_PX tile
+// min and max of each channel of an image (the luminance, the linear image, at most
+// TILE_MAX_CHANNELS channels) over each TILE_PX x TILE_PX tile: every invocation loads its
+// pixel, one per row and channel reduces the row, one per channel the rows (two barriers in
+// all, where a halving tree took eight per channel: each barrier is a full stop of the
+// group, and a software rasteriser pays for it in every group)
+#define TILE_MAX_CHANNELS 4
 LOCAL_2D
 uniform ivec3 image_hwc;
 layout(std430, binding = B_TILE_SRC) readonly buffer TileSrc { float tile_src[]; };
 layout(std430, binding = B_FLAT_TILES) writeonly buffer FlatTiles { vec2 flat_tiles[]; };
-shared float tile_lo[LOCAL_2D_SIZE];
-shared float tile_hi[LOCAL_2D_SIZE];
+shared float tile_px[TILE_MAX_CHANNELS * LOCAL_2D_SIZE];
+shared vec2 tile_rows[TILE_MAX_CHANNELS * TILE_PX];
 void main() {
     ivec2 p = min(ivec2(gl_GlobalInvocationID.xy), ivec2(image_hwc.y, image_hwc.x) - 1);
     uint i = gl_LocalInvocationIndex;
+    ivec2 q = ivec2(gl_LocalInvocationID.xy);
     int c = image_hwc.z;
-    for (int ch = 0; ch < c; ++ch) {
-        float v = tile_src[(p.y * image_hwc.y + p.x) * c + ch];  // edge tiles repeat pixels
-        tile_lo[i] = v;
-        tile_hi[i] = v;
-        barrier();
-        for (uint half_n = LOCAL_2D_SIZE / 2; half_n > 0u; half_n /= 2u) {
-            if (i < half_n) {
-                tile_lo[i] = min(tile_lo[i], tile_lo[i + half_n]);
-                tile_hi[i] = max(tile_hi[i], tile_hi[i + half_n]);
-            }
-            barrier();
+    for (int ch = 0; ch < c; ++ch)  // edge tiles repeat pixels
+        tile_px[ch * LOCAL_2D_SIZE + int(i)] = tile_src[(p.y * image_hwc.y + p.x) * c + ch];
+    barrier();
+    if (q.x < c) {  // invocation (ch, y): channel ch of row y
+        int row = q.x * LOCAL_2D_SIZE + q.y * TILE_PX;
+        vec2 e = vec2(tile_px[row]);
+        for (int x = 1; x < TILE_PX; ++x) {
+            float v = tile_px[row + x];
+            e = vec2(min(e.x, v), max(e.y, v));
         }
-        if (i == 0u) flat_tiles[(gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x) * c + ch] =
-            vec2(tile_lo[0], tile_hi[0]);
-        barrier();
+        tile_rows[q.x * TILE_PX + q.y] = e;
+    }
+    barrier();
+    if (q.y == 0 && q.x < c) {  // invocation (ch, 0): channel ch of the tile
+        vec2 e = tile_rows[q.x * TILE_PX];
+        for (int y = 1; y < TILE_PX; ++y) {
+            vec2 r = tile_rows[q.x * TILE_PX + y];
+            e = vec2(min(e.x, r.x), max(e.y, r.y));
+        }
+        flat_tiles[(gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x) * c + q.x] = e;
     }
 }
 #endif
