@@ -49,9 +49,11 @@ from .pyramids import (
     level_scale,
 )
 
-#: The largest padded copy of the image the blur stack may make, past which the blur is far
-#: beyond any real display's (a 4K frame at the largest blur-rate, gaze in a corner: sigma
-#: 370 px, pad 2048 px, 0.55 GiB in float32; an 8K frame in float64 4.4 GiB).
+#: The largest padded image (the frame with the blur stack's replicated border) the blur stack
+#: may work on, past which the blur is far beyond any real display's (a 4K frame at the
+#: largest blur-rate, gaze in a corner: sigma 370 px, pad 2048 px, 0.55 GiB in float32; an 8K
+#: frame in float64 4.4 GiB). The border is read in place, never copied; the pyramid built on
+#: it takes a third of this.
 MAX_PADDED_BYTES = 8 * 2**30
 #: Gaussians are truncated at 4 sigma, as scipy.ndimage.gaussian_filter does.
 TRUNCATE_SIGMAS = 4.0
@@ -351,22 +353,33 @@ def _foveate_bands(
         # per stack level, the columns where it has a non-zero weight (levels k and k + 1)
         needs = np.zeros((n, w), dtype=np.bool_)
         for y in range(y0, y1):
+            # the row copied as one run (it vectorises), then each pixel's bracket
+            src_row, out_row = img[y].reshape(w * c), out[y].reshape(w * c)
+            for j in range(w * c):
+                out_row[j] = src_row[j]
+            s_row, k_row, t_row = sigma[y], kk[y - y0], tt[y - y0]
+            k = 0  # the bracket found last: the sigma map is smooth along a row
             for x in range(w):
-                for ch in range(c):
-                    out[y, x, ch] = img[y, x, ch]
-                s = sigma[y, x]
+                s = s_row[x]
                 if s <= 0.0 or flat[y >> shift, x >> shift]:  # (a shift: no division)
-                    kk[y - y0, x] = -1
-                    tt[y - y0, x] = 0.0
+                    k_row[x] = -1
+                    t_row[x] = 0.0
                     continue
-                k = np.searchsorted(levels, s) - 1
-                if k >= n - 1:
-                    k = n - 2
-                t = min((s - levels[k]) / (levels[k + 1] - levels[k]), 1.0)
-                kk[y - y0, x] = k
-                tt[y - y0, x] = t
-                needs[k, x] = True
-                needs[k + 1, x] = True
+                # numpy.searchsorted(levels, s) - 1 (the levels below s, less one), walked to
+                # from the last pixel's instead of searched for: one or two comparisons (NaN
+                # sorts above every level there)
+                if s != s:
+                    k = n - 1
+                while k + 1 < n and levels[k + 1] < s:
+                    k += 1
+                while k >= 0 and levels[k] >= s:
+                    k -= 1
+                kb = min(k, n - 2)
+                t = min((s - levels[kb]) / (levels[kb + 1] - levels[kb]), 1.0)
+                k_row[x] = kb
+                t_row[x] = t
+                needs[kb, x] = True
+                needs[kb + 1, x] = True
         for lv in range(1, n):
             need = needs[lv]
             if not need.any():
@@ -399,6 +412,23 @@ def _foveate_bands(
                 lx1 = (xb + off) // sc + 2
                 patch = _blur_patch(src, ly0, ly1, lx0, lx1, g)
                 pw = lx1 - lx0
+                if sc == 1:
+                    # full resolution: the bilinear sample is the patch's own pixel (the
+                    # three other weights are 0 and add 0: the same bits as below)
+                    for y in range(y0, y1):
+                        p_row, k_row, t_row = patch[y - y0], kk[y - y0], tt[y - y0]
+                        for xx in range(xa, xb + 1):
+                            k = k_row[xx]
+                            if k == lv:
+                                wgt = 1.0 - t_row[xx]
+                            elif k == lv - 1:
+                                wgt = t_row[xx]
+                            else:
+                                continue
+                            ix = (xx - xa) * c
+                            for ch in range(c):
+                                out[y, xx, ch] += wgt * (p_row[ix + ch] - img[y, xx, ch])
+                    continue
                 for y in range(y0, y1):
                     fy = (y + off) / sc - ly0
                     iy = min(int(fy), ly1 - ly0 - 2)
@@ -528,12 +558,13 @@ def _foveate(
     if padded_bytes > MAX_PADDED_BYTES:
         raise FovexpError(
             f"the foveation's blur reaches sigma = {max_sigma:.4g} px on a {img.shape[1]}x"
-            f"{img.shape[0]} image: its padded copy would take {padded_bytes / 2**30:.3g} GiB "
+            f"{img.shape[0]} image: its padded image would take {padded_bytes / 2**30:.3g} GiB "
             f"(at most {MAX_PADDED_BYTES / 2**30:g}); the display profile's size, resolution "
             "and viewing distance with the blur-rate give this blur"
         )
-    padded = np.pad(img, ((pad, pad), (pad, pad), (0, 0)), mode="edge") if pad else img
-    pyramid = gaussian_pyramid(padded, top)
+    # the pyramid of the image padded by `pad` (its first step reads the image through
+    # clamped indices: no padded copy)
+    pyramid = gaussian_pyramid(img, top, pad_px=pad)
     # level 0 is the image itself, read unpadded (its borders replicate by clamping); the
     # coarser levels go into one buffer (not the image: a copy of it would cost more)
     pmeta = np.zeros((top + 1, 3), dtype=np.int64)

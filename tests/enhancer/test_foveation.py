@@ -48,7 +48,7 @@ def test_foveation_leaves_sigma_zero_pixels_bit_exact():
 
 
 def test_a_blur_beyond_any_display_is_refused_in_one_line(monkeypatch):
-    """A blur whose padded copy would not fit is one clear error, not a MemoryError."""
+    """A blur whose padded image would not fit is one clear error, not a MemoryError."""
     from fovexp import FovexpError, foveation
 
     monkeypatch.setattr(foveation, "MAX_PADDED_BYTES", 2**20)
@@ -287,8 +287,8 @@ def test_the_sigma_map_of_some_blocks_on_a_small_frame():
                                                   "linear"), gaze, 1.7, fovea)
 
 
-def test_the_padded_copy_is_measured_exactly(monkeypatch):
-    """The guard's figure is the padded copy's size, (H + 2 pad)(W + 2 pad) C bytes-per-value
+def test_the_padded_image_is_measured_exactly(monkeypatch):
+    """The guard's figure is the padded image's size, (H + 2 pad)(W + 2 pad) C bytes-per-value
     (pad: the blur stack's border), refused just above the limit and let through at it."""
     from fovexp import FovexpError, foveation
 

@@ -101,6 +101,30 @@ def test_reduce_and_expand_are_the_binomial_filters():
     assert (pyramids.expand(pyramids.reduce(c), (13, 11)) == np.float32(0.3)).all()
 
 
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_an_interleaved_reduce_and_its_border_read_in_place_are_exact(dtype):
+    """The (H, W, C) reduce keeps the channels interleaved: each channel comes out bit for bit
+    as the one-channel reduce gives it. ``pad_px`` reads the replicated border through clamped
+    indices: bit for bit the pyramid of the ``np.pad(mode="edge")`` copy, at every level,
+    shapes odd and even, down to a single pixel and a border wider than the image."""
+    rng = np.random.default_rng(3)
+    rgb = rng.random((21, 34, 3)).astype(dtype)
+    red = pyramids.reduce(rgb)
+    for ch in range(3):
+        one = pyramids.reduce(np.ascontiguousarray(rgb[..., ch]))
+        assert red[..., ch].tobytes() == one.tobytes()
+    for shape in ((1, 1, 3), (2, 1, 1), (5, 7, 3), (31, 17, 2), (9, 12)):
+        img = rng.random(shape).astype(dtype)
+        for pad in (0, 1, 2, 3, 8, 40):
+            widths = ((pad, pad), (pad, pad)) + (((0, 0),) if img.ndim == 3 else ())
+            want = pyramids.gaussian_pyramid(np.pad(img, widths, mode="edge"), 5)
+            got = pyramids.gaussian_pyramid(img, 5, pad_px=pad)
+            assert got[0] is img and len(got) == len(want), (shape, pad)
+            for a, b in zip(want[1:], got[1:], strict=True):
+                assert a.shape == b.shape and a.dtype == b.dtype, (shape, pad)
+                assert a.tobytes() == b.tobytes(), (shape, pad)
+
+
 def test_the_pyramids_levels_and_laplacian_bands():
     img = np.random.default_rng(5).random((40, 24))
     pyr = pyramids.gaussian_pyramid(img, 10)

@@ -119,7 +119,7 @@ void main() {
 
 #ifdef ENTRY_REDUCE
 // pyramids.reduce: 5-tap binomial filter, replicated borders, every second sample; down the
-// columns first, then along the row (pyramids._reduce_2d). The source may carry a virtual
+// columns first, then along the row (pyramids._reduce_hwc). The source may carry a virtual
 // replicated border of src_pad px (level 0 of the foveation pyramid).
 LOCAL_2D
 uniform ivec3 src_hwc;
