@@ -199,6 +199,8 @@ def reduce(image: np.ndarray, pad_px: int = 0) -> np.ndarray:
     border replicated that many px on every side (``np.pad(mode="edge")``), bit for bit,
     without making the padded copy.
     """
+    if pad_px < 0:
+        raise ValueError(f"pad_px must be >= 0, not {pad_px}")
     image = np.ascontiguousarray(image)
     if image.dtype not in (np.float32, np.float64):
         image = image.astype(np.float32)

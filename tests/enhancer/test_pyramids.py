@@ -123,6 +123,8 @@ def test_an_interleaved_reduce_and_its_border_read_in_place_are_exact(dtype):
             for a, b in zip(want[1:], got[1:], strict=True):
                 assert a.shape == b.shape and a.dtype == b.dtype, (shape, pad)
                 assert a.tobytes() == b.tobytes(), (shape, pad)
+    with pytest.raises(ValueError, match="pad_px must be >= 0"):
+        pyramids.reduce(rgb, pad_px=-1)
 
 
 def test_the_pyramids_levels_and_laplacian_bands():
