@@ -219,6 +219,38 @@ def test_bad_images_are_refused_with_a_clear_message(frame, bad, msg):
         enh.set_image(bad(frame))
 
 
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+@pytest.mark.parametrize("size", [1, 63, 64, 65, 10_000])
+def test_the_image_checks_one_pass_counts_and_bounds_as_numpy(dtype, size):
+    """The one compiled pass of the image check (64 parts, some empty for small arrays)
+    against NumPy's isfinite, min and max, with non-finite values at the parts' edges."""
+    from fovexp.pipeline import _finite_range
+
+    rng = np.random.default_rng(size)
+    a = (rng.random(size) * 3.0 - 1.0).astype(dtype)
+    assert _finite_range(a)[0] == 0
+    assert _finite_range(a)[1:] == (a.min(), a.max())
+    for idx, v in [(0, np.nan), (size // 64, np.inf), (size - 1, -np.inf), (size // 2, np.nan)]:
+        a[idx] = v
+    assert _finite_range(a)[0] == np.count_nonzero(~np.isfinite(a))
+
+
+def test_a_strided_view_is_checked_as_its_values(frame):
+    """A view the one pass cannot take (rows with a stride) is checked by NumPy: the same
+    refusals."""
+    enh = Enhancer(LG)
+    h, w = frame.shape[:2]
+    wider = np.concatenate([frame, frame[:, :8]], axis=1)
+    assert not wider[:, :w].flags.c_contiguous
+    enh.set_image(wider[:, :w])  # in range: accepted
+    wider[3, 5, 1] = np.inf
+    with pytest.raises(FovexpError, match=r"1 NaN/Inf values \(first at x=5, y=3\)"):
+        enh.set_image(wider[:, :w])
+    wider[3, 5, 1] = -0.5
+    with pytest.raises(FovexpError, match=r"found \[-0.5, "):
+        enh.set_image(wider[:, :w])
+
+
 @pytest.mark.parametrize("kw,field", [
     ({"blur_rate": -0.1}, "blur_rate"), ({"impulses": 0}, "impulses"),
     ({"s_f": 0.0}, "s_f"), ({"method": "magic"}, "method"), ({"f_e": 100.0}, "f_e"),
