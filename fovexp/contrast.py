@@ -85,69 +85,64 @@ def _fixed(v):  # pragma: no cover - compiled
     return rint_to_int64(np.float64(v) * _SAT_SCALE)
 
 
-@numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
-def _sat_into(img, pad, y0, y1, x0, x1, s, row_max, parts):  # pragma: no cover - compiled
-    """:func:`_sat`, written into ``s`` ((y1 - y0 + 1, x1 - x0 + 1) int64); each padded row's
-    largest magnitude into ``row_max`` (y1 - y0), for :func:`check_sat_fits`. The column sums
-    go in ``parts`` runs of columns (the thread count: a kernel that asks Numba for it is
-    not cached)."""
+#: Image rows per strip of the contrast's summed-area tables (at least; a strip is at least
+#: as tall as its border of 2 ``pad`` rows, so that no more than half its table is border).
+#: Each strip's table ((rows + 2 pad + 1) x (W + 2 pad + 1) int64: 3.6 MB at 4K with a 25 px
+#: border) stays in the cache while its boxes are read; one table of the whole frame (70 MB)
+#: went to memory and back, twice (measured: 80 ms of a 4K frame's contrast stage, 2 cores).
+STRIP_ROWS = 64
+
+
+@numba.njit(cache=True, fastmath=FASTMATH, nogil=True)
+def _table_into(img, pad, y0, y1, x0, x1, cols, s):  # pragma: no cover - compiled
+    """The exact summed-area table of rows [y0, y1) and columns [x0, x1) of the padded image
+    (symmetric borders, :func:`_symmetric`) in fixed point (:func:`_fixed`), written into
+    ``s[:y1 - y0 + 1, :x1 - x0 + 1]`` with its leading zero row and column, in one pass
+    (each row's prefix sums added to the row above's, still in the cache). ``cols`` is
+    scratch of at least ``x1 - x0`` ints. Returns the largest magnitude summed."""
     h, w = img.shape
     hp, wp = y1 - y0, x1 - x0
-    # every entry past the leading zero row and column is written below: no memset of the
-    # whole table (tens of MB at 4K, on one thread)
-    s[0, :] = 0
-    s[:, 0] = 0
-    cols = np.empty(wp, dtype=np.int64)
     for x in range(wp):
         cols[x] = _symmetric(x0 + x - pad, w)
-    for y in numba.prange(hp):  # row prefix sums, rows in parallel
-        sy = _symmetric(y0 + y - pad, h)
+    first = s[0]
+    for x in range(wp + 1):
+        first[x] = 0
+    top = 0.0
+    for y in range(hp):
+        src = img[_symmetric(y0 + y - pad, h)]
+        above, row = s[y], s[y + 1]
+        row[0] = 0
         run = np.int64(0)
-        top = -np.inf
         for x in range(wp):
-            v = img[sy, cols[x]]
-            top = max(top, abs(v))
+            v = src[cols[x]]
+            top = max(top, abs(np.float64(v)))
             run += _fixed(v)
-            s[y + 1, x + 1] = run
-        row_max[y] = top
-    # then column sums, row after row in one contiguous run of columns per thread (blocks of
-    # 64 columns, each walked down its rows, measured 2-3x slower: a stride of a row per add)
-    for p in numba.prange(parts):
-        a = 1 + wp * p // parts
-        b = 1 + wp * (p + 1) // parts
-        for y in range(1, hp + 1):
-            for x in range(a, b):
-                s[y, x] += s[y - 1, x]
-    return s
+            row[x + 1] = above[x + 1] + run
+    return top
 
 
-#: The summed-area table of the last frame of each thread, kept: a table in fresh pages cost
-#: several ms more than one written again (fovexp/jit.py), and a frame needs one.
+#: Each thread's strip tables, kept from frame to frame: tables in fresh pages cost several ms
+#: more than tables written again (fovexp/jit.py).
 _SCRATCH = threading.local()
 
 
-def _table(rows: int, cols: int) -> np.ndarray:
-    """An (rows, cols) int64 array for a summed-area table: this thread's kept one, grown
-    when too small."""
-    buf = getattr(_SCRATCH, "sat", None)
-    if buf is None or buf.size < rows * cols:
-        buf = _SCRATCH.sat = np.empty(rows * cols, np.int64)
-    return buf[: rows * cols].reshape(rows, cols)
+def _tables(parts: int, rows: int, cols: int) -> np.ndarray:
+    """``parts`` (rows, cols) int64 tables, one per thread of a kernel: this thread's kept
+    ones, grown when too small."""
+    buf = getattr(_SCRATCH, "tables", None)
+    if buf is None or buf.size < parts * rows * cols:
+        buf = _SCRATCH.tables = np.empty(parts * rows * cols, np.int64)
+    return buf[: parts * rows * cols].reshape(parts, rows, cols)
 
 
 def _sat(
     img: np.ndarray, pad: int, y0: int, y1: int, x0: int, x1: int,
 ) -> tuple[np.ndarray, float]:
-    """Exact summed-area table (int64, leading zero row and column) of a grey image in fixed
-    point (:func:`_fixed`), padded by ``pad`` pixels with symmetric borders
-    (:func:`_symmetric`), over rows [y0, y1) and columns [x0, x1) of the padded image (the
-    sums start there: the boxes inside it are the same integers). The table is this thread's
-    scratch (:func:`_table`): valid until its next call. Also the largest magnitude it sums,
-    found on the way; refuses what :func:`check_sat_fits` refuses."""
-    row_max = np.empty(y1 - y0, img.dtype)
-    sat = _sat_into(img, pad, y0, y1, x0, x1, _table(y1 - y0 + 1, x1 - x0 + 1), row_max,
-                    numba.get_num_threads())
-    largest = float(row_max.max()) if row_max.size else 0.0
+    """The summed-area table of rows [y0, y1) and columns [x0, x1) of the padded image, as a
+    new array (the kernels build one per strip, :func:`_table_into`), and the largest
+    magnitude it sums; refuses what :func:`check_sat_fits` refuses."""
+    sat = np.empty((y1 - y0 + 1, x1 - x0 + 1), np.int64)
+    largest = _table_into(img, pad, y0, y1, x0, x1, np.empty(x1 - x0, np.int64), sat)
     check_sat_fits(img.shape, pad, largest)
     return sat, largest
 
@@ -170,12 +165,13 @@ def check_sat_fits(shape: tuple[int, int], pad: int, max_value: float) -> None:
         )
 
 
-def _box_sums_exact_as_float(pad: int, max_value: float) -> bool:
+@numba.njit(cache=True, fastmath=FASTMATH, nogil=True)
+def _box_sums_exact_as_float(pad, max_value):  # pragma: no cover - compiled
     """Whether every box sum (and its difference from ``n^2`` times the pixel) converts to
     float64 by :func:`fovexp.jit.int64_to_float64`: below ``2**51`` for the widest box
     (``2 pad - 2`` px, :func:`sat_pad_px`). Otherwise the kernels convert the slow way."""
     n = 2 * pad
-    return n * n * max(float(max_value), 1.0) * _SAT_SCALE < MAGIC_EXACT_BELOW
+    return n * n * max(max_value, 1.0) * _SAT_SCALE < MAGIC_EXACT_BELOW
 
 
 @numba.njit(cache=True, inline="always", fastmath=FASTMATH, nogil=True)
@@ -239,42 +235,64 @@ def _row_change(img, sigma, sat, y, xs, xe, oy, ox, pad, f_e, add_input, magic, 
 
 
 @numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
-def _change(img, sigma, sat, oy, ox, pad, f_e, add_input, magic, out):
+def _change_strips(img, sigma, pad, f_e, flat, shift, add_input, tables, largest, out):
     # pragma: no cover - compiled
-    """:func:`_row_change` of every pixel, written into ``out`` (img's shape)."""
+    """:func:`_row_change` of every pixel whose ``2**shift`` square block ``flat`` does not
+    mark (``flat`` of shape (0, 0): every pixel), written into ``out`` (zeros where blocks
+    are left out: their boxes are one constant, their change is 0). The rows go in strips
+    of ``tables.shape[1] - 2 pad - 1``, each summed into a table of its own
+    (:func:`_table_into`, ``tables[p]`` for part ``p``; columns from the first to the last
+    block it computes), which stays in the cache while its boxes are read. The strips are
+    spread over the parts in an interleaved order (flat strips cost nothing). ``largest``
+    (one per strip) gets the largest magnitude each table sums (-1 for a strip left out):
+    the caller refuses the frame when it is too large to sum exactly."""
     h, w = img.shape
-    for y in numba.prange(h):
-        _row_change(img, sigma, sat, y, 0, w, oy, ox, pad, f_e, add_input, magic, out)
-    return out
-
-
-@numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
-def _change_blocks(img, sigma, sat, oy, ox, pad, f_e, flat, shift, magic, out):
-    # pragma: no cover - compiled
-    """:func:`_row_change` of the pixels whose ``2**shift`` square block ``flat`` does not
-    mark, written into ``out`` (zeros: the others' boxes are one constant, their change is
-    0), a run of consecutive blocks at a time."""
-    h, w = img.shape
+    parts, rows = tables.shape[0], tables.shape[1] - 2 * pad - 1
+    nst = (h + rows - 1) // rows
+    stride = interleave(nst)
+    skip = flat.shape[0] > 0
     nbx = flat.shape[1]
-    # rows in chunks of 8 (consecutive rows share the table's rows), the chunks interleaved:
-    # flat chunks cost nothing, so the others are spread over the threads
-    nch = (h + 7) // 8
-    stride = interleave(nch)
-    for i in numba.prange(nch * 8):
-        y = ((i // 8) * stride) % nch * 8 + i % 8
-        if y >= h:
-            continue
-        by = y >> shift
-        bx = 0
-        while bx < nbx:
-            if flat[by, bx]:
-                bx += 1
-                continue
-            b0 = bx  # a run of blocks to compute
-            while bx < nbx and not flat[by, bx]:
-                bx += 1
-            _row_change(img, sigma, sat, y, b0 << shift, min(bx << shift, w), oy, ox, pad,
-                        f_e, False, magic, out)
+    for p in numba.prange(parts):
+        table = tables[p]
+        cols = np.empty(tables.shape[2], np.int64)
+        for j in range(p, nst, parts):
+            st = (j * stride) % nst
+            y0, y1 = st * rows, min(h, (st + 1) * rows)
+            x0, x1 = 0, w
+            if skip:  # the columns of the blocks to compute, if any
+                b0, b1 = nbx, -1
+                for by in range(y0 >> shift, ((y1 - 1) >> shift) + 1):
+                    for bx in range(nbx):
+                        if not flat[by, bx]:
+                            b0, b1 = min(b0, bx), max(b1, bx)
+                            break
+                    for bx in range(nbx - 1, b1, -1):
+                        if not flat[by, bx]:
+                            b1 = bx
+                            break
+                if b1 < 0:
+                    largest[st] = -1.0
+                    continue
+                x0, x1 = b0 << shift, min((b1 + 1) << shift, w)
+            top = _table_into(img, pad, y0, y1 + 2 * pad, x0, x1 + 2 * pad, cols, table)
+            largest[st] = top
+            magic = _box_sums_exact_as_float(pad, top)
+            for y in range(y0, y1):
+                if not skip:
+                    _row_change(img, sigma, table, y, 0, w, y0, 0, pad, f_e, add_input, magic,
+                                out)
+                    continue
+                by = y >> shift
+                bx = 0
+                while bx < nbx:  # runs of consecutive blocks to compute
+                    if flat[by, bx]:
+                        bx += 1
+                        continue
+                    c0 = bx
+                    while bx < nbx and not flat[by, bx]:
+                        bx += 1
+                    _row_change(img, sigma, table, y, c0 << shift, min(bx << shift, w), y0,
+                                x0, pad, f_e, False, magic, out)
     return out
 
 
@@ -287,14 +305,10 @@ def _flat_blocks(grey_flat: np.ndarray, max_sigma: float) -> np.ndarray:
 
 
 def _enhance_channels(img: np.ndarray, sigma: np.ndarray, max_sigma: float, f_e: float):
-    pad = sat_pad_px(max_sigma)
     out = np.empty_like(img)
-    h, w = img.shape[:2]
     for ch in range(img.shape[2]):
         plane = np.ascontiguousarray(img[..., ch])
-        sat, largest = _sat(plane, pad, 0, h + 2 * pad, 0, w + 2 * pad)
-        magic = _box_sums_exact_as_float(pad, largest)
-        out[..., ch] = _change(plane, sigma, sat, 0, 0, pad, f_e, True, magic,
+        out[..., ch] = _strips(plane, sigma, f_e, None, max_sigma, True,
                                np.empty(plane.shape, plane.dtype))
     return out
 
@@ -359,25 +373,27 @@ def _change_outside(
 ) -> np.ndarray:
     """The change of every pixel outside the level-3 blocks ``flat`` marks (0 there); boxes up
     to level ``floor(max_sigma) + 1``."""
+    if flat is None or not flat.any():  # nothing to leave out
+        return _strips(img, sigma, f_e, None, max_sigma, False, np.empty(img.shape, img.dtype))
+    # NumPy's zeros: the flat blocks' pages are never written (calloc)
+    return _strips(img, sigma, f_e, flat, max_sigma, False, np.zeros(img.shape, img.dtype))
+
+
+def _strips(
+    img: np.ndarray, sigma: np.ndarray, f_e: float, flat: np.ndarray | None, max_sigma: float,
+    add_input: bool, out: np.ndarray,
+) -> np.ndarray:
+    """:func:`_change_strips` into ``out``, on this thread's kept tables; refuses a frame
+    whose values the exact sums cannot hold (:func:`check_sat_fits`)."""
     pad = sat_pad_px(max_sigma)
     h, w = img.shape
-    f_e = np.float64(f_e)
-    if flat is None or not flat.any():  # nothing to leave out
-        sat, largest = _sat(img, pad, 0, h + 2 * pad, 0, w + 2 * pad)
-        magic = _box_sums_exact_as_float(pad, largest)
-        return _change(img, sigma, sat, 0, 0, pad, f_e, False, magic,
-                       np.empty(img.shape, img.dtype))
-    # the table only where the boxes of the pixels computed reach: their bounding box, and
-    # pad around it (in the padded image's coordinates, [y_lo, y_hi + 2 pad])
-    block = level_scale(FLAT_BLOCK_LEVEL)
-    rows, cols = np.flatnonzero(~flat.all(axis=1)), np.flatnonzero(~flat.all(axis=0))
-    if rows.size == 0:
-        return np.zeros(img.shape, dtype=img.dtype)
-    y0, y1 = min(rows[0] * block, h), min((rows[-1] + 1) * block, h) + 2 * pad
-    x0, x1 = min(cols[0] * block, w), min((cols[-1] + 1) * block, w) + 2 * pad
-    sat, largest = _sat(img, pad, y0, y1, x0, x1)
-    magic = _box_sums_exact_as_float(pad, largest)
-    # NumPy's zeros: the flat blocks' pages are never written (calloc)
-    out = np.zeros(img.shape, dtype=img.dtype)
-    _change_blocks(img, sigma, sat, y0, x0, pad, f_e, flat, FLAT_BLOCK_LEVEL, magic, out)
+    rows = max(STRIP_ROWS, 2 * pad)
+    parts = numba.get_num_threads()
+    tables = _tables(parts, rows + 2 * pad + 1, w + 2 * pad + 1)
+    largest = np.empty((h + rows - 1) // rows, np.float64)
+    blocks = np.zeros((0, 0), np.bool_) if flat is None else np.ascontiguousarray(flat)
+    _change_strips(img, sigma, pad, np.float64(f_e), blocks, FLAT_BLOCK_LEVEL, add_input,
+                   tables, largest, out)
+    # NaN fails the check as too large, as it should
+    check_sat_fits(img.shape, pad, float(largest.max()) if largest.size else 0.0)
     return out

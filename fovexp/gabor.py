@@ -290,18 +290,37 @@ def _splat_band(
         rc = math.cos(ky[i])
         rs = math.sin(ky[i])
         xo = x0 + pad
-        for y in range(ya, yb + 1):
-            cs[0] = env * c
-            cs[1] = env * s
-            cr, ci = cs[0], cs[1]
-            # the window as a row slice (xo >= 0: _window's pad): an index xo + j of unknown
-            # sign made Numba wrap negative indices, and kept the loop scalar (2x slower)
-            row = out[y - y0, xo:xo + nwin]
-            for j in range(nwin):
-                row[j] += cr * er[j] - ci * ei[j]
-            env *= q
-            q *= step_q
-            c, s = c * rc - s * rs, s * rc + c * rs
+        # the common windows with their width a constant the compiler unrolls (measured:
+        # the rows 1.4x faster at 4K, 64 impulses); any other width as it comes
+        if nwin == 48:
+            _kernel_rows(out, y0, ya, yb, xo, 48, er, ei, env, q, step_q, c, s, rc, rs, cs)
+        elif nwin == 32:
+            _kernel_rows(out, y0, ya, yb, xo, 32, er, ei, env, q, step_q, c, s, rc, rs, cs)
+        elif nwin == 64:
+            _kernel_rows(out, y0, ya, yb, xo, 64, er, ei, env, q, step_q, c, s, rc, rs, cs)
+        else:
+            _kernel_rows(out, y0, ya, yb, xo, nwin, er, ei, env, q, step_q, c, s, rc, rs, cs)
+
+
+@numba.njit(cache=True, inline="always", fastmath=FASTMATH, nogil=True)
+def _kernel_rows(out, y0, ya, yb, xo, nwin, er, ei, env, q, step_q, c, s, rc, rs, cs):
+    # pragma: no cover - compiled
+    """Rows [ya, yb] of one kernel added to ``out`` (band-local rows from ``y0``): the x
+    factor ``er + i ei`` (window from column ``xo``) times the y factor, stepped down the
+    rows by the recurrence from ``env``, ``q``, ``c``, ``s``. Inlined: a constant ``nwin``
+    makes the row loop's trip count known."""
+    for y in range(ya, yb + 1):
+        cs[0] = env * c
+        cs[1] = env * s
+        cr, ci = cs[0], cs[1]
+        # the window as a row slice (xo >= 0: _window's pad): an index xo + j of unknown
+        # sign made Numba wrap negative indices, and kept the loop scalar (2x slower)
+        row = out[y - y0, xo:xo + nwin]
+        for j in range(nwin):
+            row[j] += cr * er[j] - ci * ei[j]
+        env *= q
+        q *= step_q
+        c, s = c * rc - s * rs, s * rc + c * rs
 
 
 def _window(r: float) -> tuple[int, int]:

@@ -48,15 +48,19 @@ def direct_sum(shape, imp, k, f, t, r_px, a, norm) -> np.ndarray:
     return ref
 
 
-def test_synthesis_matches_direct_sum_of_truncated_gabors():
+@pytest.mark.parametrize("a,window_px", [(0.06, 48), (0.1, 32), (0.04, 64), (0.03, 96)])
+def test_synthesis_matches_direct_sum_of_truncated_gabors(a, window_px):
+    """Against the kernels summed directly, for each window width the synthesis has a path
+    of its own for (32, 48, 64 px) and one it has not (96 px)."""
+    assert gabor._window(gabor.kernel_radius_px(a))[0] == window_px
     h, w = 64, 80
-    imp = gabor.generate_impulses(w, h, 3, 0.06, 9)
+    imp = gabor.generate_impulses(w, h, 3, a, 9)
     m = len(imp)
     rng = np.random.default_rng(1)
     k, f, t = rng.random(m), rng.uniform(0.05, 0.45, m), rng.uniform(-np.pi, np.pi, m)
-    fast = gabor.synthesize((h, w), imp, k, f, t, 3, 0.06)
-    ref = direct_sum((h, w), imp, k, f, t, gabor.kernel_radius_px(0.06), 0.06,
-                     gabor.normalisation(3, 0.06))
+    fast = gabor.synthesize((h, w), imp, k, f, t, 3, a)
+    ref = direct_sum((h, w), imp, k, f, t, gabor.kernel_radius_px(a), a,
+                     gabor.normalisation(3, a))
     assert np.abs(fast - ref).max() < 1e-4 * max(1.0, np.abs(ref).max())
 
 
