@@ -584,31 +584,11 @@ class Enhancer:
     def _laplacian_need(self, pyr, active: ImpulseParams) -> dict[int, np.ndarray]:
         """Per level k, the tiles of |L_k| that the imp_laplacian stage reads at the active
         impulses: the bilinear taps (one more node each side, as a margin) of levels k0 and
-        k0 + 1 (:func:`fovexp.amplitude.bracketing_levels`)."""
+        k0 + 1 (:func:`fovexp.amplitude.bracketing_levels`,
+        :func:`fovexp.pyramids.tiles_of_taps`)."""
         top = min(amp.MAX_LAPLACIAN_LEVEL, len(pyr) - 1)
         k0, _ = amp.bracketing_levels(active.level, max(top, 1))
-        tile = pyramids.ABS_LAPLACIAN_TILE
-        need = {}
-        for k in range(1, top + 1):
-            grid = pyr[k - 1]
-            mask = np.zeros(pyramids.tile_grid(grid.shape), dtype=np.bool_)
-            sel = (k0 == k) | (k0 + 1 == k)
-            if sel.any():
-                scale = float(pyramids.level_scale(k - 1))
-                for coord, n, axis in ((active.y_px[sel], grid.shape[0], 0),
-                                       (active.x_px[sel], grid.shape[1], 1)):
-                    node = np.floor(np.asarray(coord) / scale).astype(np.int64)
-                    lo = np.clip(node - 1, 0, n - 1) // tile
-                    hi = np.clip(node + 2, 0, n - 1) // tile
-                    if axis == 0:
-                        ty0, ty1 = lo, hi
-                    else:
-                        tx0, tx1 = lo, hi
-                for ty in (ty0, ty1):  # the taps span at most two tiles each way
-                    for tx in (tx0, tx1):
-                        mask[ty, tx] = True
-            need[k] = mask
-        return need
+        return pyramids.tiles_of_taps(active.x_px, active.y_px, k0, pyr, top)
 
     def _contrast(self, luma, sigma, f_e, luma_flat, sigma_blocks) -> np.ndarray:
         """The change of luminance the contrast enhancement makes (grey, linear). The method

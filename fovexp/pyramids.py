@@ -323,6 +323,54 @@ def tile_grid(shape: tuple[int, int], tile: int = ABS_LAPLACIAN_TILE) -> tuple[i
     return -(-int(shape[0]) // tile), -(-int(shape[1]) // tile)
 
 
+@numba.njit(cache=True, fastmath=FASTMATH, nogil=True)
+def _mark_tiles_of_taps(x_px, y_px, k0, top, rows, cols, tile, offsets, tile_cols, marks):
+    # pragma: no cover - compiled
+    """:func:`tiles_of_taps` into ``marks``: level k's (tile rows, tile columns) grid flat
+    from ``offsets[k]``, ``tile_cols[k]`` per row; level k's samples (rows[k], cols[k])."""
+    for i in range(k0.shape[0]):
+        for k in (k0[i], k0[i] + 1):
+            if k < 1 or k > top:
+                continue
+            scale = np.float64(1 << (k - 1))  # level_scale(k - 1)
+            n_y, n_x = rows[k], cols[k]
+            ny = np.int64(math.floor(y_px[i] / scale))
+            nx = np.int64(math.floor(x_px[i] / scale))
+            ty0, ty1 = min(max(ny - 1, 0), n_y - 1) // tile, min(max(ny + 2, 0), n_y - 1) // tile
+            tx0, tx1 = min(max(nx - 1, 0), n_x - 1) // tile, min(max(nx + 2, 0), n_x - 1) // tile
+            base, tc = offsets[k], tile_cols[k]
+            marks[base + ty0 * tc + tx0] = True
+            marks[base + ty0 * tc + tx1] = True
+            marks[base + ty1 * tc + tx0] = True
+            marks[base + ty1 * tc + tx1] = True
+
+
+def tiles_of_taps(
+    x_px: np.ndarray, y_px: np.ndarray, k0: np.ndarray, gaussian: list[np.ndarray], top: int,
+    tile: int = ABS_LAPLACIAN_TILE,
+) -> dict[int, np.ndarray]:
+    """Per level k in 1..``top``, the ``tile`` x ``tile`` tiles of |L_k| (on level k - 1's
+    grid, ``gaussian[k - 1]``) that bilinear taps at full-resolution points (``x_px``,
+    ``y_px``) read on levels ``k0`` and ``k0 + 1``, with one more node each side as a margin
+    (:func:`fovexp.amplitude.laplacian_amplitude_at`'s samples): the taps span at most two
+    tiles each way. One compiled pass over the points."""
+    rows = np.zeros(top + 1, np.int64)
+    cols = np.zeros(top + 1, np.int64)
+    offsets = np.zeros(top + 2, np.int64)
+    tile_cols = np.zeros(top + 1, np.int64)
+    for k in range(1, top + 1):
+        rows[k], cols[k] = gaussian[k - 1].shape[:2]
+        ty, tx = tile_grid(gaussian[k - 1].shape, tile)
+        tile_cols[k] = tx
+        offsets[k + 1] = offsets[k] + ty * tx
+    marks = np.zeros(int(offsets[top + 1]), np.bool_)
+    _mark_tiles_of_taps(np.asarray(x_px, np.float64), np.asarray(y_px, np.float64),
+                        np.asarray(k0, np.int64), int(top), rows, cols, int(tile), offsets,
+                        tile_cols, marks)
+    return {k: marks[offsets[k]:offsets[k + 1]].reshape(tile_grid(gaussian[k - 1].shape, tile))
+            for k in range(1, top + 1)}
+
+
 def smoothed_abs_laplacian(
     gaussian: list[np.ndarray], levels: int, need: dict[int, np.ndarray] | None = None
 ) -> dict[int, np.ndarray]:

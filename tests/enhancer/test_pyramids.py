@@ -233,3 +233,31 @@ def test_sampling_a_level_at_full_resolution_coordinates():
     near = pyramids.sample_nearest(grid, np.array([0.0, 7.4, 7.6, 100.0]),
                                    np.array([0.0, 3.0, 3.0, -3.0]), 4)
     assert near.tolist() == [grid[0, 0], grid[0, 1], grid[0, 2], grid[0, 8]]
+
+
+def test_the_tiles_of_taps_are_those_each_tap_reads():
+    """Every tile a point's bilinear taps (and one node more each side) fall in, on levels
+    k0 and k0 + 1, is marked, and no other: against the taps enumerated one by one, with
+    points past the edges (clamped) and levels out of range (skipped)."""
+    rng = np.random.default_rng(5)
+    shape = (300, 517)
+    gaussian = pyramids.gaussian_pyramid(rng.random(shape, dtype=np.float32), 5)
+    top, tile = 4, 8
+    n = 60
+    x = rng.uniform(-40.0, shape[1] + 40.0, n)
+    y = rng.uniform(-40.0, shape[0] + 40.0, n)
+    k0 = rng.integers(-1, top + 1, n)
+    got = pyramids.tiles_of_taps(x, y, k0, gaussian, top, tile)
+    assert sorted(got) == list(range(1, top + 1))
+    for k in range(1, top + 1):
+        h, w = gaussian[k - 1].shape
+        want = np.zeros(pyramids.tile_grid((h, w), tile), bool)
+        scale = 2.0 ** (k - 1)
+        for i in np.flatnonzero((k0 == k) | (k0 + 1 == k)):
+            ny, nx = int(np.floor(y[i] / scale)), int(np.floor(x[i] / scale))
+            for dy in range(-1, 3):
+                for dx in range(-1, 3):
+                    want[min(max(ny + dy, 0), h - 1) // tile,
+                         min(max(nx + dx, 0), w - 1) // tile] = True
+        assert np.array_equal(got[k], want), k
+        assert want.any() and (k > 2 or not want.all())  # a test that can tell
