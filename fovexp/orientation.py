@@ -24,6 +24,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
+from ._parallel import over_points
 from .pyramids import sample_cubic
 
 #: Gaussian-pyramid level the gradients are computed on (paper section 4.3).
@@ -54,5 +55,9 @@ def orientation_at(
     Float32 (or ``dtype``)."""
     gxs = sample_cubic(gx, x_px, y_px, level)
     gys = sample_cubic(gy, x_px, y_px, level)
-    flat = np.hypot(gxs, gys) < GRADIENT_EPS
-    return (np.where(flat, 0.0, np.arctan2(gys, gxs)) - 0.5 * np.pi).astype(dtype)
+
+    def omega(gxs: np.ndarray, gys: np.ndarray) -> np.ndarray:
+        flat = np.hypot(gxs, gys) < GRADIENT_EPS
+        return (np.where(flat, 0.0, np.arctan2(gys, gxs)) - 0.5 * np.pi).astype(dtype)
+
+    return over_points(omega, gxs, gys)

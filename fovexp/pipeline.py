@@ -48,6 +48,7 @@ import numpy as np
 
 from . import amplitude as amp
 from . import colour, frequency, gabor, orientation, pyramids
+from ._parallel import over_points
 from .contrast import contrast_change, contrast_change_where_needed
 from .errors import FovexpError
 from .foveation import (
@@ -649,8 +650,12 @@ class Enhancer:
 
     def _imp_bands(self, imp, geom, gaze, sigma_given, blur_rate) -> _ImpulseBands:
         # impulses whose kernel cannot reach the image are dropped with the others
+        def band_at(x, y):
+            return self._band_at(geom, gaze, sigma_given, blur_rate, x, y)
+
+        # in parts on threads, but for a given map: its sampling is a parallel kernel itself
         return _ImpulseBands(
-            lambda x, y: self._band_at(geom, gaze, sigma_given, blur_rate, x, y),
+            band_at if sigma_given is not None else (lambda x, y: over_points(band_at, x, y)),
             np.clip(imp.x_px, 0, geom.width_px - 1), np.clip(imp.y_px, 0, geom.height_px - 1))
 
     def _imp_band(self, imp, bands: _ImpulseBands) -> ImpulseParams:
@@ -712,11 +717,15 @@ class Enhancer:
         (no noise there)."""
         f = np.zeros(len(band.index))
         o = band.open_
-        mu, sig_n = frequency.lognormal_params(band.f_low_cpp[o], band.f_high_cpp[o], s_f)
         if self.preset.frequency_draw == "truncated":
-            f[o] = frequency.draw_truncated(imp.quantile[band.index[o]], mu, sig_n,
-                                            band.f_high_cpp[o])
+            def draw(f_lo, f_hi, u):
+                return frequency.draw_truncated(
+                    u, *frequency.lognormal_params(f_lo, f_hi, s_f), f_hi)
+
+            f[o] = over_points(draw, band.f_low_cpp[o], band.f_high_cpp[o],
+                               imp.quantile[band.index[o]])
             return f
+        mu, sig_n = frequency.lognormal_params(band.f_low_cpp[o], band.f_high_cpp[o], s_f)
         rng = np.random.default_rng(imp.seed)
         normals = rng.standard_normal((len(imp), frequency.RELEASE_REJECTION_TRIES))
         f[o] = frequency.draw_release(normals[band.index[o]], mu, sig_n, band.f_high_cpp[o])

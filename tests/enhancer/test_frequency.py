@@ -158,3 +158,34 @@ def test_a_band_open_by_one_ulp_draws_its_upper_limit():
         assert not sn.any() and np.array_equal(mu, np.log(hi))
         f = frequency.draw_truncated(np.array([0.01, 0.99]), mu, sn, hi)
         assert np.array_equal(f, np.minimum(np.exp(mu), hi))
+
+
+@pytest.mark.parametrize("n", [5, (1 << 14) + 1, 300_001])
+def test_the_per_impulse_draw_on_threads_is_one_call_bit_for_bit(n):
+    """The pipeline's per-impulse expressions go in parts on threads
+    (fovexp._parallel.over_points): the frequency draw, a tuple-valued function and one of
+    the point maps give the bits of one call, on every thread count."""
+    import numba
+
+    from fovexp._parallel import over_points
+
+    rng = np.random.default_rng(n)
+    f_lo = rng.uniform(0.01, 0.1, n)
+    f_hi = f_lo * rng.uniform(0.5, 4.0, n)  # some bands closed
+    u = rng.random(n)
+
+    def draw(lo, hi, q):
+        return frequency.draw_truncated(q, *frequency.lognormal_params(lo, hi, 1.3), hi)
+
+    want = draw(f_lo, f_hi, u)
+    want_pair = frequency.lognormal_params(f_lo, f_hi, 0.7)
+    before = numba.get_num_threads()
+    try:
+        for threads in range(1, numba.config.NUMBA_NUM_THREADS + 1):
+            numba.set_num_threads(threads)
+            assert over_points(draw, f_lo, f_hi, u).tobytes() == want.tobytes()
+            got = over_points(lambda lo, hi: frequency.lognormal_params(lo, hi, 0.7), f_lo, f_hi)
+            assert isinstance(got, tuple) and len(got) == 2
+            assert all(g.tobytes() == w.tobytes() for g, w in zip(got, want_pair, strict=True))
+    finally:
+        numba.set_num_threads(before)
