@@ -328,6 +328,61 @@ def _blur_patch(src, ly0, ly1, lx0, lx1, g):  # pragma: no cover - compiled
     return out
 
 
+@numba.njit(cache=True, inline="always", fastmath=FASTMATH, nogil=True)
+def _accumulate(img, patch, kk, tt, y0, y1, xa, xb, lv, off, sc, ly0, ly1, lx0, lx1, c, out):
+    # pragma: no cover - compiled
+    """Stack level ``lv``'s blurred ``patch`` (its level grid's rows [ly0, ly1), columns
+    [lx0, lx1), channels interleaved), added into ``out`` at the pixels of rows [y0, y1)
+    and columns [xa, xb] that bracket their sigma with it (``kk`` the lower level, ``tt``
+    the weight of the upper), sampled bilinearly, as weighted differences from the pixel's
+    own value. Inlined: a constant ``c`` unrolls the channel loops."""
+    pw = lx1 - lx0
+    if sc == 1:
+        # full resolution: the bilinear sample is the patch's own pixel (the three other
+        # weights are 0 and add 0: the same bits as below)
+        for y in range(y0, y1):
+            p_row, k_row, t_row = patch[y - y0], kk[y - y0], tt[y - y0]
+            for xx in range(xa, xb + 1):
+                k = k_row[xx]
+                if k == lv:
+                    wgt = 1.0 - t_row[xx]
+                elif k == lv - 1:
+                    wgt = t_row[xx]
+                else:
+                    continue
+                ix = (xx - xa) * c
+                for ch in range(c):
+                    out[y, xx, ch] += wgt * (p_row[ix + ch] - img[y, xx, ch])
+        return
+    for y in range(y0, y1):
+        fy = (y + off) / sc - ly0
+        iy = min(int(fy), ly1 - ly0 - 2)
+        ay = fy - iy
+        for xx in range(xa, xb + 1):
+            k = kk[y - y0, xx]
+            if k == lv:
+                wgt = 1.0 - tt[y - y0, xx]
+            elif k == lv - 1:
+                wgt = tt[y - y0, xx]
+            else:
+                continue
+            fx = (xx + off) / sc - lx0
+            ix = min(int(fx), pw - 2)
+            ax = fx - ix
+            w00 = wgt * (1.0 - ay) * (1.0 - ax)
+            w01 = wgt * (1.0 - ay) * ax
+            w10 = wgt * ay * (1.0 - ax)
+            w11 = wgt * ay * ax
+            for ch in range(c):
+                v = img[y, xx, ch]
+                out[y, xx, ch] += (
+                    w00 * (patch[iy, ix * c + ch] - v)
+                    + w01 * (patch[iy, (ix + 1) * c + ch] - v)
+                    + w10 * (patch[iy + 1, ix * c + ch] - v)
+                    + w11 * (patch[iy + 1, (ix + 1) * c + ch] - v)
+                )
+
+
 @numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
 def _foveate_bands(
     img, sigma, levels, lvl_m, kbuf, kmeta, pbuf, pmeta, pad, band_h, flat, shift, out
@@ -411,51 +466,14 @@ def _foveate_bands(
                 lx0 = (xa + off) // sc
                 lx1 = (xb + off) // sc + 2
                 patch = _blur_patch(src, ly0, ly1, lx0, lx1, g)
-                pw = lx1 - lx0
-                if sc == 1:
-                    # full resolution: the bilinear sample is the patch's own pixel (the
-                    # three other weights are 0 and add 0: the same bits as below)
-                    for y in range(y0, y1):
-                        p_row, k_row, t_row = patch[y - y0], kk[y - y0], tt[y - y0]
-                        for xx in range(xa, xb + 1):
-                            k = k_row[xx]
-                            if k == lv:
-                                wgt = 1.0 - t_row[xx]
-                            elif k == lv - 1:
-                                wgt = t_row[xx]
-                            else:
-                                continue
-                            ix = (xx - xa) * c
-                            for ch in range(c):
-                                out[y, xx, ch] += wgt * (p_row[ix + ch] - img[y, xx, ch])
-                    continue
-                for y in range(y0, y1):
-                    fy = (y + off) / sc - ly0
-                    iy = min(int(fy), ly1 - ly0 - 2)
-                    ay = fy - iy
-                    for xx in range(xa, xb + 1):
-                        k = kk[y - y0, xx]
-                        if k == lv:
-                            wgt = 1.0 - tt[y - y0, xx]
-                        elif k == lv - 1:
-                            wgt = tt[y - y0, xx]
-                        else:
-                            continue
-                        fx = (xx + off) / sc - lx0
-                        ix = min(int(fx), pw - 2)
-                        ax = fx - ix
-                        w00 = wgt * (1.0 - ay) * (1.0 - ax)
-                        w01 = wgt * (1.0 - ay) * ax
-                        w10 = wgt * ay * (1.0 - ax)
-                        w11 = wgt * ay * ax
-                        for ch in range(c):
-                            v = img[y, xx, ch]
-                            out[y, xx, ch] += (
-                                w00 * (patch[iy, ix * c + ch] - v)
-                                + w01 * (patch[iy, (ix + 1) * c + ch] - v)
-                                + w10 * (patch[iy + 1, ix * c + ch] - v)
-                                + w11 * (patch[iy + 1, (ix + 1) * c + ch] - v)
-                            )
+                # RGB with its channel count a constant the compiler unrolls; any other as
+                # it comes
+                if c == 3:
+                    _accumulate(img, patch, kk, tt, y0, y1, xa, xb, lv, off, sc, ly0, ly1,
+                                lx0, lx1, 3, out)
+                else:
+                    _accumulate(img, patch, kk, tt, y0, y1, xa, xb, lv, off, sc, ly0, ly1,
+                                lx0, lx1, c, out)
     return out
 
 
