@@ -283,14 +283,15 @@ SETUP_GROUP = 64
 
 @numba.njit(cache=True, fastmath=FASTMATH, nogil=True)
 def _splat_band(
-    out, y0, y1, pad, xs, ys, amp, kx, ky, lo, hi, r, a, nwin, er, ei, cs, su
+    out, y0, y1, pad, xs, ys, amp, kf, tf, lo, hi, r, a, nwin, er, ei, cs, su
 ):  # pragma: no cover - compiled
     """Add the kernels of impulses ``lo..hi`` to rows [y0, y1) of ``out`` (band-local rows,
     columns shifted by ``pad``). The kernel is truncated to the square of half-side ``r``
     (its envelope is at most 1 % on the square's edges), so each row is one fixed-width
     multiply-add over ``nwin`` pixels, in ``out``'s dtype (``cs`` holds the row's factor
-    in it). Each kernel's two factors start from their values at the window's first column
-    and row, set up for :data:`SETUP_GROUP` impulses at a time into ``su`` (18, group)."""
+    in it). Impulse ``i`` has angular frequency ``kf[i]`` (rad/px) along direction ``tf[i]``
+    (rad). Each kernel's two factors start from their values at the window's first column
+    and row, set up for :data:`SETUP_GROUP` impulses at a time into ``su`` (20, group)."""
     pa2 = math.pi * a * a
     step_q = math.exp(-2.0 * pa2)
     rr = int(math.ceil(r))
@@ -300,12 +301,14 @@ def _splat_band(
         m = min(hi, g0 + group) - g0
         # the factors' starting phases and rotations (one loop, it vectorises), then their
         # envelopes (libm's exp, one value at a time)
+        _sincos_into(tf[g0:g0 + m], su[18], su[19], m)  # the carrier's direction
         for j in range(m):
             i = g0 + j
+            kx, ky = kf[i] * su[19, j], kf[i] * su[18, j]
             dx = (math.floor(xs[i]) - rr) - xs[i]
             dy = max(y0, math.ceil(ys[i] - r)) - ys[i]
             su[0, j], su[1, j] = dx, dy
-            su[2, j], su[3, j], su[4, j], su[5, j] = kx[i] * dx, kx[i], ky[i] * dy, ky[i]
+            su[2, j], su[3, j], su[4, j], su[5, j] = kx * dx, kx, ky * dy, ky
             su[14, j] = math.exp(-pa2 * dx * dx)
             su[15, j] = math.exp(-pa2 * dy * dy)
             su[16, j] = math.exp(-pa2 * (2.0 * dx + 1.0))
@@ -391,8 +394,12 @@ def _window(r: float) -> tuple[int, int]:
 
 
 @numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
-def _splat(out, xs, ys, amp, kx, ky, row_start, cell, r, a, band, nwin, pad):  # pragma: no cover
+def _splat(sums, out, xs, ys, amp, k, t, row_start, cell, r, a, band, nwin, pad):
+    # pragma: no cover - compiled
+    """The kernels summed into the padded rows ``sums`` band by band in parallel
+    (:func:`_splat_band`), each band's image columns then copied into ``out`` (H, W)."""
     height = out.shape[0]
+    width = out.shape[1]
     nb = (height + band - 1) // band
     n_rows = row_start.shape[0] - 1
     stride = interleave(nb)  # bands without impulses cost nothing: spread the others
@@ -400,18 +407,22 @@ def _splat(out, xs, ys, amp, kx, ky, row_start, cell, r, a, band, nwin, pad):  #
         b = (i * stride) % nb
         y0 = b * band
         y1 = min(height, y0 + band)
-        er = np.empty(nwin, dtype=out.dtype)
-        ei = np.empty(nwin, dtype=out.dtype)
-        cs = np.empty(2, dtype=out.dtype)
-        su = np.empty((18, SETUP_GROUP), dtype=np.float64)
+        er = np.empty(nwin, dtype=sums.dtype)
+        ei = np.empty(nwin, dtype=sums.dtype)
+        cs = np.empty(2, dtype=sums.dtype)
+        su = np.empty((20, SETUP_GROUP), dtype=np.float64)
         # cell rows (cell_index) whose kernels can reach the band, one more each side
         j0 = max(int(math.floor((y0 - r - CELL_ORIGIN_PX) / cell)) + CELL_BORDER - 1, 0)
         j1 = min(int(math.floor((y1 - 1 + r - CELL_ORIGIN_PX) / cell)) + CELL_BORDER + 1,
                  n_rows - 1)
         _splat_band(
-            out[y0:y1], y0, y1, pad, xs, ys, amp, kx, ky, row_start[j0], row_start[j1 + 1],
+            sums[y0:y1], y0, y1, pad, xs, ys, amp, k, t, row_start[j0], row_start[j1 + 1],
             r, a, nwin, er, ei, cs, su,
         )
+        for y in range(y0, y1):  # the band's rows are final: no other band writes them
+            src, dst = sums[y, pad:pad + width], out[y]
+            for x in range(width):
+                dst[x] = src[x]
 
 
 def synthesize(
@@ -451,7 +462,10 @@ def synthesize(
     row_start = np.searchsorted(rows, np.arange(n_rows + 1)).astype(np.int64)
     r = kernel_radius_px(gabor_a_cpp, truncation)
     nwin, pad = _window(r)
-    out = np.zeros((h, w + 2 * pad + nwin), dtype=dtype)
-    _splat(out, xs, ys, amp[keep], k * np.cos(t), k * np.sin(t), row_start, cell, r,
-           gabor_a_cpp, BAND_ROWS, nwin, pad)
-    return np.ascontiguousarray(out[:, pad : pad + w])
+    # the sums in padded rows (NumPy's zeros: pages of bands without noise never written),
+    # each band's image columns copied into the result once the band is done
+    sums = np.zeros((h, w + 2 * pad + nwin), dtype=dtype)
+    out = np.empty(shape, dtype=dtype)
+    _splat(sums, out, xs, ys, amp[keep], k, t, row_start, cell, r, gabor_a_cpp, BAND_ROWS, nwin,
+           pad)
+    return out
