@@ -118,6 +118,22 @@ def linearize(
     return power(out, scalar(gamma), out)
 
 
+@numba.njit(cache=True, inline="always", fastmath=FASTMATH, nogil=True)
+def _add_clip_row(src, a, b, y, w, c, n_grey, row):  # pragma: no cover - compiled
+    """``row = clip(src + a[y] + b[y], 0, 1)`` of one row (``c`` channels interleaved; the
+    first ``n_grey`` of the grey images added to every channel)."""
+    lo, hi = np.float32(0.0), np.float32(1.0)
+    for x in range(w):
+        g = np.float32(0.0)
+        if n_grey == 2:
+            g = a[y, x] + b[y, x]
+        elif n_grey == 1:
+            g = a[y, x]
+        for ch in range(c):
+            v = src[x * c + ch] + g if n_grey else src[x * c + ch]
+            row[x * c + ch] = min(max(v, lo), hi)
+
+
 @numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
 def _encode_into(img, a, b, n_grey, p, offset, out):  # pragma: no cover - compiled
     """:func:`encode` of float32 (H, W, C) ``img`` in one pass: clip(img + a + b, 0, 1) (the
@@ -129,15 +145,12 @@ def _encode_into(img, a, b, n_grey, p, offset, out):  # pragma: no cover - compi
     gain, off = np.float32(1.0 + offset), np.float32(offset)
     for y in numba.prange(h):
         row = out[y].reshape(-1)
-        for x in range(w):
-            g = np.float32(0.0)
-            if n_grey == 2:
-                g = a[y, x] + b[y, x]
-            elif n_grey == 1:
-                g = a[y, x]
-            for ch in range(c):
-                v = img[y, x, ch] + g if n_grey else img[y, x, ch]
-                row[x * c + ch] = min(max(v, lo), hi)
+        # RGB with its channel count a constant the compiler unrolls (measured: 4K encode
+        # 114 -> 84 ms, 2 cores); any other as it comes
+        if c == 3:
+            _add_clip_row(img[y].reshape(-1), a, b, y, w, 3, n_grey, row)
+        else:
+            _add_clip_row(img[y].reshape(-1), a, b, y, w, c, n_grey, row)
         for i in range(w * c):
             e = np.float32(_pow01(np.float64(row[i]), p))
             if offset != 0.0:
