@@ -513,23 +513,44 @@ def laplacian_levels(gaussian: list[np.ndarray], levels: int) -> dict[int, np.nd
 
 @numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
 def _block_extremes(img, add, block):  # pragma: no cover - compiled
+    """Extremes of ``img + add`` over every channel of each block, the rows streamed in order
+    (a block row's rows one after the other: prefetched, where a block's own rows were a
+    jump of a row each); RGB and grey with their channel count a constant the compiler
+    unrolls."""
     h, w, c = img.shape
     bh, bw = (h + block - 1) // block, (w + block - 1) // block
     lo = np.empty((bh, bw), dtype=img.dtype)
     hi = np.empty((bh, bw), dtype=img.dtype)
     for by in numba.prange(bh):
-        for bx in range(bw):
-            mn = img[by * block, bx * block, 0] + add[by * block, bx * block]
-            mx = mn
-            for y in range(by * block, min(by * block + block, h)):
-                for x in range(bx * block, min(bx * block + block, w)):
-                    for ch in range(c):
-                        v = img[y, x, ch] + add[y, x]
-                        mn = min(mn, v)
-                        mx = max(mx, v)
-            lo[by, bx] = mn
-            hi[by, bx] = mx
+        if c == 3:
+            _block_row_extremes(img, add, block, by, 3, lo[by], hi[by])
+        elif c == 1:
+            _block_row_extremes(img, add, block, by, 1, lo[by], hi[by])
+        else:
+            _block_row_extremes(img, add, block, by, c, lo[by], hi[by])
     return lo, hi
+
+
+@numba.njit(cache=True, inline="always", fastmath=FASTMATH, nogil=True)
+def _block_row_extremes(img, add, block, by, c, lo, hi):  # pragma: no cover - compiled
+    """:func:`_block_extremes` of block row ``by`` into ``lo`` and ``hi`` (bw,)."""
+    h, w = img.shape[0], img.shape[1]
+    bw = lo.shape[0]
+    ya, yb = by * block, min(by * block + block, h)
+    for y in range(ya, yb):
+        src, grey = img[y].reshape(-1), add[y]
+        for bx in range(bw):
+            xa, xb = bx * block, min(bx * block + block, w)
+            mn = src[xa * c] + grey[xa] if y == ya else lo[bx]
+            mx = mn if y == ya else hi[bx]
+            for x in range(xa, xb):
+                g = grey[x]
+                for ch in range(c):
+                    v = src[x * c + ch] + g
+                    mn = min(mn, v)
+                    mx = max(mx, v)
+            lo[bx] = mn
+            hi[bx] = mx
 
 
 def block_extremes(
