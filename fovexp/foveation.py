@@ -354,8 +354,9 @@ def _accumulate(img, patch, kk, tt, y0, y1, xa, xb, lv, off, sc, ly0, ly1, lx0, 
                 for ch in range(c):
                     out[y, xx, ch] += wgt * (p_row[ix + ch] - img[y, xx, ch])
         return
+    inv_sc = 1.0 / sc  # a power of two: multiplying by it is the division, exactly
     for y in range(y0, y1):
-        fy = (y + off) / sc - ly0
+        fy = (y + off) * inv_sc - ly0
         iy = min(int(fy), ly1 - ly0 - 2)
         ay = fy - iy
         for xx in range(xa, xb + 1):
@@ -366,7 +367,7 @@ def _accumulate(img, patch, kk, tt, y0, y1, xa, xb, lv, off, sc, ly0, ly1, lx0, 
                 wgt = tt[y - y0, xx]
             else:
                 continue
-            fx = (xx + off) / sc - lx0
+            fx = (xx + off) * inv_sc - lx0
             ix = min(int(fx), pw - 2)
             ax = fx - ix
             w00 = wgt * (1.0 - ay) * (1.0 - ax)

@@ -61,6 +61,7 @@ from .foveation import (
 )
 from .geometry import Display, GeometryModel, ViewingGeometry
 from .jit import FASTMATH
+from .memory import retain_freed_memory
 from .params import EngineOptions, EnhanceParams, ParameterTable, Preset, get_preset
 from .pyramids import FLAT_BLOCK_LEVEL
 
@@ -412,6 +413,7 @@ class Enhancer:
         self._alpha: np.ndarray | None = None
         self._c = _StageCache()
         self._define_stages()
+        retain_freed_memory()  # each frame's arrays in the last frame's pages (fovexp.memory)
 
     def _define_stages(self) -> None:
         c = self._c
