@@ -355,6 +355,14 @@ def _accumulate(img, patch, kk, tt, y0, y1, xa, xb, lv, off, sc, ly0, ly1, lx0, 
                     out[y, xx, ch] += wgt * (p_row[ix + ch] - img[y, xx, ch])
         return
     inv_sc = 1.0 / sc  # a power of two: multiplying by it is the division, exactly
+    # each column's tap and weight on the level grid, the same on every row of the band
+    ixs = np.empty(xb + 1 - xa, np.int64)
+    axs = np.empty(xb + 1 - xa, img.dtype)
+    for xx in range(xa, xb + 1):
+        fx = (xx + off) * inv_sc - lx0
+        ix = min(int(fx), pw - 2)
+        ixs[xx - xa] = ix
+        axs[xx - xa] = fx - ix
     for y in range(y0, y1):
         fy = (y + off) * inv_sc - ly0
         iy = min(int(fy), ly1 - ly0 - 2)
@@ -367,9 +375,8 @@ def _accumulate(img, patch, kk, tt, y0, y1, xa, xb, lv, off, sc, ly0, ly1, lx0, 
                 wgt = tt[y - y0, xx]
             else:
                 continue
-            fx = (xx + off) * inv_sc - lx0
-            ix = min(int(fx), pw - 2)
-            ax = fx - ix
+            ix = ixs[xx - xa]
+            ax = axs[xx - xa]
             w00 = wgt * (1.0 - ay) * (1.0 - ax)
             w01 = wgt * (1.0 - ay) * ax
             w10 = wgt * ay * (1.0 - ax)
