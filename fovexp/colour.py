@@ -73,23 +73,64 @@ def _pow01(v, p):  # pragma: no cover - compiled
     return poly * two_n if v > 0.0 else 0.0
 
 
+#: Values per run of :func:`_transfer_runs`: 256 RGB pixels (long enough that the power's
+#: loop keeps its vector speed).
+_RUN = 768
+#: The period a run is compared at: one RGB pixel (a grey image's equal values repeat too).
+_PERIOD = 3
+
+
+@numba.njit(cache=True, inline="always", fastmath=FASTMATH, nogil=True)
+def _transfer_runs(src, dst, p, offset, inverse):  # pragma: no cover - compiled
+    """``dst = T(src)`` of flat float32 runs: :func:`linearize`'s ``((v + offset) / (1 +
+    offset)) ** p``, or with ``inverse`` :func:`encode`'s ``v ** p`` then the offset and a
+    clip. A run of :data:`_RUN` values that repeats the :data:`_PERIOD` before it value for
+    value (a flat region: grey, or one colour) copies their results, the same numbers (a
+    value's result depends on the value alone); the others go through the power (it
+    vectorises). A flat region then costs a comparison and a copy, not the power."""
+    n = src.shape[0]
+    lo, hi = np.float32(0.0), np.float32(1.0)
+    scale = np.float32(1.0 / (1.0 + offset))
+    gain, off = np.float32(1.0 + offset), np.float32(offset)
+    s = 0
+    while s < n:
+        e = min(n, s + _RUN)
+        repeats = s >= _PERIOD
+        if repeats:
+            now, before = src[s:e], src[s - _PERIOD:e - _PERIOD]
+            for i in range(e - s):  # one pass, no early exit: it vectorises
+                repeats &= now[i] == before[i]
+        run_in, run_out = src[s:e], dst[s:e]  # indexed from 0: the loops vectorise
+        if repeats:
+            p0, p1, p2 = dst[s - 3], dst[s - 2], dst[s - 1]
+            for i in range(0, e - s - 2, 3):
+                run_out[i], run_out[i + 1], run_out[i + 2] = p0, p1, p2
+            for i in range((e - s) // 3 * 3, e - s):
+                run_out[i] = run_out[i - 3]
+        else:
+            for i in range(e - s):
+                u = run_in[i]
+                if offset != 0.0 and not inverse:
+                    u = np.float32(u + off) * scale
+                v = np.float32(_pow01(np.float64(u), p))
+                if offset != 0.0 and inverse:
+                    v = min(max(v * gain - off, lo), hi)
+                run_out[i] = v
+        s = e
+
+
 @numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
 def _linearize_into(encoded, p, offset, out):  # pragma: no cover - compiled
     """``out = ((encoded + offset) / (1 + offset)) ** p`` of flat float32 arrays (offset 0:
-    the plain power), in float32 up to the power, as NumPy computed it."""
+    the plain power), in float32 up to the power, as NumPy computed it; in parts in
+    parallel, each in runs (:func:`_transfer_runs`)."""
     n = encoded.size
     parts = 64  # no reductions: the thread count does not change a value
-    scale = np.float32(1.0 / (1.0 + offset))
-    off = np.float32(offset)
     for k in numba.prange(parts):
         # slices indexed from 0 (an index of unknown sign keeps a loop scalar: fovexp/gabor.py)
         src = encoded[n * k // parts:n * (k + 1) // parts]
         dst = out[n * k // parts:n * (k + 1) // parts]
-        for i in range(src.shape[0]):
-            u = src[i]
-            if offset != 0.0:
-                u = np.float32(u + off) * scale
-            dst[i] = np.float32(_pow01(np.float64(u), p))
+        _transfer_runs(src, dst, p, offset, False)
     return out
 
 
@@ -139,23 +180,17 @@ def _encode_into(img, a, b, n_grey, p, offset, out):  # pragma: no cover - compi
     """:func:`encode` of float32 (H, W, C) ``img`` in one pass: clip(img + a + b, 0, 1) (the
     first ``n_grey`` of the grey (H, W) images ``a``, ``b`` added to every channel), to the
     power ``p``, then the release's offset (``offset`` > 0) and a clip. Each row is clipped
-    into a row of ``out`` first, then raised to the power as one flat run (it vectorises)."""
+    into a row of its own first, then raised to the power in runs (:func:`_transfer_runs`)."""
     h, w, c = img.shape
-    lo, hi = np.float32(0.0), np.float32(1.0)
-    gain, off = np.float32(1.0 + offset), np.float32(offset)
     for y in numba.prange(h):
-        row = out[y].reshape(-1)
+        clipped = np.empty(w * c, np.float32)
         # RGB with its channel count a constant the compiler unrolls (measured: 4K encode
         # 114 -> 84 ms, 2 cores); any other as it comes
         if c == 3:
-            _add_clip_row(img[y].reshape(-1), a, b, y, w, 3, n_grey, row)
+            _add_clip_row(img[y].reshape(-1), a, b, y, w, 3, n_grey, clipped)
         else:
-            _add_clip_row(img[y].reshape(-1), a, b, y, w, c, n_grey, row)
-        for i in range(w * c):
-            e = np.float32(_pow01(np.float64(row[i]), p))
-            if offset != 0.0:
-                e = min(max(e * gain - off, lo), hi)
-            row[i] = e
+            _add_clip_row(img[y].reshape(-1), a, b, y, w, c, n_grey, clipped)
+        _transfer_runs(clipped, out[y].reshape(-1), p, offset, True)
     return out
 
 

@@ -136,3 +136,29 @@ def test_the_polynomial_power_is_pow_within_one_unit_in_the_last_place(gamma):
     enc = encode(img, 1 / gamma)
     ref = np.power(img, np.float32(gamma))
     assert np.abs(enc.view(np.int32).astype(np.int64) - ref.view(np.int32)).max() <= 1
+
+
+@pytest.mark.parametrize("transfer", ["power", "release"])
+def test_flat_runs_copy_the_results_the_power_gives(transfer):
+    """The transfers copy a run's results where it repeats the pixel before it (a flat grey
+    or colour region, fovexp/colour.py): the same bits as every value through the power
+    (the same values shuffled, where no run repeats), with a run broken by one value."""
+    rng = np.random.default_rng(3)
+    img = rng.random((40, 700, 3), dtype=np.float32)
+    img[5:20] = (0.2, 0.5, 0.7)  # flat colour rows
+    img[25:30, 100:600] = 0.25  # a flat grey stretch ...
+    img[26, 300, 1] = np.float32(0.25) + np.float32(1e-7)  # ... one value off in a run
+    perm = rng.permutation(img.size)
+
+    def unshuffled(shuffled: np.ndarray) -> np.ndarray:
+        out = np.empty_like(shuffled)
+        out[perm] = shuffled
+        return out
+
+    got = linearize(img, 2.2, transfer)
+    want = unshuffled(linearize(img.reshape(-1)[perm], 2.2, transfer))
+    assert got.reshape(-1).tobytes() == want.tobytes()
+    assert got[26, 300, 1] != got[26, 299, 1]
+    enc = encode(got, 2.2, transfer)
+    want = unshuffled(encode(got.reshape(-1)[perm], 2.2, transfer))
+    assert enc.reshape(-1).tobytes() == want.tobytes()
