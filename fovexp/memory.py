@@ -3,10 +3,12 @@
 glibc's malloc hands an allocation above its mmap threshold (at most 32 MB, however it adapts)
 its own fresh pages and returns them to the system when it is freed, so every frame's arrays
 start in new pages, each first written through a page fault. On the 2-core machine of
-benchmarks/CPU_FLOOR.md that was 12-34 ms per 100 MB array written by a compiled kernel, and
-50-100 ms of a 0.5 s frame. :func:`retain_freed_memory` raises the threshold and the heap's
-trim threshold, so that a frame's arrays reuse the previous frame's pages: the process keeps
-what its largest frame needed (the peak is unchanged; it is not given back between frames).
+benchmarks/CPU_FLOOR.md a 100 MB array written by a compiled kernel took 12-34 ms longer in
+fresh pages than in kept ones, and an already-foveated 4K frame 44-108 ms longer (two runs of
+the same tree with and without it: 0.54 -> 0.49 s, 0.55 -> 0.44 s).
+:func:`retain_freed_memory` raises the threshold and the heap's trim threshold, so that a
+frame's arrays reuse the previous frame's pages: the process keeps what its largest frame
+needed (the peak is unchanged; it is not given back between frames).
 :class:`fovexp.Enhancer` calls it; ``FOVEXP_MALLOC_DEFAULTS=1`` leaves glibc's defaults.
 Elsewhere than glibc (macOS, Windows, musl) it does nothing.
 """
