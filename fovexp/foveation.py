@@ -391,6 +391,11 @@ def _accumulate(img, patch, kk, tt, y0, y1, xa, xb, lv, off, sc, ly0, ly1, lx0, 
                 )
 
 
+#: :func:`_accumulate` called, not inlined, for channel counts other than 3 (grey): an inlined
+#: second copy in :func:`_foveate_bands` cost seconds of every compilation.
+_accumulate_any = numba.njit(cache=True, fastmath=FASTMATH, nogil=True)(_accumulate.py_func)
+
+
 @numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
 def _foveate_bands(
     img, sigma, levels, lvl_m, kbuf, kmeta, pbuf, pmeta, pad, band_h, flat, shift, out
@@ -480,8 +485,8 @@ def _foveate_bands(
                     _accumulate(img, patch, kk, tt, y0, y1, xa, xb, lv, off, sc, ly0, ly1,
                                 lx0, lx1, 3, out)
                 else:
-                    _accumulate(img, patch, kk, tt, y0, y1, xa, xb, lv, off, sc, ly0, ly1,
-                                lx0, lx1, c, out)
+                    _accumulate_any(img, patch, kk, tt, y0, y1, xa, xb, lv, off, sc, ly0, ly1,
+                                    lx0, lx1, c, out)
     return out
 
 

@@ -269,7 +269,7 @@ def _sincos(x):  # pragma: no cover - compiled
     return sin_x, cos_x
 
 
-@numba.njit(cache=True, inline="always", fastmath=FASTMATH, nogil=True)
+@numba.njit(cache=True, fastmath=FASTMATH, nogil=True)
 def _sincos_into(x, sin_x, cos_x, m):  # pragma: no cover - compiled
     """:func:`_sincos` of ``x[:m]`` into ``sin_x``, ``cos_x`` (a loop of its own: it
     vectorises)."""
@@ -350,14 +350,11 @@ def _splat_band(
             s, c = su[10, j], su[11, j]
             rs, rc = su[12, j], su[13, j]
             xo = x0 + pad
-            # the common windows with their width a constant the compiler unrolls (measured on
-            # the rows alone: 1.4x faster at 4K, 64 impulses); any other width as it comes
+            # the window of both presets' kernels (48 px) with its width a constant the
+            # compiler unrolls (measured on the rows alone: 1.4x faster at 4K, 64 impulses);
+            # any other width as it comes (one more copy per width costs compile time)
             if nwin == 48:
                 _kernel_rows(out, y0, ya, yb, xo, 48, er, ei, env, q, step_q, c, s, rc, rs, cs)
-            elif nwin == 32:
-                _kernel_rows(out, y0, ya, yb, xo, 32, er, ei, env, q, step_q, c, s, rc, rs, cs)
-            elif nwin == 64:
-                _kernel_rows(out, y0, ya, yb, xo, 64, er, ei, env, q, step_q, c, s, rc, rs, cs)
             else:
                 _kernel_rows(out, y0, ya, yb, xo, nwin, er, ei, env, q, step_q, c, s, rc, rs,
                              cs)

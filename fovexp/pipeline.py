@@ -43,12 +43,11 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-import numba
 import numpy as np
 
 from . import amplitude as amp
 from . import colour, frequency, gabor, orientation, pyramids
-from ._parallel import over_points
+from ._parallel import over_points, thread_map
 from .contrast import contrast_change, contrast_change_where_needed
 from .errors import FovexpError
 from .foveation import (
@@ -60,7 +59,6 @@ from .foveation import (
     sigma_px,
 )
 from .geometry import Display, GeometryModel, ViewingGeometry
-from .jit import FASTMATH
 from .memory import retain_freed_memory
 from .params import EngineOptions, EnhanceParams, ParameterTable, Preset, get_preset
 from .pyramids import FLAT_BLOCK_LEVEL
@@ -94,34 +92,20 @@ def with_alpha(colour: np.ndarray, alpha: np.ndarray | None) -> np.ndarray:
     return np.concatenate([c, alpha[..., None].astype(c.dtype, copy=False)], axis=2)
 
 
-#: Parts of :func:`_finite_range`'s pass (fixed: the count and extremes do not depend on how
-#: many threads run them).
-_CHECK_PARTS = 64
+#: Elements per part of :func:`_finite_range` (a part's three passes stay in the cache).
+_CHECK_PART = 1 << 18
 
 
-@numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
-def _finite_range(flat):  # pragma: no cover - compiled
-    """``(non-finite count, min, max)`` of a flat float array in one parallel pass (NumPy's
-    isfinite, min and max are three passes and a mask: 50 ms of a 4K frame's set-up). The
-    extremes are meaningful only when the count is 0."""
-    n = flat.size
-    bad = np.zeros(_CHECK_PARTS, np.int64)
-    lo = np.zeros(_CHECK_PARTS, np.float64)
-    hi = np.zeros(_CHECK_PARTS, np.float64)
-    for p in numba.prange(_CHECK_PARTS):
-        seg = flat[n * p // _CHECK_PARTS:n * (p + 1) // _CHECK_PARTS]
-        if seg.shape[0] == 0:
-            lo[p], hi[p] = np.inf, -np.inf
-            continue
-        b = 0
-        low = high = seg[0]
-        for i in range(seg.shape[0]):
-            v = seg[i]
-            b += (v - v) != 0  # inf - inf and NaN - NaN are NaN: not finite
-            low = min(low, v)
-            high = max(high, v)
-        bad[p], lo[p], hi[p] = b, low, high
-    return bad.sum(), lo.min(), hi.max()
+def _finite_range(flat: np.ndarray) -> tuple[int, float, float]:
+    """``(non-finite count, min, max)`` of a flat float array, in parts on threads, each part's
+    three NumPy passes in the cache (the three passes and a mask over a whole 4K frame were
+    50 ms of its set-up). The extremes are meaningful only when the count is 0."""
+    def part(i: int) -> tuple[int, float, float]:
+        seg = flat[i:i + _CHECK_PART]
+        return int(np.count_nonzero(~np.isfinite(seg))), float(seg.min()), float(seg.max())
+
+    parts = thread_map(part, range(0, flat.size, _CHECK_PART))
+    return (sum(p[0] for p in parts), min(p[1] for p in parts), max(p[2] for p in parts))
 
 
 def check_image(image: np.ndarray, what: str = "image", dtype: type = np.float32) -> np.ndarray:
@@ -140,7 +124,7 @@ def check_image(image: np.ndarray, what: str = "image", dtype: type = np.float32
         raise FovexpError(f"{what} is {a.shape[1]}x{a.shape[0]} px: at least 16x16 is needed")
     if not np.issubdtype(a.dtype, np.floating):
         raise FovexpError(f"{what} must be a float array in [0, 1], got dtype {a.dtype}")
-    if a.dtype in (np.float32, np.float64) and a.flags.c_contiguous:
+    if a.flags.c_contiguous and a.size:
         n_bad, lo, hi = _finite_range(a.reshape(-1))
     else:  # another float type, or a strided view: NumPy's passes
         n_bad = int(np.count_nonzero(~np.isfinite(a)))

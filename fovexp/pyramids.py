@@ -515,8 +515,7 @@ def laplacian_levels(gaussian: list[np.ndarray], levels: int) -> dict[int, np.nd
 def _block_extremes(img, add, block):  # pragma: no cover - compiled
     """Extremes of ``img + add`` over every channel of each block, the rows streamed in order
     (a block row's rows one after the other: prefetched, where a block's own rows were a
-    jump of a row each); RGB and grey with their channel count a constant the compiler
-    unrolls."""
+    jump of a row each); RGB with its channel count a constant the compiler unrolls."""
     h, w, c = img.shape
     bh, bw = (h + block - 1) // block, (w + block - 1) // block
     lo = np.empty((bh, bw), dtype=img.dtype)
@@ -524,8 +523,6 @@ def _block_extremes(img, add, block):  # pragma: no cover - compiled
     for by in numba.prange(bh):
         if c == 3:
             _block_row_extremes(img, add, block, by, 3, lo[by], hi[by])
-        elif c == 1:
-            _block_row_extremes(img, add, block, by, 1, lo[by], hi[by])
         else:
             _block_row_extremes(img, add, block, by, c, lo[by], hi[by])
     return lo, hi

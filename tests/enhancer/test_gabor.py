@@ -51,7 +51,7 @@ def direct_sum(shape, imp, k, f, t, r_px, a, norm) -> np.ndarray:
 @pytest.mark.parametrize("a,window_px", [(0.06, 48), (0.1, 32), (0.04, 64), (0.03, 96)])
 def test_synthesis_matches_direct_sum_of_truncated_gabors(a, window_px):
     """Against the kernels summed directly, for each window width the synthesis has a path
-    of its own for (32, 48, 64 px) and one it has not (96 px)."""
+    of its own for (48 px, both presets) and those it has not (32, 64, 96 px)."""
     assert gabor._window(gabor.kernel_radius_px(a))[0] == window_px
     h, w = 64, 80
     imp = gabor.generate_impulses(w, h, 3, a, 9)

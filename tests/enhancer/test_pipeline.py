@@ -220,18 +220,20 @@ def test_bad_images_are_refused_with_a_clear_message(frame, bad, msg):
 
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
-@pytest.mark.parametrize("size", [1, 63, 64, 65, 10_000])
-def test_the_image_checks_one_pass_counts_and_bounds_as_numpy(dtype, size):
-    """The one compiled pass of the image check (64 parts, some empty for small arrays)
-    against NumPy's isfinite, min and max, with non-finite values at the parts' edges."""
-    from fovexp.pipeline import _finite_range
+@pytest.mark.parametrize("size", [1, (1 << 18) - 1, 1 << 18, (1 << 18) + 1, 600_001])
+def test_the_image_checks_parts_count_and_bound_as_numpy(dtype, size):
+    """The image check in parts on threads (pipeline._finite_range, parts of 2**18 values)
+    against NumPy's isfinite, min and max over the whole, with non-finite values on the
+    parts' edges."""
+    from fovexp.pipeline import _CHECK_PART, _finite_range
 
     rng = np.random.default_rng(size)
     a = (rng.random(size) * 3.0 - 1.0).astype(dtype)
     assert _finite_range(a)[0] == 0
     assert _finite_range(a)[1:] == (a.min(), a.max())
-    for idx, v in [(0, np.nan), (size // 64, np.inf), (size - 1, -np.inf), (size // 2, np.nan)]:
-        a[idx] = v
+    for idx in (0, _CHECK_PART - 1, _CHECK_PART, size // 2, size - 1):
+        if idx < size:
+            a[idx] = (np.nan, np.inf, -np.inf)[idx % 3]
     assert _finite_range(a)[0] == np.count_nonzero(~np.isfinite(a))
 
 
