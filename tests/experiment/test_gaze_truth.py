@@ -45,11 +45,17 @@ def logs(folder: Path):
 def test_a_wandering_eye_with_and_without_latency(ws: Path) -> None:
     rule = BlankingRule(1.25, 0.05)
     figures = {}
+    # Each eye loses a quarter of its samples, so that about one sample in 16 has neither
+    # eye: an 8 ms delivery then holds an invalid sample back at about a quarter of the
+    # decisions, and the latency's cost shows on every run. Saccades and blinks alone left it
+    # to chance: at 60 frames/s an 8 ms window holds a decision about half the time, and two
+    # trials see two or three of them (CI once counted none).
     for pid, lat in (("W00", "0"), ("W08", "8")):
-        frames, gaze, info = logs(dry(ws, pid, "--sim-gaze", "wandering",
+        frames, gaze, info = logs(dry(ws, pid, "--sim-gaze", "wandering,dropout_prob=0.25",
                                       "--gaze-latency-ms", lat))
         assert info["tracker"]["params"]["latency_ms"] == float(lat)
         assert info["tracker"]["params"]["saccade_rate"] == 1.0
+        assert info["tracker"]["params"]["dropout_prob"] == 0.25
         assert info["blanking_rule"]["radius_deg"] == 1.25
         assert "nominal eye" in info["blanking_rule"]["angle"]
         # the runner's own proof still holds: every stimulus frame decided on a sample it had
@@ -64,7 +70,9 @@ def test_a_wandering_eye_with_and_without_latency(ws: Path) -> None:
     # the independent check: nothing outside the rule when delivery is instant
     assert zero["stamped_violations"] == 0 and zero["tracker_cost_frames"] == 0
     assert eight["tracker_cost_frames"] > 0
-    assert eight["outside_ms"] >= zero["outside_ms"]
+    # a stimulus frame whose newest measured sample is bad had that sample pending (received
+    # after the decision, or the runner would have blanked): one measure bounds the other
+    assert eight["stamped_violations"] <= eight["tracker_cost_frames"]
     # a wandering eye blanks part of each run (its share over 2 trials depends on where the
     # wall clock puts them in the eye's stream: 16-40 % measured; the preset's third of the
     # time away is checked on 20 s of samples in trackers/test_gaze.py)
