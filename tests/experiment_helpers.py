@@ -29,7 +29,9 @@ PYTHON = sys.executable
 
 
 def _free_display() -> int:
-    for n in range(99, 160):
+    # from 300: clear of xvfb-run -a, which counts up from 99 (CI runs .ci/wheel-smoke beside
+    # the suite)
+    for n in range(300, 400):
         if not Path(f"/tmp/.X11-unix/X{n}").exists() and not Path(f"/tmp/.X{n}-lock").exists():
             return n
     raise RuntimeError("no free X display number")
@@ -163,6 +165,24 @@ def popen_cli(args: list[str], cwd: Path) -> subprocess.Popen:
     env["PYTHONPATH"] = os.pathsep.join([str(REPO), env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
     return subprocess.Popen([PYTHON, "-m", "fovexp", *args], cwd=cwd, env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def wait_for_trials(proc: subprocess.Popen, trials_csv: Path, rows: int,
+                    timeout_s: float) -> int:
+    """Poll a running session's trial log until it holds ``rows`` rows, the process ends or
+    ``timeout_s`` passes; the rows it held last (to kill a session part-way, at a known
+    point)."""
+    from fovexp.experiment.records.logs import read_trials
+
+    deadline = time.monotonic() + timeout_s
+    n = 0
+    while time.monotonic() < deadline and proc.poll() is None:
+        if trials_csv.exists():
+            n = len(read_trials(trials_csv)[0])
+            if n >= rows:
+                break
+        time.sleep(0.05)
+    return n
 
 
 class ScriptedGaze(ClockedGaze):

@@ -9,7 +9,6 @@ trial's included)."""
 from __future__ import annotations
 
 import signal
-import time
 from pathlib import Path
 
 import pytest
@@ -21,7 +20,13 @@ from fovexp.experiment.records.logs import TRIAL_HEADERS, read_trials
 from fovexp.experiment.tasks.forced_choice import make_procedure
 from fovexp.experiment.tasks.procedures import rebuild
 
-from experiment_helpers import make_workspace, popen_cli, run_cli, xvfb_display  # noqa: F401
+from experiment_helpers import (  # noqa: F401
+    make_workspace,
+    popen_cli,
+    run_cli,
+    wait_for_trials,
+    xvfb_display,
+)
 
 pytestmark = [pytest.mark.gui, pytest.mark.slow]
 
@@ -45,14 +50,7 @@ def test_killed_forced_choice_session_resumes_where_its_procedures_were(ws: Path
     folder = ws / "results" / "validation-2afc" / "K01"
     proc = popen_cli(args, ws)
     try:
-        deadline = time.monotonic() + 240
-        n = 0
-        while time.monotonic() < deadline and proc.poll() is None:
-            if (folder / "trials.csv").exists():
-                n = len(read_trials(folder / "trials.csv")[0])
-                if n >= 4:
-                    break
-            time.sleep(0.05)
+        wait_for_trials(proc, folder / "trials.csv", 4, timeout_s=240)
         assert proc.poll() is None, proc.communicate()[1][-2000:]
         proc.send_signal(signal.SIGKILL)
         proc.wait(timeout=30)

@@ -7,7 +7,6 @@ from __future__ import annotations
 import csv
 import json
 import signal
-import time
 import warnings
 from pathlib import Path
 
@@ -27,7 +26,14 @@ from fovexp.experiment.records.resume import (
 )
 from fovexp.experiment.session import Session
 
-from experiment_helpers import REPO, make_workspace, popen_cli, run_cli, xvfb_display  # noqa: F401
+from experiment_helpers import (  # noqa: F401
+    REPO,
+    make_workspace,
+    popen_cli,
+    run_cli,
+    wait_for_trials,
+    xvfb_display,
+)
 
 
 @pytest.mark.gui
@@ -39,14 +45,7 @@ def test_sigkill_then_resume(tmp_path: Path, xvfb_display) -> None:  # noqa: F81
     folder = ws / "results" / "calibration-fe" / "K01"
     proc = popen_cli(args, ws)
     try:
-        deadline = time.monotonic() + 180
-        n = 0
-        while time.monotonic() < deadline and proc.poll() is None:
-            if (folder / "trials.csv").exists():
-                n = len(read_trials(folder / "trials.csv")[0])
-                if n >= 3:
-                    break
-            time.sleep(0.05)
+        n = wait_for_trials(proc, folder / "trials.csv", 3, timeout_s=180)
         assert proc.poll() is None, proc.communicate()[1][-2000:]
         assert n >= 3
         # While it runs, a second run of the same session (another process's lock) is refused:
