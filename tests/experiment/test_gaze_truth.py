@@ -74,8 +74,9 @@ def test_a_wandering_eye_with_and_without_latency(ws: Path) -> None:
     # after the decision, or the runner would have blanked): one measure bounds the other
     assert eight["stamped_violations"] <= eight["tracker_cost_frames"]
     # a wandering eye blanks part of each run (its share over 2 trials depends on where the
-    # wall clock puts them in the eye's stream: 16-40 % measured; the preset's third of the
-    # time away is checked on 20 s of samples in trackers/test_gaze.py)
+    # wall clock puts them in the eye's stream: 16-40 % measured without the dropouts above,
+    # 24 % with them; the preset's third of the time away is checked on 20 s of samples in
+    # trackers/test_gaze.py)
     assert zero["blanked"] > 0.05
 
 
