@@ -191,14 +191,15 @@ void main() {
     vec2 a = f - vec2(i0);
     ivec2 i1 = min(i0 + 1, ivec2(level_hw.y, level_hw.x) - 1);
     int lw = level_hw.y;
-    float w00 = wgt * (1.0 - a.y) * (1.0 - a.x), w01 = wgt * (1.0 - a.y) * a.x;
-    float w10 = wgt * a.y * (1.0 - a.x), w11 = wgt * a.y * a.x;
+    // the bilinear sample as foveation._accumulate computes it: along x, then between the
+    // two rows, each step a + f (b - a) (a constant level gives exactly its constant)
     for (int ch = 0; ch < c; ++ch) {
         float v = linear[i * c + ch];
-        foveated[i * c + ch] += w00 * (blurred[(i0.y * lw + i0.x) * c + ch] - v)
-                              + w01 * (blurred[(i0.y * lw + i1.x) * c + ch] - v)
-                              + w10 * (blurred[(i1.y * lw + i0.x) * c + ch] - v)
-                              + w11 * (blurred[(i1.y * lw + i1.x) * c + ch] - v);
+        float p00 = blurred[(i0.y * lw + i0.x) * c + ch];
+        float p10 = blurred[(i1.y * lw + i0.x) * c + ch];
+        float u0 = p00 + a.x * (blurred[(i0.y * lw + i1.x) * c + ch] - p00);
+        float u1 = p10 + a.x * (blurred[(i1.y * lw + i1.x) * c + ch] - p10);
+        foveated[i * c + ch] += wgt * ((u0 + a.y * (u1 - u0)) - v);
     }
 }
 #endif
