@@ -97,13 +97,24 @@ def _reduce_2d(img: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
         r = 2 * i
         rm2, rm1 = max(r - 2, 0), max(r - 1, 0)
         rp1, rp2 = min(r + 1, h - 1), min(r + 2, h - 1)
+        # the five source rows as slices indexed from 0 (the loop vectorises)
+        a0, am2, am1, ap1, ap2 = img[r], img[rm2], img[rm1], img[rp1], img[rp2]
         row = np.empty(w, dtype=img.dtype)
         for x in range(w):
-            row[x] = _taps5(img[r, x], img[rm2, x], img[rm1, x], img[rp1, x], img[rp2, x])
+            row[x] = _taps5(a0[x], am2[x], am1[x], ap1[x], ap2[x])
+        # the interior outputs (no clamping) from slices indexed from 0, then the borders
+        dst = out[i]
+        j_hi = max(min((w - 3) // 2 + 1, wo), 1)
+        src, d = row[0:2 * j_hi + 1], dst[1:j_hi]
+        for jj in range(j_hi - 1):
+            b = 2 * jj
+            d[jj] = _taps5(src[b + 2], src[b], src[b + 1], src[b + 3], src[b + 4])
         for j in range(wo):
+            if 1 <= j < j_hi:
+                continue
             c = 2 * j
-            out[i, j] = _taps5(row[c], row[max(c - 2, 0)], row[max(c - 1, 0)],
-                               row[min(c + 1, w - 1)], row[min(c + 2, w - 1)])
+            dst[j] = _taps5(row[c], row[max(c - 2, 0)], row[max(c - 1, 0)],
+                            row[min(c + 1, w - 1)], row[min(c + 2, w - 1)])
     return out
 
 
@@ -132,8 +143,25 @@ def _reduce_hwc(img: np.ndarray, pad: int) -> np.ndarray:  # pragma: no cover - 
             row[x] = _taps5(a0[x], am2[x], am1[x], ap1[x], ap2[x])
         # then channel by channel (no loop over channels inside the loop over pixels)
         dst = out[i].reshape(wo * c)
+        # interior outputs (all five taps inside the row: no clamping), from slices indexed
+        # from 0; the border ones below
+        j_lo = min(max((pad + 3) // 2, 0), wo)
+        j_hi = max(min((w - 3 + pad) // 2 + 1, wo), j_lo)
+        cnt = j_hi - j_lo
+        if cnt > 0:
+            base = (2 * j_lo - pad - 2) * c
+            src = row[base:base + (2 * cnt + 3) * c]
+            d = dst[j_lo * c:j_hi * c]
+            c2 = 2 * c
+            for ch in range(c):
+                for jj in range(cnt):
+                    b = jj * c2 + ch
+                    d[jj * c + ch] = _taps5(src[b + c2], src[b], src[b + c], src[b + 3 * c],
+                                            src[b + 2 * c2])
         for ch in range(c):
             for j in range(wo):
+                if j_lo <= j < j_hi:
+                    continue
                 q = 2 * j - pad
                 dst[j * c + ch] = _taps5(
                     row[min(max(q, 0), w - 1) * c + ch], row[min(max(q - 2, 0), w - 1) * c + ch],
