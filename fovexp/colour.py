@@ -248,11 +248,31 @@ def encode(
     return out
 
 
+@numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
+def _luma_into(rgb, weights, out):  # pragma: no cover - compiled
+    """``out = (w0 R + w1 G) + w2 B`` of an (H, W, 3) image, in its dtype, row by row."""
+    h, w = out.shape
+    w0, w1, w2 = weights[0], weights[1], weights[2]
+    for y in numba.prange(h):
+        src, dst = rgb[y].reshape(-1), out[y]  # indexed from 0: the loop vectorises
+        for x in range(w):
+            dst[x] = (w0 * src[3 * x] + w1 * src[3 * x + 1]) + w2 * src[3 * x + 2]
+    return out
+
+
 def luminance(linear: np.ndarray) -> np.ndarray:
     """Linear luma ``0.299 R + 0.587 G + 0.114 B`` of an (H, W, 3) image; grey passes through.
-    Float32, or float64 (with the weights in float64) when ``linear`` is."""
+    Float32, or float64 (with the weights in float64) when ``linear`` is.
+
+    A compiled loop, not NumPy's ``tensordot``: that is a BLAS call, and OpenBLAS's threads
+    spin for a while after one, taking a core from the parallel kernels that follow (measured
+    on 2 cores: an already-foveated 4K frame 0.42 -> 0.33 s, the contrast stage after it
+    118 -> 60 ms)."""
     dtype = np.float64 if np.asarray(linear).dtype == np.float64 else np.float32
     if linear.ndim == 2:
         return np.asarray(linear, dtype=dtype)
+    if linear.ndim != 3 or linear.shape[2] != 3:
+        raise ValueError(f"luminance of an (H, W, 3) image or a grey one, not {linear.shape}")
     weights = LUMA_BT601_F64 if dtype == np.float64 else LUMA_BT601
-    return np.tensordot(linear, weights, axes=([-1], [0])).astype(dtype, copy=False)
+    rgb = np.ascontiguousarray(linear, dtype=dtype)
+    return _luma_into(rgb, weights, np.empty(rgb.shape[:2], dtype))
