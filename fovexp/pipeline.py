@@ -98,11 +98,16 @@ _CHECK_PART = 1 << 18
 
 def _finite_range(flat: np.ndarray) -> tuple[int, float, float]:
     """``(non-finite count, min, max)`` of a flat float array, in parts on threads, each part's
-    three NumPy passes in the cache (the three passes and a mask over a whole 4K frame were
-    50 ms of its set-up). The extremes are meaningful only when the count is 0."""
+    NumPy passes in the cache (three passes and a mask over a whole 4K frame were 50 ms of its
+    set-up). A part's min and max are finite only when all its values are (NumPy's min and
+    max propagate NaN; an infinity is an extreme), so its non-finite values are counted only
+    when they are not (two passes, not four: a 4K frame 17 -> 11 ms). The extremes are
+    meaningful only when the count is 0."""
     def part(i: int) -> tuple[int, float, float]:
         seg = flat[i:i + _CHECK_PART]
-        return int(np.count_nonzero(~np.isfinite(seg))), float(seg.min()), float(seg.max())
+        lo, hi = float(seg.min()), float(seg.max())
+        bad = 0 if np.isfinite(lo) and np.isfinite(hi) else int(np.count_nonzero(~np.isfinite(seg)))
+        return bad, lo, hi
 
     parts = thread_map(part, range(0, flat.size, _CHECK_PART))
     return (sum(p[0] for p in parts), min(p[1] for p in parts), max(p[2] for p in parts))
