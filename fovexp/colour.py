@@ -93,6 +93,7 @@ def _transfer_runs(src, dst, p, offset, inverse):  # pragma: no cover - compiled
     scale = np.float32(1.0 / (1.0 + offset))
     gain, off = np.float32(1.0 + offset), np.float32(offset)
     s = 0
+    repeated = False  # whether the run before this one repeated its period
     while s < n:
         e = min(n, s + _RUN)
         repeats = s >= _PERIOD
@@ -101,7 +102,13 @@ def _transfer_runs(src, dst, p, offset, inverse):  # pragma: no cover - compiled
             for i in range(e - s):  # one pass, no early exit: it vectorises
                 repeats &= now[i] == before[i]
         run_in, run_out = src[s:e], dst[s:e]  # indexed from 0: the loops vectorise
-        if repeats:
+        if repeats and repeated:
+            # the run before repeated the same period (its last values are this run's), and
+            # _RUN is a multiple of it: its results are this run's, copied as one run
+            prev = dst[s - _RUN:e - _RUN]
+            for i in range(e - s):
+                run_out[i] = prev[i]
+        elif repeats:
             p0, p1, p2 = dst[s - 3], dst[s - 2], dst[s - 1]
             for i in range(0, e - s - 2, 3):
                 run_out[i], run_out[i + 1], run_out[i + 2] = p0, p1, p2
@@ -116,6 +123,7 @@ def _transfer_runs(src, dst, p, offset, inverse):  # pragma: no cover - compiled
                 if offset != 0.0 and inverse:
                     v = min(max(v * gain - off, lo), hi)
                 run_out[i] = v
+        repeated = repeats
         s = e
 
 
