@@ -280,6 +280,16 @@ def _verdict(ok: bool) -> str:
     return "met" if ok else "**not met**"
 
 
+#: Map names whose values carry a unit: their differences are not 8-bit codes.
+_UNIT_SUFFIXES = ("_deg", "_px", "_cpp", "_rad")
+
+
+def _in_codes(what: str) -> bool:
+    """Whether an output or map (``preset/name`` or ``preset/map:name``) holds values in
+    [0, 1], whose differences count in 8-bit codes."""
+    return not what.split(":")[-1].endswith(_UNIT_SUFFIXES)
+
+
 def markdown(record: dict) -> str:
     info, summary, comparison = record["info"], record["summary"], record["comparison"]
     m = info["machine"]
@@ -345,14 +355,17 @@ def markdown(record: dict) -> str:
         lines += ["| " + " | ".join(r) + " |" for r in rows]
         lines.append("")
     if comparison:
-        worst = max(r["max_codes"] for r in comparison)
+        worst = max(r["max_codes"] for r in comparison if _in_codes(r["what"]))
         lines += ["## The output against the baseline's", "",
-                  f"Largest difference {worst:.3g} of an 8-bit code (bound: 0.5).", "",
+                  f"Largest difference {worst:.3g} of an 8-bit code (bound: 0.5), over the "
+                  "outputs and the maps of values in [0, 1]; the maps with a unit (degrees, "
+                  "px, cycles per pixel, radians) are compared in it.", "",
                   "| output or map | identical bytes | max abs | max 8-bit codes | differing |",
                   "|---|---|---|---|---|"]
         for r in comparison:
+            codes = f"{r['max_codes']:.3g}" if _in_codes(r["what"]) else "(in its unit)"
             lines.append(f"| {r['what']} | {'yes' if r['identical'] else 'no'} | "
-                         f"{r['max_abs']:.3g} | {r['max_codes']:.3g} | {r['differing']} |")
+                         f"{r['max_abs']:.3g} | {codes} | {r['differing']} |")
         lines.append("")
     return "\n".join(lines) + "\n"
 
