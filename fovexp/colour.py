@@ -183,13 +183,47 @@ def _add_clip_row(src, a, b, y, w, c, n_grey, row):  # pragma: no cover - compil
             row[x * c + ch] = min(max(v, lo), hi)
 
 
+#: Pixels per run of :func:`_encode_kept`: a run whose change is 0 throughout copies the input
+#: (256 RGB pixels, :data:`_RUN` values).
+_RUN_PX = _RUN // _PERIOD
+
+
+@numba.njit(cache=True, inline="always", fastmath=FASTMATH, nogil=True)
+def _encode_kept(clipped, g, kept, w, c, p, offset, row):  # pragma: no cover - compiled
+    """:func:`_transfer_runs` of one row's ``clipped`` values into ``row``, except where the
+    grey change ``g`` of a pixel is exactly 0: there the pixel is ``kept`` (the encoded input
+    the row's linear values came from). A run of :data:`_RUN_PX` pixels without a change
+    is one copy, with no power."""
+    s = 0
+    while s < w:
+        e = min(w, s + _RUN_PX)
+        gs, ks, out = g[s:e], kept[s * c:e * c], row[s * c:e * c]  # indexed from 0
+        changed = False
+        for x in range(e - s):  # no early exit: it vectorises
+            changed |= gs[x] != 0.0
+        if changed:
+            _transfer_runs(clipped[s * c:e * c], out, p, offset, True)
+            for x in range(e - s):
+                if gs[x] == 0.0:
+                    for ch in range(c):
+                        out[x * c + ch] = ks[x * c + ch]
+        else:
+            for i in range((e - s) * c):
+                out[i] = ks[i]
+        s = e
+
+
 @numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
-def _encode_into(img, a, b, n_grey, p, offset, out):  # pragma: no cover - compiled
+def _encode_into(img, a, b, n_grey, p, offset, kept, out):  # pragma: no cover - compiled
     """:func:`encode` of float32 (H, W, C) ``img`` in one pass: clip(img + a + b, 0, 1) (the
     first ``n_grey`` of the grey (H, W) images ``a``, ``b`` added to every channel), to the
     power ``p``, then the release's offset (``offset`` > 0) and a clip. Each row is clipped
-    into a row of its own first, then raised to the power in runs (:func:`_transfer_runs`)."""
+    into a row of its own first, then raised to the power in runs (:func:`_transfer_runs`).
+    With ``kept`` of ``img``'s shape (the encoded image ``img`` was linearised from; shape
+    (0, 0, 0): none), a pixel whose grey images add exactly 0 is ``kept``'s
+    (:func:`_encode_kept`)."""
     h, w, c = img.shape
+    keep = kept.shape[0] > 0 and n_grey > 0
     for y in numba.prange(h):
         clipped = np.empty(w * c, np.float32)
         # RGB with its channel count a constant the compiler unrolls (measured: 4K encode
@@ -198,7 +232,22 @@ def _encode_into(img, a, b, n_grey, p, offset, out):  # pragma: no cover - compi
             _add_clip_row(img[y].reshape(-1), a, b, y, w, 3, n_grey, clipped)
         else:
             _add_clip_row(img[y].reshape(-1), a, b, y, w, c, n_grey, clipped)
-        _transfer_runs(clipped, out[y].reshape(-1), p, offset, True)
+        if not keep:
+            _transfer_runs(clipped, out[y].reshape(-1), p, offset, True)
+            continue
+        g = np.empty(w, np.float32)
+        ay = a[y]
+        if n_grey == 2:
+            by = b[y]
+            for x in range(w):
+                g[x] = ay[x] + by[x]
+        else:
+            for x in range(w):
+                g[x] = ay[x]
+        if c == 3:
+            _encode_kept(clipped, g, kept[y].reshape(-1), w, 3, p, offset, out[y].reshape(-1))
+        else:
+            _encode_kept(clipped, g, kept[y].reshape(-1), w, c, p, offset, out[y].reshape(-1))
     return out
 
 
@@ -214,12 +263,19 @@ def _add_grey_clip(img, a, b, out):  # pragma: no cover - compiled
 
 
 def encode(
-    linear: np.ndarray, gamma: float, transfer: str = "power", *grey: np.ndarray
+    linear: np.ndarray, gamma: float, transfer: str = "power", *grey: np.ndarray,
+    unchanged: np.ndarray | None = None,
 ) -> np.ndarray:
     """Inverse of :func:`linearize`, after adding up to two grey (H, W) images (the contrast
     change, the noise) to every channel; values outside [0, 1] are clipped first (a display
     shows nothing else). Float32 in one pass (the add, the clip and the polynomial power of
-    :func:`linearize`); float64 when ``linear`` is, through NumPy's pow."""
+    :func:`linearize`); float64 when ``linear`` is, through NumPy's pow.
+
+    ``unchanged``: the display-encoded image ``linear`` is the linearisation of (float32,
+    ``linear``'s shape). Where the grey images add exactly 0 that pixel is returned as it
+    was, not through the round trip (which gives it back within one float32 unit in the
+    last place): the fovea and the flat regions of an already-foveated frame are left
+    exactly as rendered, and a run of such pixels costs a copy, not the power."""
     lin = np.asarray(linear)
     if lin.dtype != np.float64:
         lin = lin.astype(np.float32, copy=False)
@@ -227,6 +283,12 @@ def encode(
     scalar = dtype.type
     if len(grey) > 2:
         raise ValueError("encode adds at most two grey images")
+    if unchanged is not None:
+        unchanged = np.asarray(unchanged)
+        if unchanged.shape != lin.shape:
+            raise ValueError(f"unchanged has shape {unchanged.shape}, linear {lin.shape}")
+        if not grey:  # nothing added anywhere: the encoded image itself
+            return np.array(unchanged, dtype=dtype)
     out = np.empty(lin.shape, dtype=dtype)
     three = lin.ndim == 3
     if dtype == np.float32:
@@ -236,9 +298,11 @@ def encode(
         a, b = (ga + [zero, zero])[:2]
         # as (H, W, C): grey (H, W) with one channel, any other shape as one row
         hwc = lin.shape if three else lin.shape + (1,) if lin.ndim == 2 else (1, lin.size, 1)
+        kept = (np.zeros((0, 0, 0), dtype) if unchanged is None
+                else np.ascontiguousarray(unchanged, dtype=dtype).reshape(hwc))
         _encode_into(np.ascontiguousarray(lin).reshape(hwc), a, b, len(ga),
                      np.float64(np.float32(1.0 / gamma)),
-                     _RELEASE_OFFSET if transfer == "release" else 0.0, out.reshape(hwc))
+                     _RELEASE_OFFSET if transfer == "release" else 0.0, kept, out.reshape(hwc))
         return out
     if grey:
         a = np.ascontiguousarray(grey[0], dtype=dtype)
@@ -253,6 +317,9 @@ def encode(
         out *= scalar(1.0 + _RELEASE_OFFSET)
         out -= scalar(_RELEASE_OFFSET)
         np.clip(out, 0.0, 1.0, out=out)
+    if unchanged is not None:
+        added = sum(np.asarray(g, dtype) for g in grey)
+        np.copyto(out, unchanged, where=(added == 0)[..., None] if three else added == 0)
     return out
 
 

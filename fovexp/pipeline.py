@@ -449,7 +449,8 @@ class Enhancer:
                 orientation.orientation_at(g[0], g[1], b.x_px, b.y_px, dtype=self._dtype))
         c.stage("noise", ("shape", "impulses", "imp_active", "imp_amplitude", "imp_frequency",
                           "imp_orientation", "n_impulses"), self._noise)
-        c.stage("output", ("method", "foveated", "?contrast", "?noise"), self._compose)
+        c.stage("output", ("method", "foveated", "?contrast", "?noise", "image",
+                           "already_foveated"), self._compose)
 
     # ----------------------------------------------------------------------------- public API
     def set_image(
@@ -741,14 +742,15 @@ class Enhancer:
         return gabor.synthesize(shape, imp, full, freq, carrier, n, self.preset.gabor_a_cpp,
                                 self.options.kernel_truncation, self.options.skip, self._dtype)
 
-    def _compose(self, method, foveated, contrast, noise) -> np.ndarray:
+    def _compose(self, method, foveated, contrast, noise, image, already_foveated) -> np.ndarray:
         """The displayed frame: the grey contrast change and noise are added to every channel
-        of the linear foveated image, then encoded (section 4.5); values outside [0, 1] clip."""
-        if method == "foveated":
-            return self._encode(foveated)
-        if method == "contrast":
-            return colour.encode(foveated, self._gamma(), self.preset.transfer, contrast())
-        return colour.encode(foveated, self._gamma(), self.preset.transfer, contrast(), noise())
+        of the linear foveated image, then encoded (section 4.5); values outside [0, 1] clip.
+        A pixel of an already-foveated frame that nothing changes is the frame's own
+        (:func:`fovexp.colour.encode`'s ``unchanged``)."""
+        grey = () if method == "foveated" else (contrast(),) if method == "contrast" else (
+            contrast(), noise())
+        return colour.encode(foveated, self._gamma(), self.preset.transfer, *grey,
+                             unchanged=image if already_foveated else None)
 
     # ------------------------------------------------------------------------------- maps
     def linear(self, name: str) -> np.ndarray:
@@ -766,19 +768,28 @@ class Enhancer:
         if name == "output":
             return self._output()
         if name in ("foveated", "contrast"):
-            return self._encode(self._linear_image(name))
+            if not self._c.get("already_foveated"):
+                return self._encode(self._linear_image(name))
+            # as the output stage composes them: the frame's own pixels where nothing changes
+            grey = (self._contrast_change(),) if name == "contrast" else ()
+            return colour.encode(self._linear_image("foveated"), self._gamma(),
+                                 self.preset.transfer, *grey, unchanged=self._c.get("image"))
         if name in ("noise", "amplitude") and self._c.get("method") != "ours":
             return np.zeros(self._c.get("shape"), self._dtype)  # no noise: K = 0 everywhere
         return self._read_map(name)
 
-    # The read hooks: each backend supplies these three.
+    # The read hooks: each backend supplies these four.
     def _linear_image(self, name: str) -> np.ndarray:
         """The linear ``foveated`` image, or ``contrast`` (foveated + the grey change)."""
         foveated = self._c.get("foveated")
         if name == "foveated":
             return foveated
-        delta = self._c.get("contrast")
+        delta = self._contrast_change()
         return foveated + (delta[..., None] if foveated.ndim == 3 else delta)
+
+    def _contrast_change(self) -> np.ndarray:
+        """The contrast's grey change of linear luminance, (H, W)."""
+        return self._c.get("contrast")
 
     def _read_map(self, name: str) -> np.ndarray:
         """Map ``name`` of :data:`POINT_MAPS`, ``sigma_px`` or ``noise`` (the method is

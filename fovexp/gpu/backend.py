@@ -279,7 +279,8 @@ class GpuEnhancer(Enhancer):
                                "s_k", "abs_laplacian", "gradients", "headroom"),
                 t(self._gpu_imp_params))
         c.stage("noise", ("impulses", "imp_params"), t(self._gpu_noise))
-        c.stage("output", ("method", "foveated", "?contrast", "?noise"), t(self._gpu_output))
+        c.stage("output", ("method", "foveated", "?contrast", "?noise", "upload",
+                           "already_foveated"), t(self._gpu_output))
 
     @property
     def dispatch_timings_s(self) -> dict[str, float]:
@@ -699,8 +700,10 @@ class GpuEnhancer(Enhancer):
                   skip=int(self.options.skip))
         return noise
 
-    def _gpu_output(self, method: str, fov: Any, contrast, noise) -> Any:
-        """Enhancer._compose: the grey change and noise on every channel, clipped, encoded."""
+    def _gpu_output(self, method: str, fov: Any, contrast, noise, upload: Any,
+                    already_foveated: bool) -> Any:
+        """Enhancer._compose: the grey change and noise on every channel, clipped, encoded;
+        an already-foveated frame's own pixel where nothing changes."""
         h, w, c = self._hwc()
         out = self._buffer("OUTPUT", h * w * c * _F4)
         delta = contrast() if method in ("contrast", "ours") else None
@@ -709,9 +712,10 @@ class GpuEnhancer(Enhancer):
         self._run("colour.glsl", "COMPOSE", self._groups_2d(h, w),
                   {"FOVEATED": fov, "CONTRAST": unused if delta is None else delta,
                    "NOISE": unused if nz is None else nz,
-                   "OUTPUT": out},
+                   "IMAGE": upload if already_foveated else unused, "OUTPUT": out},
                   image_hwc=(h, w, c), add_contrast=int(delta is not None),
-                  add_noise=int(nz is not None), gamma=self._gamma())
+                  add_noise=int(nz is not None), keep_unchanged=int(already_foveated),
+                  gamma=self._gamma())
         return out
 
     # ------------------------------------------------------------------------- read-back
@@ -760,10 +764,14 @@ class GpuEnhancer(Enhancer):
         img = np.frombuffer(fov.read(size=h * w * c * _F4), np.float32).reshape(
             self._image_shape()).copy()
         if name == "contrast":
-            self._c.get("contrast")
-            delta = self._read("CONTRAST", h * w).reshape(h, w)
+            delta = self._contrast_change()
             img += delta[..., None] if img.ndim == 3 else delta
         return img
+
+    def _contrast_change(self) -> np.ndarray:
+        self._c.get("contrast")
+        h, w, _ = self._hwc()
+        return self._read("CONTRAST", h * w).reshape(h, w)
 
     def impulse_params(self) -> dict[str, np.ndarray]:
         """Per-impulse parameters of the last frame, in the order of the impulses (``x_px``,

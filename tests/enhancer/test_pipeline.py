@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from fovexp import EngineOptions, EnhanceParams, Enhancer, FovexpError, load_display, make_params
+from fovexp import colour
 from fovexp.colour import luminance
 from fovexp.params import PAPER_TABLE2
 
@@ -173,6 +174,33 @@ def test_already_foveated_input_gives_the_same_result(frame):
     res3 = enh3.enhance((0.5, 0.5), EnhanceParams(blur_rate=0.34, impulses=12))
     # the sigma map is sampled bilinearly at the impulses: nearly the same
     assert np.abs(res3.output - full.output).mean() < 1e-3
+
+
+def test_an_already_foveated_frame_is_kept_where_nothing_changes(frame):
+    """An already-foveated frame comes back bit for bit wherever the contrast change and the
+    noise add exactly 0 (the fovea, flat regions), not through the transfer's round trip;
+    elsewhere within rounding of the composition without that rule; the maps as the output
+    composes them."""
+    _, full = _run(frame, blur_rate=0.34, impulses=12)
+    foveated = full.map("foveated").copy()
+    foveated[:, :200] = 0.5  # a flat region: no contrast change, no noise there
+    enh = Enhancer(LG)
+    enh.set_image(foveated, foveated=True)
+    params = EnhanceParams(blur_rate=0.34, impulses=12)
+    res = enh.enhance((0.5, 0.5), params)
+    change = enh._c.get("contrast") + res.map("noise")
+    zero = change == 0
+    assert zero.mean() > 0.1 and (res.map("sigma_px") == 0).sum() < zero.sum()
+    assert np.array_equal(res.output[zero], foveated[zero])
+    assert np.array_equal(res.map("foveated"), foveated)
+    lin = enh.linear("foveated")
+    plain = colour.encode(lin, enh._gamma(), "power", enh._c.get("contrast"), res.map("noise"))
+    assert np.array_equal(res.output[~zero], plain[~zero])
+    contrast_map = res.map("contrast")
+    con = enh.enhance((0.5, 0.5), params.model_copy(update={"method": "contrast"}))
+    assert np.array_equal(con.output, contrast_map)
+    fov = enh.enhance((0.5, 0.5), params.model_copy(update={"method": "foveated"}))
+    assert np.array_equal(fov.output, foveated)
 
 
 def test_methods_differ_as_they_should(frame):

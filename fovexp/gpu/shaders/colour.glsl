@@ -34,11 +34,15 @@ void main() {
 #endif
 
 #ifdef ENTRY_COMPOSE
-// colour.encode with the grey images added: clip(foveated + delta + noise, 0, 1) ** (1 / gamma)
+// colour.encode with the grey images added: clip(foveated + delta + noise, 0, 1) ** (1 / gamma);
+// with keep_unchanged (an already-foveated frame, `foveated` its linearisation), a pixel whose
+// change is exactly 0 is the frame's own (colour.encode's `unchanged`)
 LOCAL_2D
 uniform ivec3 image_hwc;
 uniform int add_contrast;
 uniform int add_noise;
+uniform int keep_unchanged;
+layout(std430, binding = B_IMAGE) readonly buffer Image { float image[]; };
 layout(std430, binding = B_FOVEATED) readonly buffer Foveated { float foveated[]; };
 layout(std430, binding = B_CONTRAST) readonly buffer Contrast { float delta[]; };
 layout(std430, binding = B_NOISE) readonly buffer Noise { float noise[]; };
@@ -48,7 +52,9 @@ void main() {
     if (p.x >= image_hwc.y || p.y >= image_hwc.x) return;
     int i = p.y * image_hwc.y + p.x, channels = image_hwc.z;
     float g = (add_contrast == 1 ? delta[i] : 0.0) + (add_noise == 1 ? noise[i] : 0.0);
+    bool kept = keep_unchanged == 1 && g == 0.0;
     for (int ch = 0; ch < channels; ++ch)
-        outimg[i * channels + ch] = pow(clamp(foveated[i * channels + ch] + g, 0.0, 1.0), 1.0 / gamma);
+        outimg[i * channels + ch] = kept ? image[i * channels + ch]
+            : pow(clamp(foveated[i * channels + ch] + g, 0.0, 1.0), 1.0 / gamma);
 }
 #endif
