@@ -20,7 +20,7 @@ import math
 import numba
 import numpy as np
 
-from ._parallel import power
+from ._parallel import interleave, power
 from .jit import FASTMATH, MAGIC_BITS, MAGIC_F64, _bits_as_float64, _float64_bits
 
 #: BT.601 luma weights. The release's Y of YCbCr, normalised as (Y - 16/255) / (219/255), equals
@@ -134,7 +134,11 @@ def _linearize_into(encoded, p, offset, out):  # pragma: no cover - compiled
     parallel, each in runs (:func:`_transfer_runs`)."""
     n = encoded.size
     parts = 64  # no reductions: the thread count does not change a value
-    for k in numba.prange(parts):
+    # each thread's parts spread over the frame: a textured region costs the power, a flat
+    # one a copy, and a thread given one half of a half-flat frame waited for the other
+    stride = interleave(parts)
+    for i in numba.prange(parts):
+        k = (i * stride) % parts
         # slices indexed from 0 (an index of unknown sign keeps a loop scalar: fovexp/gabor.py)
         src = encoded[n * k // parts:n * (k + 1) // parts]
         dst = out[n * k // parts:n * (k + 1) // parts]
@@ -189,20 +193,27 @@ _RUN_PX = _RUN // _PERIOD
 
 
 @numba.njit(cache=True, inline="always", fastmath=FASTMATH, nogil=True)
-def _encode_kept(clipped, g, kept, w, c, p, offset, row):  # pragma: no cover - compiled
-    """:func:`_transfer_runs` of one row's ``clipped`` values into ``row``, except where the
-    grey change ``g`` of a pixel is exactly 0: there the pixel is ``kept`` (the encoded input
-    the row's linear values came from). A run of :data:`_RUN_PX` pixels without a change
-    is one copy, with no power."""
+def _encode_kept(src, g, kept, w, c, p, offset, clipped, row):  # pragma: no cover - compiled
+    """One row of :func:`_encode_into` with ``kept``: ``row = T^-1(clip(src + g))`` (``g`` the
+    row's grey change, ``clipped`` scratch of the row's size) except where ``g`` of a pixel
+    is exactly 0: there the pixel is ``kept``'s (the encoded input ``src`` is the
+    linearisation of). A run of :data:`_RUN_PX` pixels without a change is one copy: no
+    add, clip or power, and ``src`` not read."""
+    lo, hi = np.float32(0.0), np.float32(1.0)
     s = 0
     while s < w:
         e = min(w, s + _RUN_PX)
-        gs, ks, out = g[s:e], kept[s * c:e * c], row[s * c:e * c]  # indexed from 0
+        # indexed from 0: the loops vectorise
+        gs, ks, out = g[s:e], kept[s * c:e * c], row[s * c:e * c]
         changed = False
         for x in range(e - s):  # no early exit: it vectorises
             changed |= gs[x] != 0.0
         if changed:
-            _transfer_runs(clipped[s * c:e * c], out, p, offset, True)
+            lin, clip = src[s * c:e * c], clipped[s * c:e * c]
+            for x in range(e - s):
+                for ch in range(c):
+                    clip[x * c + ch] = min(max(lin[x * c + ch] + gs[x], lo), hi)
+            _transfer_runs(clip, out, p, offset, True)
             for x in range(e - s):
                 if gs[x] == 0.0:
                     for ch in range(c):
@@ -224,30 +235,34 @@ def _encode_into(img, a, b, n_grey, p, offset, kept, out):  # pragma: no cover -
     (:func:`_encode_kept`)."""
     h, w, c = img.shape
     keep = kept.shape[0] > 0 and n_grey > 0
-    for y in numba.prange(h):
+    stride = interleave(h)  # each thread's rows spread over the frame (:func:`_linearize_into`)
+    for i in numba.prange(h):
+        y = (i * stride) % h
         clipped = np.empty(w * c, np.float32)
+        if keep:
+            g = np.empty(w, np.float32)
+            ay = a[y]
+            if n_grey == 2:
+                by = b[y]
+                for x in range(w):
+                    g[x] = ay[x] + by[x]
+            else:
+                for x in range(w):
+                    g[x] = ay[x]
+            if c == 3:
+                _encode_kept(img[y].reshape(-1), g, kept[y].reshape(-1), w, 3, p, offset,
+                             clipped, out[y].reshape(-1))
+            else:
+                _encode_kept(img[y].reshape(-1), g, kept[y].reshape(-1), w, c, p, offset,
+                             clipped, out[y].reshape(-1))
+            continue
         # RGB with its channel count a constant the compiler unrolls (measured: 4K encode
         # 114 -> 84 ms, 2 cores); any other as it comes
         if c == 3:
             _add_clip_row(img[y].reshape(-1), a, b, y, w, 3, n_grey, clipped)
         else:
             _add_clip_row(img[y].reshape(-1), a, b, y, w, c, n_grey, clipped)
-        if not keep:
-            _transfer_runs(clipped, out[y].reshape(-1), p, offset, True)
-            continue
-        g = np.empty(w, np.float32)
-        ay = a[y]
-        if n_grey == 2:
-            by = b[y]
-            for x in range(w):
-                g[x] = ay[x] + by[x]
-        else:
-            for x in range(w):
-                g[x] = ay[x]
-        if c == 3:
-            _encode_kept(clipped, g, kept[y].reshape(-1), w, 3, p, offset, out[y].reshape(-1))
-        else:
-            _encode_kept(clipped, g, kept[y].reshape(-1), w, c, p, offset, out[y].reshape(-1))
+        _transfer_runs(clipped, out[y].reshape(-1), p, offset, True)
     return out
 
 

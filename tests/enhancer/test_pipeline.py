@@ -3,8 +3,15 @@
 import numpy as np
 import pytest
 
-from fovexp import EngineOptions, EnhanceParams, Enhancer, FovexpError, load_display, make_params
-from fovexp import colour
+from fovexp import (
+    EngineOptions,
+    EnhanceParams,
+    Enhancer,
+    FovexpError,
+    colour,
+    load_display,
+    make_params,
+)
 from fovexp.colour import luminance
 from fovexp.params import PAPER_TABLE2
 
