@@ -79,6 +79,22 @@ def test_grey_viewport_and_given_sigma_inputs_match(ctx, frame):
     assert np.abs(c2.map("noise") - g2.map("noise")).max() < 1e-3
 
 
+def test_an_already_foveated_frame_is_kept_where_nothing_changes(ctx, frame):
+    """As on the CPU (colour.encode's ``unchanged``), the COMPOSE shader returns an
+    already-foveated frame's own pixel where the contrast change and the noise add exactly
+    0: the fovea bit for bit, and the whole frame under the foveated method."""
+    (_, cpu), _ = _pair(ctx, frame)
+    foveated = cpu.map("foveated")
+    (cpu_enh, c2), (gpu_enh, g2) = _pair(ctx, foveated, set_kw={"foveated": True})
+    fovea = c2.map("sigma_px") == 0
+    assert fovea.mean() > 0.01
+    assert np.array_equal(g2.output[fovea], foveated[fovea])
+    assert np.array_equal(c2.output[fovea], foveated[fovea])
+    assert np.abs(c2.output - g2.output).max() < 2e-3
+    p = EnhanceParams(blur_rate=0.57, method="foveated")
+    assert np.array_equal(gpu_enh.enhance((0.5, 0.5), p).output, foveated)
+
+
 @pytest.mark.parametrize("rule", ["paper", "widened"])
 def test_every_map_matches_the_cpu_reference_under_each_clipping_rule(ctx, frame, rule):
     """The two clipping rules the shaders implement (docs/GPU.md): the extremes of one
