@@ -551,6 +551,8 @@ def _block_extremes(img, add, block):  # pragma: no cover - compiled
     for by in numba.prange(bh):
         if c == 3:
             _block_row_extremes(img, add, block, by, 3, lo[by], hi[by])
+        elif c == 1:  # luminance (the paper's rule)
+            _block_row_extremes(img, add, block, by, 1, lo[by], hi[by])
         else:
             _block_row_extremes(img, add, block, by, c, lo[by], hi[by])
     return lo, hi
