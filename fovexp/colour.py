@@ -286,8 +286,8 @@ def encode(
     shows nothing else). Float32 in one pass (the add, the clip and the polynomial power of
     :func:`linearize`); float64 when ``linear`` is, through NumPy's pow.
 
-    ``unchanged``: the display-encoded image ``linear`` is the linearisation of (float32,
-    ``linear``'s shape). Where the grey images add exactly 0 that pixel is returned as it
+    ``unchanged``: the display-encoded image ``linear`` is the linearisation of (``linear``'s
+    shape). Where the grey images add exactly 0 that pixel is returned as it
     was, not through the round trip (which gives it back within one float32 unit in the
     last place): the fovea and the flat regions of an already-foveated frame are left
     exactly as rendered, and a run of such pixels costs a copy, not the power."""
