@@ -21,7 +21,7 @@ import numba
 import numpy as np
 
 from ._parallel import interleave, power
-from .jit import FASTMATH, MAGIC_BITS, MAGIC_F64, _bits_as_float64, _float64_bits
+from .jit import FASTMATH, MAGIC_BITS, MAGIC_F64, _bits_as_float64, _float64_bits, fma
 
 #: BT.601 luma weights. The release's Y of YCbCr, normalised as (Y - 16/255) / (219/255), equals
 #: 0.299 R + 0.587 G + 0.114 B (docs/METHOD.md, 5.4); its grey for orientation uses the same
@@ -46,6 +46,8 @@ _LN2 = math.log(2.0)
 _LOG2E = 1.0 / _LN2
 _MANTISSA = 0x000FFFFFFFFFFFFF
 _EXPONENT_OF_ONE = 0x3FF0000000000000
+#: e^x's Taylor coefficients 1 / k! from k = 8 down to 0 (the x^9 one starts Horner's rule).
+_EXP_TAYLOR = tuple(1.0 / math.factorial(k) for k in range(8, -1, -1))
 
 
 @numba.njit(cache=True, inline="always", fastmath=FASTMATH, nogil=True)
@@ -60,15 +62,18 @@ def _pow01(v, p):  # pragma: no cover - compiled
     e = e + 1.0 if big else e
     t = (m - 1.0) / (m + 1.0)  # |t| <= 0.172: ln m = 2 (t + t^3/3 + ...), to t^11
     t2 = t * t
-    ln_m = 2.0 * t * (1.0 + t2 * (1.0 / 3.0 + t2 * (1.0 / 5.0 + t2 * (
-        1.0 / 7.0 + t2 * (1.0 / 9.0 + t2 * (1.0 / 11.0))))))
-    y = p * (e + ln_m * _LOG2E)  # log2(v ** p)
+    q = fma(t2, 1.0 / 11.0, 1.0 / 9.0)  # Horner's rule, each step one rounding (jit.fma)
+    q = fma(t2, q, 1.0 / 7.0)
+    q = fma(t2, q, 1.0 / 5.0)
+    q = fma(t2, q, 1.0 / 3.0)
+    ln_m = 2.0 * t * fma(t2, q, 1.0)
+    y = p * fma(ln_m, _LOG2E, e)  # log2(v ** p)
     shifted = y + MAGIC_F64  # rounds y to the nearest integer n
     n = shifted - MAGIC_F64
     x = (y - n) * _LN2  # |x| <= ln(2) / 2: e^x to x^9
-    poly = 1.0 + x * (1.0 + x * (1.0 / 2.0 + x * (1.0 / 6.0 + x * (1.0 / 24.0 + x * (
-        1.0 / 120.0 + x * (1.0 / 720.0 + x * (1.0 / 5040.0 + x * (
-            1.0 / 40320.0 + x * (1.0 / 362880.0)))))))))
+    poly = 1.0 / 362880.0
+    for c in _EXP_TAYLOR:  # 1 / 8!, ..., 1 / 1!, 1 (unrolled: a tuple)
+        poly = fma(x, poly, c)
     two_n = _bits_as_float64((_float64_bits(shifted) - MAGIC_BITS + 1023) << 52)
     return poly * two_n if v > 0.0 else 0.0
 

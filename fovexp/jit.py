@@ -86,6 +86,24 @@ def _float64_bits(typingctx, value):  # pragma: no cover - compiled
     return types.int64(types.float64), codegen
 
 
+@intrinsic
+def fma(typingctx, a, b, c):  # pragma: no cover - compiled
+    """``a * b + c`` rounded once (LLVM's ``llvm.fma``: the FMA instruction on every x86-64
+    since 2013, a library call elsewhere), in float32 when all three are float32, else in
+    float64. Written out where a polynomial or a multiply-add loop wants it: ``FASTMATH`` is
+    off, so LLVM may not fuse a multiply and an add itself, and an explicit FMA is the same
+    instruction in every compile of a kernel (the bits do not change between a fresh and a
+    cached one, as they did under fast-math)."""
+    single = all(t == types.float32 for t in (a, b, c))
+    ty = types.float32 if single else types.float64
+
+    def codegen(context, builder, signature, args):
+        args = [context.cast(builder, v, t, ty) for v, t in
+                zip(args, signature.args, strict=True)]
+        return builder.fma(*args)
+    return ty(a, b, c), codegen
+
+
 @numba.njit(cache=True, inline="always", fastmath=FASTMATH, nogil=True)
 def int64_to_float64(i):  # pragma: no cover - compiled
     """``float64(i)``, exact for ``|i| < 2**51``; a conversion that vectorises."""
