@@ -173,9 +173,9 @@ def _atan2_upper(y, x):  # pragma: no cover - compiled
     t = y / abs(x)  # +inf at x = 0: atan gives pi/2
     big = t > _TAN_3PI_8
     mid = t > 0.66
-    inv = -1.0 / t
-    shifted = (t - 1.0) / (t + 1.0)
-    r = inv if big else (shifted if mid else t)
+    # one division for the three reductions (-1 / t, (t - 1) / (t + 1), t / 1 = t exactly):
+    # the same quotients, and division is what the loop waits for
+    r = (-1.0 if big else (t - 1.0 if mid else t)) / (t if big else (t + 1.0 if mid else 1.0))
     base = 0.5 * math.pi if big else (0.25 * math.pi if mid else 0.0)
     extra = _MOREBITS if big else (0.5 * _MOREBITS if mid else 0.0)
     p0, p1, p2, p3, p4 = _ATAN_P
