@@ -95,31 +95,53 @@ STRIP_ROWS = 64
 
 
 @numba.njit(cache=True, fastmath=FASTMATH, nogil=True)
-def _table_into(img, pad, y0, y1, x0, x1, cols, s):  # pragma: no cover - compiled
+def _table_into(img, pad, y0, y1, x0, x1, scratch, s):  # pragma: no cover - compiled
     """The exact summed-area table of rows [y0, y1) and columns [x0, x1) of the padded image
     (symmetric borders, :func:`_symmetric`) in fixed point (:func:`_fixed`), written into
     ``s[:y1 - y0 + 1, :x1 - x0 + 1]`` with its leading zero row and column, in one pass
-    (each row's prefix sums added to the row above's, still in the cache). ``cols`` is
-    scratch of at least ``x1 - x0`` ints. Returns the largest magnitude summed."""
+    (each row's prefix sums added to the row above's, still in the cache). ``scratch`` is
+    (2, at least ``x1 - x0``) ints. Returns the largest magnitude summed.
+
+    Each row is converted to fixed point first, in a loop of its own that vectorises (the
+    image's columns are contiguous between the borders); only the prefix sum is a chain. The
+    largest magnitude is tracked on the fixed-point values (an integer maximum vectorises, a
+    float one does not); a value the fixed point cannot hold (NaN, inf, 2**15 or more) makes
+    it ``2**51`` or more, and that value itself is then returned, so that the caller's error
+    names it."""
     h, w = img.shape
     hp, wp = y1 - y0, x1 - x0
+    cols, fixed = scratch[0], scratch[1]
     for x in range(wp):
         cols[x] = _symmetric(x0 + x - pad, w)
+    lo = min(wp, max(0, pad - x0))  # the columns [lo, hi) read the image's [x0 + lo - pad, ...)
+    hi = max(lo, min(wp, w + pad - x0))
     first = s[0]
     for x in range(wp + 1):
         first[x] = 0
-    top = 0.0
+    largest = np.int64(0)
     for y in range(hp):
         src = img[_symmetric(y0 + y - pad, h)]
+        for x in range(lo):
+            fixed[x] = _fixed(src[cols[x]])
+        for x in range(hi, wp):
+            fixed[x] = _fixed(src[cols[x]])
+        inner, out = src[x0 + lo - pad:x0 + hi - pad], fixed[lo:hi]  # indexed from 0
+        for x in range(hi - lo):
+            out[x] = _fixed(inner[x])
+        for x in range(wp):
+            largest = max(largest, abs(fixed[x]))
+        if largest >= MAGIC_EXACT_BELOW:  # a value not held exactly: return it
+            for x in range(wp):
+                v = abs(np.float64(src[cols[x]]))
+                if not v < MAGIC_EXACT_BELOW * _SAT_STEP:  # NaN, inf or too large
+                    return v
         above, row = s[y], s[y + 1]
         row[0] = 0
         run = np.int64(0)
         for x in range(wp):
-            v = src[cols[x]]
-            top = max(top, abs(np.float64(v)))
-            run += _fixed(v)
+            run += fixed[x]
             row[x + 1] = above[x + 1] + run
-    return top
+    return np.float64(largest) * _SAT_STEP
 
 
 #: Each thread's strip tables, kept from frame to frame: tables in fresh pages cost several ms
@@ -143,7 +165,7 @@ def _sat(
     new array (the kernels build one per strip, :func:`_table_into`), and the largest
     magnitude it sums; refuses what :func:`check_sat_fits` refuses."""
     sat = np.empty((y1 - y0 + 1, x1 - x0 + 1), np.int64)
-    largest = _table_into(img, pad, y0, y1, x0, x1, np.empty(x1 - x0, np.int64), sat)
+    largest = _table_into(img, pad, y0, y1, x0, x1, np.empty((2, x1 - x0), np.int64), sat)
     check_sat_fits(img.shape, pad, largest)
     return sat, largest
 
@@ -255,7 +277,7 @@ def _change_strips(img, sigma, pad, f_e, flat, shift, add_input, tables, largest
     nbx = flat.shape[1]
     for p in numba.prange(parts):
         table = tables[p]
-        cols = np.empty(tables.shape[2], np.int64)
+        scratch = np.empty((2, tables.shape[2]), np.int64)
         for j in range(p, nst, parts):
             st = (j * stride) % nst
             y0, y1 = st * rows, min(h, (st + 1) * rows)
@@ -275,7 +297,7 @@ def _change_strips(img, sigma, pad, f_e, flat, shift, add_input, tables, largest
                     largest[st] = -1.0
                     continue
                 x0, x1 = b0 << shift, min((b1 + 1) << shift, w)
-            top = _table_into(img, pad, y0, y1 + 2 * pad, x0, x1 + 2 * pad, cols, table)
+            top = _table_into(img, pad, y0, y1 + 2 * pad, x0, x1 + 2 * pad, scratch, table)
             largest[st] = top
             magic = _box_sums_exact_as_float(pad, top)
             for y in range(y0, y1):
