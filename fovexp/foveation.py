@@ -109,12 +109,20 @@ def _sigma_points(ecc, ppd, blur_rate, fovea, single, out):  # pragma: no cover 
 
 
 @numba.njit(cache=True, nogil=True, fastmath=FASTMATH, error_model="numpy")
-def _exact_terms_row(ux, uy, vx, vy, d, pitch, x0, x1, ecc, ppd):  # pragma: no cover
+def _exact_terms_row(ux, uy, vx, vy, d, pitch, x0, x1, ecc, ppd, ppd_row):  # pragma: no cover
     """The float32 eccentricity and ppd maps' values (eccentricity_and_ppd_maps) of the
-    pixels [x0, x1) of the row at ``uy``, into ``ecc`` and ``ppd`` from index 0. A loop of
-    its own: it vectorises (geometry._atan2_upper), where the sigma formula's float32
-    steps kept the loop they shared scalar (measured 4x slower)."""
+    pixels [x0, x1) of the row at ``uy``, into ``ecc`` and ``ppd`` from index 0; the ppd
+    read from ``ppd_row`` (the row of :meth:`~fovexp.geometry.ViewingGeometry.ppd_map`)
+    when it is not empty. A loop of its own: it vectorises (geometry._atan2_upper), where
+    the sigma formula's float32 steps kept the loop they shared scalar (measured 4x
+    slower)."""
     cols = ux[x0:x1]  # indexed from 0: an index of unknown sign keeps a loop scalar
+    if ppd_row.shape[0] > 0:
+        kept = ppd_row[x0:x1]
+        for i in range(cols.shape[0]):
+            ecc[i] = np.float32(_angle_deg(cols[i], uy, vx, vy, d))
+            ppd[i] = kept[i]
+        return
     for i in range(cols.shape[0]):
         ecc[i] = np.float32(_angle_deg(cols[i], uy, vx, vy, d))
         ppd[i] = np.float32(_ppd_at(cols[i], uy, d, pitch))
@@ -122,11 +130,13 @@ def _exact_terms_row(ux, uy, vx, vy, d, pitch, x0, x1, ecc, ppd):  # pragma: no 
 
 @numba.njit(parallel=True, cache=True, nogil=True, fastmath=FASTMATH)
 def _exact_sigma_blocks(
-    ux, uy, vx, vy, d, pitch, blur_rate, fovea, need, shift, out
+    ux, uy, vx, vy, d, pitch, blur_rate, fovea, need, shift, ppd_map, out
 ):  # pragma: no cover - compiled
     h, w = uy.shape[0], ux.shape[0]
     stride = interleave(h)  # the blocks needed may be all in one part of the frame
     nbx = need.shape[1]
+    have_ppd = ppd_map.shape[0] > 0
+    none = np.empty(0, np.float32)
     for i in numba.prange(h):
         y = (i * stride) % h
         by = y >> shift
@@ -141,7 +151,8 @@ def _exact_sigma_blocks(
             while bx < nbx and need[by, bx]:
                 bx += 1
             x0, x1 = b0 << shift, min(bx << shift, w)
-            _exact_terms_row(ux, uy[y], vx, vy, d, pitch, x0, x1, ecc, ppd)
+            _exact_terms_row(ux, uy[y], vx, vy, d, pitch, x0, x1, ecc, ppd,
+                             ppd_map[y] if have_ppd else none)
             dst = out[y, x0:x1]
             for j in range(x1 - x0):  # (not i: the parallel loop's index)
                 dst[j] = _sigma_at(ecc[j], ppd[j], blur_rate, fovea, True)
@@ -150,21 +161,30 @@ def _exact_sigma_blocks(
 def sigma_on_blocks(
     geom: ViewingGeometry, gaze_px: tuple[float, float], blur_rate: float, fovea_deg: float,
     need: np.ndarray | None = None, shift: int = 0, out: np.ndarray | None = None,
+    ppd_map: np.ndarray | None = None,
 ) -> np.ndarray:
     """The float32 sigma map of the ``exact`` geometry model: :func:`sigma_px` of
     :meth:`~fovexp.geometry.ViewingGeometry.eccentricity_and_ppd_maps`, bit for bit, in one
-    parallel pass with no eccentricity or ppd map. ``need``: a boolean map of ``2**shift`` px
+    parallel pass with no eccentricity map. ``need``: a boolean map of ``2**shift`` px
     square blocks; only the pixels of the blocks it marks are evaluated, and the others left
-    as they are: 0, or what ``out`` (float32, the image's shape, written in place) holds."""
+    as they are: 0, or what ``out`` (float32, the image's shape, written in place) holds.
+    ``ppd_map``: :meth:`~fovexp.geometry.ViewingGeometry.ppd_map` of ``geom``, which does
+    not depend on the gaze; read, not evaluated again (a third of the map's time: a square
+    root and a division per pixel)."""
     if geom.model != "exact":
         raise ValueError("sigma_on_blocks evaluates the exact geometry model")
+    if ppd_map is None:
+        ppd_map = np.zeros((0, 0), np.float32)
+    elif ppd_map.shape != geom.shape or ppd_map.dtype != np.float32:
+        raise ValueError(f"ppd_map must be float32 of shape {geom.shape}")
     if need is None:
         need, shift = np.ones((1, 1), np.bool_), 62  # one block: the whole frame
     if out is None:
         out = np.zeros(geom.shape, np.float32)
     ux, uy, vx, vy, d, pitch = geom.exact_terms(gaze_px)
     _exact_sigma_blocks(ux, uy, vx, vy, d, pitch, float(blur_rate) + 0.0, float(fovea_deg),
-                        np.ascontiguousarray(need, dtype=np.bool_), int(shift), out)
+                        np.ascontiguousarray(need, dtype=np.bool_), int(shift),
+                        np.ascontiguousarray(ppd_map), out)
     return out
 
 

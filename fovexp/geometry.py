@@ -229,6 +229,16 @@ def _exact_grids(ux, uy, vx, vy, d, pitch, ecc, ppd):  # pragma: no cover - comp
             ppd[y, x] = _ppd_at(ux[x], uy[y], d, pitch)
 
 
+@numba.njit(parallel=True, cache=True, nogil=True, fastmath=FASTMATH, error_model="numpy")
+def _ppd_grid(ux, uy, d, pitch, ppd):  # pragma: no cover - compiled
+    """px/deg of every pixel into ``ppd`` (the float64 values rounded once); rows in
+    parallel."""
+    for y in numba.prange(uy.shape[0]):
+        row = ppd[y]
+        for x in range(ux.shape[0]):
+            row[x] = _ppd_at(ux[x], uy[y], d, pitch)
+
+
 @dataclass(frozen=True)
 class ViewingGeometry:
     """The geometry of an image on a display.
@@ -381,6 +391,18 @@ class ViewingGeometry:
         ppd: np.ndarray = np.empty(self.shape, dtype=dtype)
         _exact_grids(*self.exact_terms(gaze_px), ecc, ppd)
         return ecc, ppd
+
+    def ppd_map(self, dtype: type = np.float32) -> np.ndarray:
+        """Pixels per degree of every pixel, an (H, W) map of ``dtype``: :meth:`ppd` on the
+        pixel grid (the ``exact`` model's in float64, rounded once; the same values as
+        :meth:`eccentricity_and_ppd_maps`'). It does not depend on the gaze: the enhancer
+        keeps it across frames."""
+        if self.model != "exact":
+            return np.full(self.shape, self.ppd_constant, dtype=dtype)
+        ux, uy, _, _, d, pitch = self.exact_terms((0.0, 0.0))
+        out: np.ndarray = np.empty(self.shape, dtype=dtype)
+        _ppd_grid(ux, uy, d, pitch, out)
+        return out
 
     def exact_terms(
         self, gaze_px: tuple[float, float],

@@ -295,9 +295,11 @@ class _SigmaBlocks:
     :attr:`bound_px` bounds the whole map from above without evaluating it
     (:func:`fovexp.foveation.sigma_bound_px`). Float32, the ``exact`` geometry model."""
 
-    def __init__(self, geom: ViewingGeometry, gaze, blur_rate: float, fovea_deg: float) -> None:
+    def __init__(self, geom: ViewingGeometry, gaze, blur_rate: float, fovea_deg: float,
+                 ppd_map: Callable[[], np.ndarray]) -> None:
         self._geom, self._gaze_px = geom, geom.gaze_px(gaze)
         self._blur_rate, self._fovea_deg = blur_rate, fovea_deg
+        self._ppd_map = ppd_map  # the geometry's px/deg map, asked for with the first block
         self.bound_px = sigma_bound_px(geom, self._gaze_px, blur_rate, fovea_deg)
         # allocated when first asked for (NumPy's zeros: pages never written stay untouched)
         self._sigma = np.zeros((0, 0), np.float32)
@@ -313,7 +315,7 @@ class _SigmaBlocks:
         todo = need & ~self.done
         if todo.any():
             sigma_on_blocks(self._geom, self._gaze_px, self._blur_rate, self._fovea_deg, todo,
-                            shift, self._sigma)
+                            shift, self._sigma, self._ppd_map())
             self.done |= todo
         return self._sigma
 
@@ -409,7 +411,11 @@ class Enhancer:
         c.stage("geometry", ("shape", "viewport"), self._geometry)
         c.stage("linear", ("image",), self._linear)
         c.stage("grids", ("geometry", "gaze"), self._grids)
-        c.stage("sigma", ("sigma_given", "?grids", "blur_rate", "geometry", "gaze"), self._sigma)
+        # px/deg of every pixel (frame- and gaze-free: kept for the geometry), read by the
+        # exact model's float32 sigma map
+        c.stage("ppd_map", ("geometry",), self._ppd_map)
+        c.stage("sigma", ("sigma_given", "?grids", "blur_rate", "geometry", "gaze", "?ppd_map"),
+                self._sigma)
         c.stage("foveated", ("linear", "?sigma", "already_foveated", "?sigma_blocks"),
                 self._foveated)
         c.stage("luma", ("foveated",), colour.luminance)
@@ -426,7 +432,7 @@ class Enhancer:
         c.stage("gradients", ("pyramid",), lambda pyr: orientation.sobel_gradients(
             pyr[orientation.ORIENTATION_LEVEL]))
         # the sigma map's bound, and the map block by block as the stages that skip ask for it
-        c.stage("sigma_blocks", ("geometry", "gaze", "blur_rate"), self._sigma_blocks)
+        c.stage("sigma_blocks", ("geometry", "gaze", "blur_rate", "?ppd_map"), self._sigma_blocks)
         c.stage("contrast", ("luma", "?sigma", "f_e", "?luma_flat", "?sigma_blocks"),
                 self._contrast)
         c.stage("headroom", ("foveated", "luma", "contrast"), self._headroom)
@@ -546,14 +552,20 @@ class Enhancer:
         """Eccentricity and px/deg of every pixel, maps of the engine's float type."""
         return geom.eccentricity_and_ppd_maps(geom.gaze_px(gaze), self._dtype)
 
-    def _sigma(self, given, grids, blur_rate, geom: ViewingGeometry, gaze) -> np.ndarray:
+    def _ppd_map(self, geom: ViewingGeometry) -> np.ndarray:
+        """px/deg of every pixel (float32; :meth:`~fovexp.geometry.ViewingGeometry.ppd_map`)."""
+        return geom.ppd_map()
+
+    def _sigma(self, given, grids, blur_rate, geom: ViewingGeometry, gaze, ppd_map) -> np.ndarray:
         """The sigma map (px, section 5.2): the one given with the frame, else in float32 with
-        the exact geometry in one pass (:func:`fovexp.foveation.sigma_on_blocks`), else from
-        the eccentricity and px/deg maps (computed only then)."""
+        the exact geometry in one pass (:func:`fovexp.foveation.sigma_on_blocks`, with the
+        geometry's kept px/deg), else from the eccentricity and px/deg maps (computed only
+        then)."""
         if given is not None:
             return given
         if self._dtype == np.float32 and geom.model == "exact":
-            return sigma_on_blocks(geom, geom.gaze_px(gaze), blur_rate, self.preset.fovea_deg)
+            return sigma_on_blocks(geom, geom.gaze_px(gaze), blur_rate, self.preset.fovea_deg,
+                                   ppd_map=ppd_map())
         ecc, ppd = grids()
         return sigma_px(ecc, ppd, blur_rate, self.preset.fovea_deg, self._dtype)
 
@@ -607,8 +619,9 @@ class Enhancer:
             return sigma()
         return sigma_blocks().on
 
-    def _sigma_blocks(self, geom: ViewingGeometry, gaze, blur_rate: float) -> _SigmaBlocks:
-        return _SigmaBlocks(geom, gaze, blur_rate, self.preset.fovea_deg)
+    def _sigma_blocks(self, geom: ViewingGeometry, gaze, blur_rate: float,
+                      ppd_map: Callable[[], np.ndarray]) -> _SigmaBlocks:
+        return _SigmaBlocks(geom, gaze, blur_rate, self.preset.fovea_deg, ppd_map)
 
     def _headroom(self, foveated, luma, delta) -> amp.Extremes:
         """N_min and N_max of the image the noise is added to (section 4.2), under

@@ -111,10 +111,11 @@ def _sigma_in_numpy_float32(ecc, ppd, rate, fovea):
 
 @pytest.mark.parametrize("viewport", [None, (1000, 300, 3840, 2160)])
 def test_the_sigma_map_of_some_blocks_is_the_whole_maps_there(viewport):
-    """sigma_on_blocks (one pass, no eccentricity or ppd map) gives sigma_px of the float32
-    grids bit for bit on the blocks asked for and leaves the other pixels as they were; and
-    sigma_px in float32 is NumPy's float32 arithmetic step by step (float32 grids, and
-    float64 points as the per-impulse band gives them), at the fovea's edge too."""
+    """sigma_on_blocks (one pass, no eccentricity map; the ppd map evaluated or read) gives
+    sigma_px of the float32 grids bit for bit on the blocks asked for and leaves the other
+    pixels as they were; and sigma_px in float32 is NumPy's float32 arithmetic step by step
+    (float32 grids, and float64 points as the per-impulse band gives them), at the fovea's
+    edge too."""
     from fovexp import load_display
     from fovexp.foveation import sigma_on_blocks, sigma_px
     from fovexp.geometry import ViewingGeometry
@@ -142,6 +143,18 @@ def test_the_sigma_map_of_some_blocks_is_the_whole_maps_there(viewport):
         assert np.array_equal(got[px].view(np.uint32), full[px].view(np.uint32))
         assert np.array_equal(sigma_on_blocks(g, gaze, rate, fovea).view(np.uint32),
                               full.view(np.uint32))
+        # the geometry's px/deg map (gaze-free, kept by the enhancer) is the grids', and
+        # the map read from it is the same map
+        kept = g.ppd_map()
+        assert np.array_equal(kept.view(np.uint32), ppd.view(np.uint32))
+        out = np.full((h, w), -1.0, np.float32)
+        got = sigma_on_blocks(g, gaze, rate, fovea, need, 3, out, ppd_map=kept)
+        assert (got[~px] == -1.0).all()
+        assert np.array_equal(got[px].view(np.uint32), full[px].view(np.uint32))
+        assert np.array_equal(sigma_on_blocks(g, gaze, rate, fovea, ppd_map=kept).view(
+            np.uint32), full.view(np.uint32))
+    with pytest.raises(ValueError, match="ppd_map must be float32"):
+        sigma_on_blocks(g, gaze, 0.34, 8.0, ppd_map=np.ones((h, w)))
 
 
 # --- small inputs, for the mutation runs (their kernels run as Python there) and as unit

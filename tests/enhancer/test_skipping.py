@@ -202,7 +202,7 @@ def test_a_sequence_recomputes_only_what_depends_on_the_image(tmp_path):
     for _, img, _ in frames:
         ran.append(set(enh.enhance((0.5, 0.5), p, image=img).timings_s))
         done.append(enh._c.get("sigma_blocks").done.copy())
-    independent = {"sigma_blocks", "impulses", "imp_bands"}
+    independent = {"sigma_blocks", "impulses", "imp_bands", "ppd_map"}
     assert independent <= ran[0]
     assert not {"grids", "sigma"} & ran[0]  # the whole map: only when asked for
     for stages, blocks in zip(ran[1:], done[1:], strict=True):
