@@ -177,14 +177,17 @@ def _expand_row(a, y, x0, x1, row):  # pragma: no cover - compiled
     ``x0 <= x < x1`` of ``a``."""
     h = a.shape[0]
     i = y // 2
+    # rows sliced from column x0: indexed from 0, the loops vectorise (an index of unknown
+    # sign keeps a loop scalar: fovexp/gabor.py)
+    c, out = a[i, x0:x1], row[x0:x1]
     if y % 2 == 0:
-        im1, ip1 = max(i - 1, 0), min(i + 1, h - 1)
-        for x in range(x0, x1):
-            row[x] = _taps3(a[i, x], a[im1, x], a[ip1, x])
+        m1, p1 = a[max(i - 1, 0), x0:x1], a[min(i + 1, h - 1), x0:x1]
+        for x in range(x1 - x0):
+            out[x] = _taps3(c[x], m1[x], p1[x])
     else:
-        ip1 = min(i + 1, h - 1)
-        for x in range(x0, x1):
-            row[x] = _taps2(a[i, x], a[ip1, x])
+        p1 = a[min(i + 1, h - 1), x0:x1]
+        for x in range(x1 - x0):
+            out[x] = _taps2(c[x], p1[x])
 
 
 @numba.njit(cache=True, inline="always", fastmath=FASTMATH, nogil=True)
@@ -288,8 +291,7 @@ def _abs_laplacian_tiles(fine, coarse, need, tile, out):  # pragma: no cover - c
         diff = np.empty((yb - ya, xb - xa), dtype=fine.dtype)
         for y in range(ya, yb):
             _expand_row(coarse, y, ca, cb, row)
-            for x in range(xa, xb):
-                diff[y - ya, x - xa] = abs(fine[y, x] - _expand_at(row, x, wc))
+            _abs_difference_row(fine[y], row, xa, xb, wc, diff[y - ya])
         # columns whose 3 x 3 window lies inside the image: no clamping, a loop that
         # vectorises; the image's first and last column and row take the clamped one
         xi0, xi1 = max(x0, 1), min(x1, w - 1)
@@ -321,6 +323,28 @@ def _abs_laplacian_tiles(fine, coarse, need, tile, out):  # pragma: no cover - c
                     acc += r2[c + 2]
                     dst[c] = acc / _NINE
     return out
+
+
+@numba.njit(cache=True, inline="always", fastmath=FASTMATH, nogil=True)
+def _abs_difference_row(fine, row, xa, xb, wc, out):  # pragma: no cover - compiled
+    """``out[x - xa] = |fine[x] - expand(row)[x]|`` for the columns [xa, xb) of one row
+    (:func:`_expand_at` of the expanded coarse row ``row``, ``wc`` columns). The columns
+    ``2 j, 2 j + 1`` whose taps lie inside ``row`` go in pairs, one loop without clamps or a
+    parity test, indexed from 0, that vectorises; the few others as :func:`_expand_at` says.
+    The same values."""
+    x = xa
+    while x < xb and (x % 2 == 1 or x < 2):
+        out[x - xa] = abs(fine[x] - _expand_at(row, x, wc))
+        x += 1
+    j0 = x // 2
+    m = max(min(xb // 2, wc - 1) - j0, 0)  # pairs with 2 j + 1 < xb and j + 1 < wc
+    c, m1, p1 = row[j0:j0 + m], row[j0 - 1:j0 - 1 + m], row[j0 + 1:j0 + 1 + m]
+    f, d = fine[2 * j0:2 * j0 + 2 * m], out[2 * j0 - xa:2 * j0 - xa + 2 * m]
+    for t in range(m):
+        d[2 * t] = abs(f[2 * t] - _taps3(c[t], m1[t], p1[t]))
+        d[2 * t + 1] = abs(f[2 * t + 1] - _taps2(c[t], p1[t]))
+    for x in range(2 * (j0 + m), xb):
+        out[x - xa] = abs(fine[x] - _expand_at(row, x, wc))
 
 
 @numba.njit(cache=True, inline="always", fastmath=FASTMATH, nogil=True)
