@@ -233,6 +233,15 @@ def test_sampling_a_level_at_full_resolution_coordinates():
     near = pyramids.sample_nearest(grid, np.array([0.0, 7.4, 7.6, 100.0]),
                                    np.array([0.0, 3.0, 3.0, -3.0]), 4)
     assert near.tolist() == [grid[0, 0], grid[0, 1], grid[0, 2], grid[0, 8]]
+    # the compiled pass against NumPy's truncation, floor division and clip, for blocks of a
+    # power of two (a shift) and not, points past every edge, and a 2-D set of points
+    rng = np.random.default_rng(3)
+    px, py = rng.uniform(-30.0, 60.0, (2, 40, 50))
+    for block in (1, 3, 4, 8):
+        iy = np.clip((py + 0.5).astype(np.int64) // block, 0, grid.shape[0] - 1)
+        ix = np.clip((px + 0.5).astype(np.int64) // block, 0, grid.shape[1] - 1)
+        got = pyramids.sample_nearest(grid, px, py, block)
+        assert got.shape == px.shape and np.array_equal(got, grid[iy, ix]), block
 
 
 def test_the_tiles_of_taps_are_those_each_tap_reads():
