@@ -481,7 +481,7 @@ def _band_impulses(xs, ys, row_start, cell, r, y0, y1, width):  # pragma: no cov
 
 
 @numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
-def _splat(sums, out, xs, ys, amp, k, t, row_start, cell, r, a, band, nwin, pad):
+def _splat(sums, out, xs, ys, amp, k, t, row_start, cell, r, a, band, nwin, pad, touched):
     # pragma: no cover - compiled
     """The kernels summed into the padded rows ``sums``, then the image columns copied into
     ``out`` (H, W). Each kernel is added whole by the band of ``band`` rows its first row
@@ -491,11 +491,19 @@ def _splat(sums, out, xs, ys, amp, k, t, row_start, cell, r, a, band, nwin, pad)
     (``band`` is taller), so the even bands go in parallel, then the odd ones: no two bands
     running at once write one row. A row's sums are then in the same order whatever the
     thread count. Each odd band copies its rows and the next band's out once they are
-    final (the first band copies its own)."""
+    final (the first band copies its own). ``sums`` need not be zeros: the bands ``touched``
+    marks (those that may receive a kernel) are zeroed first; the others are never read,
+    their rows of ``out`` written 0."""
     height = out.shape[0]
     width = out.shape[1]
     nb = (height + band - 1) // band
     reach = 2 * int(math.ceil(r)) + 2  # rows past its band's end a kernel may write
+    for b in numba.prange(nb):
+        if touched[b]:
+            for y in range(b * band, min(height, (b + 1) * band)):
+                row = sums[y]
+                for x in range(row.shape[0]):
+                    row[x] = 0.0
     for parity in range(2):
         nbp = (nb - parity + 1) // 2  # bands of this parity
         stride = interleave(nbp)  # bands without impulses cost nothing: spread the others
@@ -516,7 +524,12 @@ def _splat(sums, out, xs, ys, amp, k, t, row_start, cell, r, a, band, nwin, pad)
                 continue
             c1 = min(height, y1 + band) if parity == 1 else y1  # this band and the next
             for y in range(y0, c1):
-                src, dst = sums[y, pad:pad + width], out[y]
+                dst = out[y]
+                if not touched[y // band]:  # no kernel reaches the row
+                    for x in range(width):
+                        dst[x] = 0.0
+                    continue
+                src = sums[y, pad:pad + width]
                 for x in range(width):
                     dst[x] = src[x]
 
@@ -558,10 +571,16 @@ def synthesize(
     row_start = np.searchsorted(rows, np.arange(n_rows + 1)).astype(np.int64)
     r = kernel_radius_px(gabor_a_cpp, truncation)
     nwin, pad = _window(r)
-    # the sums in padded rows (NumPy's zeros: pages of bands without noise never written),
-    # each band's image columns copied into the result once the band is done
-    sums = np.zeros((h, w + 2 * pad + nwin), dtype=dtype)
-    out = np.empty(shape, dtype=dtype)
     band = max(BAND_ROWS, 2 * int(math.ceil(r)) + 2)  # a kernel reaches into the next band only
-    _splat(sums, out, xs, ys, amp[keep], k, t, row_start, cell, r, gabor_a_cpp, band, nwin, pad)
+    # the bands a kernel may reach: those holding a kernel's first row, and the ones after
+    nb = -(-h // band)
+    first = np.clip(np.ceil(ys - r), 0, h - 1).astype(np.int64) // band
+    touched = np.bincount(first, minlength=nb) > 0
+    touched[1:] |= touched[:-1].copy()
+    # the sums in padded rows, zeroed in the touched bands only; each band's image columns
+    # copied into the result once the band is done (zeros where no kernel reaches)
+    sums = np.empty((h, w + 2 * pad + nwin), dtype=dtype)
+    out = np.empty(shape, dtype=dtype)
+    _splat(sums, out, xs, ys, amp[keep], k, t, row_start, cell, r, gabor_a_cpp, band, nwin, pad,
+           touched)
     return out
