@@ -21,7 +21,7 @@ import numba
 import numpy as np
 
 from ._parallel import interleave, power
-from .jit import FASTMATH, MAGIC_BITS, MAGIC_F64, _bits_as_float64, _float64_bits, fma
+from .jit import FASTMATH, MAGIC_F64, _bits_as_float64, _float64_bits, fma, two_to_the
 
 #: BT.601 luma weights. The release's Y of YCbCr, normalised as (Y - 16/255) / (219/255), equals
 #: 0.299 R + 0.587 G + 0.114 B (docs/METHOD.md, 5.4); its grey for orientation uses the same
@@ -74,7 +74,7 @@ def _pow01(v, p):  # pragma: no cover - compiled
     poly = 1.0 / 362880.0
     for c in _EXP_TAYLOR:  # 1 / 8!, ..., 1 / 1!, 1 (unrolled: a tuple)
         poly = fma(x, poly, c)
-    two_n = _bits_as_float64((_float64_bits(shifted) - MAGIC_BITS + 1023) << 52)
+    two_n = two_to_the(shifted)
     return poly * two_n if v > 0.0 else 0.0
 
 

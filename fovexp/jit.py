@@ -105,6 +105,15 @@ def fma(typingctx, a, b, c):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, inline="always", fastmath=FASTMATH, nogil=True)
+def two_to_the(shifted):  # pragma: no cover - compiled
+    """``2**n`` as a float64, for the integer ``n`` held in ``shifted = n + MAGIC_F64`` (a
+    float rounded to an integer by that addition; ``|n| <= 1022``): its exponent field
+    written directly, where ``ldexp`` is a call per value. The exponentials' last step
+    (:mod:`fovexp.colour`'s power, :mod:`fovexp.gabor`'s e^x)."""
+    return _bits_as_float64((_float64_bits(shifted) - MAGIC_BITS + 1023) << 52)
+
+
+@numba.njit(cache=True, inline="always", fastmath=FASTMATH, nogil=True)
 def int64_to_float64(i):  # pragma: no cover - compiled
     """``float64(i)``, exact for ``|i| < 2**51``; a conversion that vectorises."""
     return _bits_as_float64(i + MAGIC_BITS) - MAGIC_F64
