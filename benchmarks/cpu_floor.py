@@ -291,6 +291,8 @@ def _in_codes(what: str) -> bool:
 
 
 def markdown(record: dict) -> str:
+    from fovexp.bench import parallel_sentence
+
     info, summary, comparison = record["info"], record["summary"], record["comparison"]
     m = info["machine"]
     trees = list(summary)
@@ -348,7 +350,8 @@ def markdown(record: dict) -> str:
     lines += ["## Each stage against its floor (current)", "",
               f"Measured in this run: memory bandwidth {rates['bandwidth_gb_s']:.1f} GB/s, FP32 "
               f"{rates['fp32_gflop_s']:.0f} GFLOP/s (fovexp.bench.machine_rates); floors as in "
-              "BENCH.md's CPU roofline (fovexp.bench.CPU_TRAFFIC_PLANES).", ""]
+              "BENCH.md's CPU roofline (fovexp.bench.CPU_TRAFFIC_PLANES)."
+              + parallel_sentence(rates), ""]
     for case, rows in record["roofline"].items():
         lines += [f"{case}:", "", "| stage | the least it moves | ms | MB | arithmetic | "
                   "floor ms | x floor |", "|---|---|---|---|---|---|---|"]

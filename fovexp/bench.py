@@ -568,7 +568,14 @@ def machine_rates(copy_mb: int = 400, gemm_n: int = 2048, repeats: int = 5) -> d
     """The machine's memory bandwidth and FP32 rate, measured now (medians of ``repeats``):
     ``bandwidth_gb_s`` = bytes read plus written by a ``copy_mb`` MB ``np.copyto`` (one thread,
     as issue 29 measured it) per second; ``fp32_gflop_s`` = a float32 ``gemm_n``-square matrix
-    product (BLAS, every core: 2 n^3 operations) per second."""
+    product (BLAS, every core: 2 n^3 operations) per second; ``parallel_speedup`` = what every
+    thread gains over one on arithmetic-bound compiled work
+    (:func:`fovexp._parallel.parallel_speedup`: the thread count where each has a core of its
+    own, less where they share vector units)."""
+    import numba
+
+    from ._parallel import parallel_speedup
+
     src = np.ones(copy_mb * 2**20 // 4, np.float32)
     dst = np.empty_like(src)
     np.copyto(dst, src)  # the pages touched before the timing
@@ -589,7 +596,20 @@ def machine_rates(copy_mb: int = 400, gemm_n: int = 2048, repeats: int = 5) -> d
         gemms.append(time.perf_counter() - t0)
     return {"bandwidth_gb_s": 2 * copy_mb * 2**20 / float(np.median(copies)) / 1e9,
             "fp32_gflop_s": 2 * gemm_n**3 / float(np.median(gemms)) / 1e9,
-            "copy_mb": copy_mb, "gemm_n": gemm_n}
+            "copy_mb": copy_mb, "gemm_n": gemm_n,
+            "parallel_speedup": parallel_speedup(repeats=repeats),
+            "threads": numba.config.NUMBA_NUM_THREADS}
+
+
+def parallel_sentence(rates: dict[str, float]) -> str:
+    """The record's sentence on :func:`machine_rates`' ``parallel_speedup`` (empty for a
+    record from before it was measured)."""
+    if "parallel_speedup" not in rates:
+        return ""
+    return (f" Its {rates['threads']} threads together ran arithmetic-bound compiled work "
+            f"{rates['parallel_speedup']:.2f}x as fast as one did "
+            "(fovexp._parallel.parallel_speedup): the most the parallel kernels can gain "
+            "from them.")
 
 
 def noise_taps(enh: Any, res: Any, seed: int, impulses: int) -> int:
@@ -926,7 +946,8 @@ def write_markdown(rows: list[dict[str, Any]], info: dict[str, Any], path: Path,
             "over its floor: how far it is from what no implementation can beat on this "
             "machine. Stages left out work per impulse or on small grids. Not modelled: the "
             "transfer function's power per value in `linear` and `output` (a transcendental, "
-            "not a memory access), and the foveation's blur stack beyond one pass.", ""]
+            "not a memory access), and the foveation's blur stack beyond one pass."
+            + parallel_sentence(rates), ""]
         for r in roof:
             parts += [f"{r['config']} ({r['device']}; median {r['median_s']:.3f} s per frame, "
                       "foveation simulated):", "",

@@ -179,3 +179,18 @@ def test_the_cpu_roofline_puts_each_stage_against_its_floor() -> None:
     assert got["noise"][4:] == ["0.00 GFLOP", "0.0", "250.0x"]
     small = machine_rates(copy_mb=8, gemm_n=64, repeats=2)
     assert small["bandwidth_gb_s"] > 0.1 and small["fp32_gflop_s"] > 0.01
+    # every thread against one on the same work: at least one thread's rate (0.8: timing
+    # noise), at most one per thread
+    assert 0.8 < small["parallel_speedup"] < small["threads"] + 0.2
+
+
+def test_the_records_say_what_the_threads_gained() -> None:
+    """The roofline's sentence on the threads' speedup, and none for a record from before
+    it was measured."""
+    from fovexp.bench import parallel_sentence
+
+    assert parallel_sentence({"parallel_speedup": 1.274, "threads": 2}) == (
+        " Its 2 threads together ran arithmetic-bound compiled work 1.27x as fast as one did "
+        "(fovexp._parallel.parallel_speedup): the most the parallel kernels can gain from "
+        "them.")
+    assert parallel_sentence({"bandwidth_gb_s": 20.0}) == ""
