@@ -150,8 +150,9 @@ def power(a: np.ndarray, exponent: np.floating, out: np.ndarray | None = None) -
 
 @numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
 def _multiply_adds(lanes, reps):  # pragma: no cover - compiled
-    """``reps`` multiply-adds on every value of each row of ``lanes`` (a row per task, small
-    enough to stay in the L1 cache): work bound by the cores' arithmetic, none by memory."""
+    """``reps`` multiplies and adds on every value of each row of ``lanes`` (a row per task,
+    small enough to stay in the L1 cache): work bound by each core's vector units and L1
+    cache, not by the shared memory's bandwidth."""
     for t in numba.prange(lanes.shape[0]):
         row = lanes[t]
         for _ in range(reps):
