@@ -6,10 +6,11 @@ The enhancer processes the colour; alpha passes through unchanged (docs/API.md).
 
 Codecs: imagecodecs for reading PNG and JPEG and writing JPEG (libpng and libjpeg-turbo; 8-
 and 16-bit, 1 to 4 channels); tifffile for TIFF (float samples too). Both are imported when
-first used. PNG is written here (:func:`_png_encode`): a fast zlib setting
-(:data:`PNG_ZLIB_LEVEL`, the "up" filter on every row) deflated in parts on threads. A 4K
-frame takes about 0.2 s on two cores, where libpng at the same level takes 0.3-0.4 s on one
-and maximum compression takes seconds (docs/STATUS.md, "Decisions").
+first used. PNG is written here (:func:`_png_encode`): the "up" filter on every row, deflated
+in fixed parts on threads by ISA-L (python-isal, level :data:`PNG_ISAL_LEVEL`; Python's zlib
+at :data:`PNG_ZLIB_LEVEL` where isal is not installed). A 4K frame takes about 0.1 s on two
+cores with ISA-L, 0.35 s with zlib, where libpng at zlib's level takes 0.9 s on one
+(benchmarks/CPU_FLOOR.md; docs/STATUS.md, "Decisions").
 (Not OpenCV: PsychoPy depends on ``opencv-python``, and a second OpenCV wheel in the same
 environment would share its ``cv2`` folder.)
 
@@ -34,13 +35,18 @@ from .errors import FovexpError
 IMAGE_SUFFIXES = {".png": "PNG", ".tif": "TIFF", ".tiff": "TIFF", ".jpg": "JPEG", ".jpeg": "JPEG"}
 #: Integer sample depths files are written with.
 BIT_DEPTHS = (8, 16)
-#: zlib level of PNG output (1: the fastest compression; a 4K frame's file is about 10 % larger
-#: than at the default 6, which takes several times longer: benchmarks/CLI.md).
+#: ISA-L level of PNG output (1: ISA-L's fast matcher; the 4K Sponza output's file is 3 % larger
+#: than zlib's level 1, written 4-5x faster).
+PNG_ISAL_LEVEL = 1
+#: zlib level of PNG output where isal is not installed (1: the fastest compression; a 4K frame's
+#: file is about 10 % larger than at the default 6, which takes several times longer:
+#: benchmarks/CLI.md).
 PNG_ZLIB_LEVEL = 1
 #: PNG colour type by channel count (PNG specification, 11.2.2: grey, grey + alpha, RGB, RGBA).
 _PNG_COLOUR_TYPE = {1: 0, 2: 4, 3: 2, 4: 6}
-#: Raw bytes below which a PNG is deflated in one part.
-_PNG_PART_BYTES = 1 << 20
+#: Filtered bytes per deflated part of a PNG: fixed, so that the file's bytes do not depend on
+#: the thread count.
+_PNG_PART_BYTES = 1 << 22
 #: JPEG quality of JPEG output.
 JPEG_QUALITY = 95
 
@@ -60,15 +66,25 @@ def read_image_with_depth(path: str | Path) -> tuple[np.ndarray, int]:
     """:func:`read_image` and the file's sample depth: 8 or 16 (float TIFFs count as 16, the
     deepest integer depth they can be written back with)."""
     raw = read_samples(path)
-    if raw.dtype == np.uint8:
-        img, depth = raw.astype(np.float32) / 255.0, 8
-    elif raw.dtype == np.uint16:
-        img, depth = raw.astype(np.float32) / 65535.0, 16
-    else:
-        img, depth = raw.astype(np.float32), 16
-    if not np.isfinite(img).all():
-        raise FovexpError(f"{path}: contains NaN or Inf pixels")
-    return img, depth
+    if raw.dtype == np.float32:  # a float TIFF: the only samples that can be NaN or Inf
+        if not np.isfinite(raw).all():
+            raise FovexpError(f"{path}: contains NaN or Inf pixels")
+        return raw, 16
+    return _to_unit_float(raw), 8 if raw.dtype == np.uint8 else 16
+
+
+def _to_unit_float(raw: np.ndarray) -> np.ndarray:
+    """Integer samples as float32 in [0, 1]: each divided by the type's largest value in
+    float32 (correctly rounded: exact codes ``k / top``), in one pass on threads
+    (:func:`fovexp._parallel.in_parts`)."""
+    from ._parallel import in_parts
+
+    top = np.float32(np.iinfo(raw.dtype).max)
+
+    def part(src: np.ndarray, dst: np.ndarray) -> None:
+        np.divide(src, top, out=dst, dtype=np.float32)
+
+    return in_parts(part, raw, np.empty(raw.shape, np.float32))
 
 
 def read_samples(path: str | Path) -> np.ndarray:
@@ -241,16 +257,28 @@ def _png_chunk(kind: bytes, body: bytes) -> bytes:
     return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", crc)
 
 
+def _deflater() -> tuple[Callable[[], object], Callable[[bytes], int]]:
+    """A raw-deflate compressor factory and the Adler-32 function: ISA-L's where python-isal is
+    installed (a dependency; it releases the GIL), Python's zlib otherwise."""
+    try:
+        from isal import isal_zlib
+    except ImportError:  # a platform without its wheel
+        return (lambda: zlib.compressobj(PNG_ZLIB_LEVEL, zlib.DEFLATED, -15)), zlib.adler32
+    return (lambda: isal_zlib.compressobj(PNG_ISAL_LEVEL, isal_zlib.DEFLATED, -15),
+            isal_zlib.adler32)
+
+
 def _png_encode(data: np.ndarray) -> bytes:
     """A PNG file (ISO/IEC 15948) of 8- or 16-bit samples (H, W) or (H, W, 1-4 channels).
 
     Every row gets the "up" filter (the difference from the row above, byte by byte: PNG
-    specification, 9.2), then the rows are deflated at :data:`PNG_ZLIB_LEVEL` in contiguous
-    parts, one per thread (zlib releases the GIL). Every part but the last ends with a sync
-    flush (an empty stored block: the stream continues byte-aligned), so the parts joined are
-    one deflate stream; the zlib stream around it carries the Adler-32 of all the filtered
-    bytes (RFC 1950, 1951)."""
-    from ._parallel import thread_count, thread_map
+    specification, 9.2), then the rows are deflated (:func:`_deflater`) in contiguous parts of
+    about :data:`_PNG_PART_BYTES`, on threads. Every part but the last ends with a sync flush
+    (an empty stored block: the stream continues byte-aligned), so the parts joined are one
+    deflate stream; the zlib stream around it carries the Adler-32 of all the filtered bytes
+    (RFC 1950, 1951). The parts depend on the image's size only: the same bytes with any
+    number of threads."""
+    from ._parallel import thread_map
 
     h, w = data.shape[:2]
     channels = 1 if data.ndim == 2 else data.shape[2]
@@ -260,16 +288,17 @@ def _png_encode(data: np.ndarray) -> bytes:
     filtered[:, 0] = 2  # "up"; the row above the first is zero
     filtered[0, 1:] = rows[0]
     np.subtract(rows[1:], rows[:-1], out=filtered[1:, 1:])  # modulo 256
-    parts = max(1, min(thread_count(), filtered.nbytes // _PNG_PART_BYTES, h))
+    parts = max(1, min(filtered.nbytes // _PNG_PART_BYTES, h))
     edges = [h * i // parts for i in range(parts + 1)]
+    compressobj, adler32 = _deflater()
 
     def deflate(i: int) -> bytes:
-        c = zlib.compressobj(PNG_ZLIB_LEVEL, zlib.DEFLATED, -15)  # raw deflate
+        c = compressobj()  # raw deflate
         part = filtered[edges[i]:edges[i + 1]].data.cast("B")
         return c.compress(part) + c.flush(zlib.Z_FINISH if i == parts - 1 else zlib.Z_SYNC_FLUSH)
 
     deflated = thread_map(deflate, range(parts))
-    adler = zlib.adler32(filtered.data.cast("B"))
+    adler = adler32(filtered.data.cast("B"))
     stream = b"".join([b"\x78\x01", *deflated, struct.pack(">I", adler)])  # zlib, fastest
     ihdr = struct.pack(">IIBBBBB", w, h, 8 * data.dtype.itemsize, _PNG_COLOUR_TYPE[channels],
                        0, 0, 0)  # deflate, adaptive filtering, no interlace
