@@ -27,6 +27,7 @@ import struct
 import zlib
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -257,7 +258,7 @@ def _png_chunk(kind: bytes, body: bytes) -> bytes:
     return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", crc)
 
 
-def _deflater() -> tuple[Callable[[], object], Callable[[bytes], int]]:
+def _deflater() -> tuple[Callable[[], Any], Callable[[Any], int]]:
     """A raw-deflate compressor factory and the Adler-32 function: ISA-L's where python-isal is
     installed (a dependency; it releases the GIL), Python's zlib otherwise."""
     try:
