@@ -295,7 +295,11 @@ def test_dry_run_answers_every_screen_itself() -> None:
     bad = Rig(SimGazeParams(target_offset_deg=(0.0, 0.9)), auto=True, timing=fast)
     flow = bad.run(bad.flow(), lambda v: [])
     assert flow.outcome == "failed" and len(bad.records) == 3
-    assert re.match(r"eye-tracker validation failed: central accuracy 0\.9\d deg", flow.failure)
+    # the simulated 0.9 deg offset, measured through the simulation's per-sample noise (0.09
+    # deg per axis): the mean of the validation's samples lands within a few hundredths
+    found = re.match(r"eye-tracker validation failed: central accuracy (\d+\.\d+) deg",
+                     flow.failure)
+    assert found and abs(float(found.group(1)) - 0.9) <= 0.05, flow.failure
     assert [r["redone"] for r, _ in bad.records] == [[], ["all"], ["all"]]
 
 
