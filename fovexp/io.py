@@ -70,7 +70,7 @@ def read_image_with_depth(path: str | Path) -> tuple[np.ndarray, int]:
     if raw.dtype == np.float32:  # a float TIFF: the only samples that can be NaN or Inf
         if not np.isfinite(raw).all():
             raise FovexpError(f"{path}: contains NaN or Inf pixels")
-        return raw, 16
+        return np.ascontiguousarray(raw), 16  # a planar TIFF's samples come as a view
     return _to_unit_float(raw), 8 if raw.dtype == np.uint8 else 16
 
 

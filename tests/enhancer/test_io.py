@@ -210,3 +210,14 @@ def test_every_integer_code_reads_as_its_float32_quotient(tmp_path, dtype):
     assert depth == 8 * np.dtype(dtype).itemsize and img.dtype == np.float32
     assert img.tobytes() == (ints.astype(np.float32) / np.float32(top)).tobytes()
     assert img.min() == 0.0 and img.max() == 1.0
+
+
+def test_a_planar_float_tiff_reads_as_one_contiguous_image(tmp_path):
+    """Float samples are returned as read (checked for NaN and Inf), channels last and
+    C-contiguous even when the file stores them plane by plane."""
+    planes = np.random.default_rng(2).random((3, 20, 30)).astype(np.float32)
+    path = tmp_path / "planar.tif"
+    tifffile.imwrite(path, planes, photometric="rgb", planarconfig="separate")
+    img, depth = read_image_with_depth(path)
+    assert depth == 16 and img.flags.c_contiguous
+    assert np.array_equal(img, np.moveaxis(planes, 0, -1))
