@@ -10,7 +10,7 @@ first used. PNG is written here (:func:`_png_encode`): the "up" filter on every 
 in fixed parts on threads by ISA-L (python-isal, level :data:`PNG_ISAL_LEVEL`; Python's zlib
 at :data:`PNG_ZLIB_LEVEL` where isal is not installed). A 4K frame takes about 0.1 s on two
 cores with ISA-L, 0.35 s with zlib, where libpng at zlib's level takes 0.9 s on one
-(benchmarks/CPU_FLOOR.md; docs/STATUS.md, "Decisions").
+(docs/STATUS.md, "Decisions").
 (Not OpenCV: PsychoPy depends on ``opencv-python``, and a second OpenCV wheel in the same
 environment would share its ``cv2`` folder.)
 
@@ -37,7 +37,7 @@ IMAGE_SUFFIXES = {".png": "PNG", ".tif": "TIFF", ".tiff": "TIFF", ".jpg": "JPEG"
 #: Integer sample depths files are written with.
 BIT_DEPTHS = (8, 16)
 #: ISA-L level of PNG output (1: ISA-L's fast matcher; the 4K Sponza output's file is 3 % larger
-#: than zlib's level 1, written 4-5x faster).
+#: than zlib's level 1, and the whole PNG encode 3.4-3.9x faster).
 PNG_ISAL_LEVEL = 1
 #: zlib level of PNG output where isal is not installed (1: the fastest compression; a 4K frame's
 #: file is about 10 % larger than at the default 6, which takes several times longer:
