@@ -44,9 +44,10 @@ from .pyramids import (
     blocks_reaching,
     channel_block_extremes,
     constant_blocks,
-    gaussian_pyramid,
     gaussian_sigma_px,
     level_scale,
+    packed_pyramid,
+    wanted_columns,
 )
 
 #: The largest padded image (the frame with the blur stack's replicated border) the blur stack
@@ -620,6 +621,21 @@ def _flat_blocks(img: np.ndarray, reach_px: int) -> np.ndarray:
     return constant_blocks(*channel_block_extremes(img, FLAT_BLOCK_LEVEL), radius)
 
 
+def _pyramid_reach_px(plan: BlurStackPlan, level: int) -> int:
+    """How far (full-resolution px, along either axis) from a pixel that is not flat the
+    blur stack may read pyramid level ``level``, or read it through a coarser level's
+    reduce: a band's patch spans the band's rows (:data:`BAND_ROWS`) and the run of columns
+    it merges (columns between needed ones: within the span :func:`wanted_columns` gives),
+    widened by the residual kernel and the bilinear taps on each level it is made on
+    (:meth:`BlurStackPlan.reach_px`). Each coarser level's columns reach one of its pixels
+    past their own reach (:func:`wanted_columns` rounds down), and its reduce two pixels of
+    the level below farther: ``2 ** (k + 1)`` full-resolution px for level k, and a block
+    more."""
+    chain = sum(2 * level_scale(k) + level_scale(FLAT_BLOCK_LEVEL)
+                for k in range(level + 1, plan.top + 1))
+    return plan.reach_px() + BAND_ROWS + chain
+
+
 def _foveate(
     img: np.ndarray, sigma: np.ndarray | SigmaOnBlocks, max_sigma: float, ratio: float,
     min_residual_px: float, skip: bool,
@@ -644,17 +660,19 @@ def _foveate(
             "and viewing distance with the blur-rate give this blur"
         )
     # the pyramid of the image padded by `pad` (its first step reads the image through
-    # clamped indices: no padded copy)
-    pyramid = gaussian_pyramid(img, top, pad_px=pad)
-    # level 0 is the image itself, read unpadded (its borders replicate by clamping); the
-    # coarser levels go into one buffer (not the image: a copy of it would cost more)
-    pmeta = np.zeros((top + 1, 3), dtype=np.int64)
-    start = 0
-    for m, lvl in enumerate(pyramid[1:], start=1):
-        pmeta[m] = (start, lvl.shape[0], lvl.shape[1])
-        start += lvl.size
-    pbuf = (np.concatenate([lvl.ravel() for lvl in pyramid[1:]]) if top
-            else np.zeros(0, img.dtype))
+    # clamped indices: no padded copy); level 0 is the image itself, read unpadded (its
+    # borders replicate by clamping), the coarser levels are written into one buffer. When
+    # blocks are flat, only the columns the blur patches can read (_pyramid_reach_px) are
+    # computed: on a mostly flat frame the pyramid was a third of the foveation
+    columns = None
+    if top and flat.any():
+        need = ~flat
+        columns = lambda m, lh, lw: wanted_columns(  # noqa: E731
+            need, level_scale(shift), _pyramid_reach_px(plan, m), m, pad, lw, lh)
+    if top:
+        pbuf, pmeta = packed_pyramid(img, top, pad, columns)
+    else:
+        pbuf, pmeta = np.zeros(0, img.dtype), np.zeros((1, 3), dtype=np.int64)
     kmeta = np.zeros((len(plan.kernels), 2), dtype=np.int64)
     start = 0
     for k, g in enumerate(plan.kernels):

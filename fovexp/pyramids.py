@@ -26,6 +26,7 @@ References
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numba
 import numpy as np
@@ -119,34 +120,45 @@ def _reduce_2d(img: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
 
 
 @numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
-def _reduce_hwc(img: np.ndarray, pad: int) -> np.ndarray:  # pragma: no cover - compiled
+def _reduce_hwc(img, pad, lo, hi, out):  # pragma: no cover - compiled
     """:func:`reduce` of an (H, W, C) image with its border replicated ``pad`` px on every
     side (read through clamped indices: the padded copy is never made), its channels kept
     interleaved: the pass down the columns runs along whole rows of W C values (it
     vectorises, and no channel is copied out and back), the pass along the row on every
     second pixel. Replicated columns have the same column pass, so reading the real ones
-    gives the padded image's result bit for bit."""
+    gives the padded image's result bit for bit. Written into ``out`` ((H + 2 pad + 1) // 2,
+    (W + 2 pad + 1) // 2, C): of output row ``i`` only the columns ``[lo[i], hi[i])`` (the
+    others are left as they are; :func:`wanted_columns`), and of the column pass only the
+    source columns those read."""
     h, w, c = img.shape
-    ho, wo = (h + 2 * pad + 1) // 2, (w + 2 * pad + 1) // 2
+    ho, wo = out.shape[0], out.shape[1]
     n = w * c
     rows = img.reshape((h, n))
-    out = np.empty((ho, wo, c), dtype=img.dtype)
     for i in numba.prange(ho):
+        jl, jh = max(lo[i], 0), min(hi[i], wo)
+        if jl >= jh:
+            continue
         r = 2 * i - pad  # in the image's rows
+        # the source columns the outputs [jl, jh) read (clamped: inside the image)
+        xs = min(max(2 * jl - pad - 2, 0), w - 1)
+        xe = min(max(2 * (jh - 1) - pad + 2, 0), w - 1) + 1
         # the five source rows as slices indexed from 0 (Numba then drops its wraparound
         # checks and the loop vectorises)
-        a0, am2 = rows[min(max(r, 0), h - 1)], rows[min(max(r - 2, 0), h - 1)]
-        am1, ap1 = rows[min(max(r - 1, 0), h - 1)], rows[min(max(r + 1, 0), h - 1)]
-        ap2 = rows[min(max(r + 2, 0), h - 1)]
+        a0 = rows[min(max(r, 0), h - 1), xs * c:xe * c]
+        am2 = rows[min(max(r - 2, 0), h - 1), xs * c:xe * c]
+        am1 = rows[min(max(r - 1, 0), h - 1), xs * c:xe * c]
+        ap1 = rows[min(max(r + 1, 0), h - 1), xs * c:xe * c]
+        ap2 = rows[min(max(r + 2, 0), h - 1), xs * c:xe * c]
         row = np.empty(n, dtype=img.dtype)
-        for x in range(n):
-            row[x] = _taps5(a0[x], am2[x], am1[x], ap1[x], ap2[x])
+        part = row[xs * c:xe * c]
+        for x in range((xe - xs) * c):
+            part[x] = _taps5(a0[x], am2[x], am1[x], ap1[x], ap2[x])
         # then channel by channel (no loop over channels inside the loop over pixels)
         dst = out[i].reshape(wo * c)
         # interior outputs (all five taps inside the row: no clamping), from slices indexed
         # from 0; the border ones below
-        j_lo = min(max((pad + 3) // 2, 0), wo)
-        j_hi = max(min((w - 3 + pad) // 2 + 1, wo), j_lo)
+        j_lo = min(max((pad + 3) // 2, jl), jh)
+        j_hi = max(min((w - 3 + pad) // 2 + 1, jh), j_lo)
         cnt = j_hi - j_lo
         if cnt > 0:
             base = (2 * j_lo - pad - 2) * c
@@ -159,7 +171,7 @@ def _reduce_hwc(img: np.ndarray, pad: int) -> np.ndarray:  # pragma: no cover - 
                     d[jj * c + ch] = _taps5(src[b + c2], src[b], src[b + c], src[b + 3 * c],
                                             src[b + 2 * c2])
         for ch in range(c):
-            for j in range(wo):
+            for j in range(jl, jh):
                 if j_lo <= j < j_hi:
                     continue
                 q = 2 * j - pad
@@ -238,8 +250,23 @@ def reduce(image: np.ndarray, pad_px: int = 0) -> np.ndarray:
     if image.ndim == 2 and pad_px == 0:
         return _reduce_2d(image)
     if image.ndim == 2:
-        return _reduce_hwc(image[..., None], int(pad_px))[..., 0]
-    return _reduce_hwc(image, int(pad_px))
+        return _reduce_padded(image[..., None], int(pad_px))[..., 0]
+    return _reduce_padded(image, int(pad_px))
+
+
+def _reduce_padded(
+    image: np.ndarray, pad: int, out: np.ndarray | None = None,
+    columns: tuple[np.ndarray, np.ndarray] | None = None,
+) -> np.ndarray:
+    """:func:`_reduce_hwc` of a contiguous (H, W, C) float image: every output column, or
+    those of ``columns`` (per output row, ``[lo, hi)``), into ``out`` or a new array."""
+    h, w, c = image.shape
+    ho, wo = (h + 2 * pad + 1) // 2, (w + 2 * pad + 1) // 2
+    if out is None:
+        out = np.empty((ho, wo, c), image.dtype)
+    if columns is None:
+        columns = np.zeros(ho, np.int64), np.full(ho, wo, np.int64)
+    return _reduce_hwc(image, pad, columns[0], columns[1], out)
 
 
 def expand(image: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
@@ -263,6 +290,74 @@ def gaussian_pyramid(image: np.ndarray, levels: int, pad_px: int = 0) -> list[np
             break
         pyr.append(reduce(pyr[-1], pad))
     return pyr
+
+
+def packed_pyramid(
+    image: np.ndarray, levels: int, pad_px: int = 0,
+    columns: Callable[[int, int, int], tuple[np.ndarray, np.ndarray]] | None = None,
+    buffer: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """``G_1 .. G_levels`` of :func:`gaussian_pyramid` of an (H, W, C) float image, written
+    into one flat buffer (no copy of the levels into it); returns it and a (levels + 1, 3)
+    table of each level's (start, height, width) in it (row 0 unused: ``G_0`` is the image).
+    ``columns(level, height, width)``: the ``[lo, hi)`` columns of each of that level's rows
+    to compute (:func:`wanted_columns`); the others are left unset, for a reader that never
+    reads them. ``buffer``: the buffer to write into (at least as large; a test fills it
+    with NaN to show that nothing unset is read)."""
+    h, w, c = image.shape
+    shapes = []
+    for m in range(levels):
+        pad = pad_px if m == 0 else 0
+        if min(h, w) + 2 * pad < 2:
+            break
+        h, w = (h + 2 * pad + 1) // 2, (w + 2 * pad + 1) // 2
+        shapes.append((h, w))
+    meta = np.zeros((levels + 1, 3), dtype=np.int64)
+    start = 0
+    for m, (lh, lw) in enumerate(shapes, start=1):
+        meta[m] = (start, lh, lw)
+        start += lh * lw * c
+    buf = np.empty(start, image.dtype) if buffer is None else buffer[:start]
+    src = image
+    for m, (lh, lw) in enumerate(shapes, start=1):
+        out = buf[meta[m, 0]:meta[m, 0] + lh * lw * c].reshape(lh, lw, c)
+        _reduce_padded(src, pad_px if m == 1 else 0, out,
+                       None if columns is None else columns(m, lh, lw))
+        src = out
+    return buf, meta
+
+
+def wanted_columns(
+    marks: np.ndarray, block: int, reach_px: int, level: int, pad_px: int, width: int,
+    height: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per row of pyramid level ``level`` (``height`` x ``width``, built on the image padded
+    ``pad_px``: level pixel X lies at full-resolution X 2**level - pad_px), the columns
+    ``[lo, hi)`` that cover every pixel of the row within ``reach_px`` (full-resolution px,
+    along each axis) of a ``block`` px square block ``marks`` marks: the span from the first
+    to the last such column, a superset (``lo = hi = 0``: none)."""
+    s = level_scale(level)
+    nby, nbx = marks.shape
+    lo, hi = np.zeros(height, np.int64), np.zeros(height, np.int64)
+    if not marks.any():
+        return lo, hi
+    any_ = marks.any(axis=1)
+    first = np.where(any_, marks.argmax(axis=1), nbx)
+    last = np.where(any_, nbx - 1 - marks[:, ::-1].argmax(axis=1), -1)
+    # each block row's span over the block rows within reach (+1: a block spans its rows)
+    r = -(-reach_px // block) + 1
+    size = 2 * r + 1
+    first = ndimage.minimum_filter1d(first, size, mode="constant", cval=nbx)
+    last = ndimage.maximum_filter1d(last, size, mode="constant", cval=-1)
+    y = np.arange(height, dtype=np.int64) * s - pad_px
+    by = np.clip(y // block, 0, nby - 1)
+    near = (y + reach_px >= 0) & (y - reach_px < nby * block)
+    f, la = first[by], last[by]
+    ok = near & (la >= f)
+    # the level's columns X whose full-resolution X s - pad_px lies within reach of the span
+    lo[ok] = np.clip((f[ok] * block - reach_px + pad_px) // s, 0, width)
+    hi[ok] = np.clip(((la[ok] + 1) * block - 1 + reach_px + pad_px) // s + 1, 0, width)
+    return lo, hi
 
 
 #: Side (level pixels) of the tiles :func:`smoothed_abs_laplacian` computes or leaves out.

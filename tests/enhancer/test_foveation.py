@@ -372,3 +372,33 @@ def test_negative_zero_sigmas_and_blur_rates_are_zero():
         assert not np.signbit(neg).any()
     assert sigma_on_blocks(g, gaze, -0.0, 8.0).tobytes() == np.zeros((40, 56), np.float32).tobytes()
     assert sigma_bound_px(g, gaze, -0.0, 8.0) == sigma_bound_px(g, gaze, 0.0, 8.0) == 1e-3
+
+
+@pytest.mark.parametrize("max_sigma", [6.0, 12.0])
+def test_a_mostly_flat_frames_pyramid_is_computed_only_where_it_is_read(monkeypatch, max_sigma):
+    """Skipping builds the blur stack's pyramid only on the columns its patches can read
+    (pyramids.wanted_columns): with every other value of the pyramid's buffer NaN, a frame
+    flat but for a few textured islands (one at an edge, so that the replicated border is
+    read) foveates bit for bit as without skipping; at the smaller blur it computes under
+    0.9 of the pyramid (at the larger one the patches' reach covers nearly all of it)."""
+    from fovexp import foveation, pyramids
+
+    h, w = 480, 720
+    img = np.full((h, w, 3), 0.4, np.float32)
+    tex = linearize(textured_image(h, w, seed=8, flat_squares=False), 2.2)
+    for y0, x0, size in ((40, 60, 24), (220, 560, 40), (h - 20, 0, 20)):
+        img[y0:y0 + size, x0:x0 + size] = tex[y0:y0 + size, x0:x0 + size]
+    sigma = _radial_sigma(h, w, max_sigma)
+    real = pyramids.packed_pyramid
+    written = []
+
+    def poisoned(image, levels, pad_px=0, columns=None, buffer=None):
+        buf = np.full(image.size * 2, np.nan, image.dtype)
+        out = real(image, levels, pad_px, columns, buf)
+        written.append(np.count_nonzero(~np.isnan(out[0])) / out[0].size)
+        return out
+
+    monkeypatch.setattr(foveation, "packed_pyramid", poisoned)
+    got = foveate(img, sigma)
+    assert written and written[0] < (0.9 if max_sigma < 10 else 1.0) and not np.isnan(got).any()
+    assert np.array_equal(got.view(np.uint32), foveate(img, sigma, skip=False).view(np.uint32))
