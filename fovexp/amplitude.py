@@ -154,15 +154,18 @@ class Extremes:
 def clipping_extremes(
     rule: str, foveated: np.ndarray, luma: np.ndarray, delta: np.ndarray, *,
     kernel_radius_px: float, level: int = 3, box_px: int = 25,
+    known: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
 ) -> Extremes:
     """N_min and N_max under ``rule`` (section 4.2; module docstring) of the image the noise
     is added to: the linear ``foveated`` image (H, W) or (H, W, C) plus the grey contrast
     change ``delta`` (H, W), whose luminance is ``luma + delta`` (the luma weights sum to 1).
     ``level``: the min/max pyramids' level (the paper's third: 8 x 8 blocks);
     ``kernel_radius_px``: the Gabor kernel's reach (the widened rule's and the exact rule's
-    neighbourhood); ``box_px``: the release's box."""
+    neighbourhood); ``box_px``: the release's box. ``known``: for the paper's rule, the
+    blocks of ``level`` whose extremes of ``luma + delta`` are known, and those extremes
+    (:func:`fovexp.pyramids.block_extremes`); the other rules read every pixel."""
     if rule == "paper":
-        lo, hi = block_extremes(luma, level, add=delta)
+        lo, hi = block_extremes(luma, level, add=delta, known=known)
         return Extremes("blocks", lo, hi, level_scale(level))
     if rule == "widened":
         block = level_scale(level)

@@ -319,9 +319,11 @@ def _change_strips(img, sigma, pad, f_e, flat, shift, add_input, tables, largest
     return out
 
 
-def _flat_blocks(grey_flat: np.ndarray, max_sigma: float) -> np.ndarray:
-    """Blocks whose every pixel's boxes lie in one constant region (change exactly 0), from
-    the grey image's constant radius per level-3 block."""
+def unchanged_blocks(grey_flat: np.ndarray, max_sigma: float) -> np.ndarray:
+    """The level-3 blocks whose every pixel's boxes, up to level ``floor(max_sigma) + 1``,
+    lie in one constant region: their change is exactly +0.0 (the blocks skipping leaves
+    out), and their luminance that constant. From the grey image's constant radius per
+    block (:func:`fovexp.pyramids.constant_radius_blocks`)."""
     # the widest box reaches sat_pad_px from its pixel; symmetric padding reads inside it
     block = level_scale(FLAT_BLOCK_LEVEL)
     return grey_flat >= blocks_reaching(sat_pad_px(max_sigma), block)
@@ -368,7 +370,7 @@ def contrast_change(
     max_sigma = float(sigma.max()) if sigma.size else 0.0
     if max_sigma <= 0.0:
         return np.zeros(img.shape, dtype=img.dtype)
-    flat = _flat_blocks(grey_flat, max_sigma) if grey_flat is not None else None
+    flat = unchanged_blocks(grey_flat, max_sigma) if grey_flat is not None else None
     return _change_outside(img, sigma, float(f_e), flat, max_sigma)
 
 
@@ -384,7 +386,7 @@ def contrast_change_where_needed(
     img = _float_array(grey)
     if max_sigma_px <= 0.0:
         return np.zeros(img.shape, dtype=img.dtype)
-    flat = _flat_blocks(grey_flat, max_sigma_px)
+    flat = unchanged_blocks(grey_flat, max_sigma_px)
     if flat.all():
         return np.zeros(img.shape, dtype=img.dtype)
     sigma = _float_array(sigma_on_blocks(~flat, FLAT_BLOCK_LEVEL))

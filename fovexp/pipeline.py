@@ -48,7 +48,7 @@ import numpy as np
 from . import amplitude as amp
 from . import colour, frequency, gabor, orientation, pyramids
 from ._parallel import over_points, thread_map
-from .contrast import contrast_change, contrast_change_where_needed
+from .contrast import contrast_change, contrast_change_where_needed, unchanged_blocks
 from .errors import FovexpError
 from .foveation import (
     SigmaOnBlocks,
@@ -435,7 +435,8 @@ class Enhancer:
         c.stage("sigma_blocks", ("geometry", "gaze", "blur_rate", "?ppd_map"), self._sigma_blocks)
         c.stage("contrast", ("luma", "?sigma", "f_e", "?luma_flat", "?sigma_blocks"),
                 self._contrast)
-        c.stage("headroom", ("foveated", "luma", "contrast"), self._headroom)
+        c.stage("headroom", ("foveated", "luma", "contrast", "?luma_blocks", "?luma_flat",
+                             "?sigma", "?sigma_blocks"), self._headroom)
         c.stage("impulses", ("shape", "n_impulses", "seed"), self._impulses)
         # the band per impulse, evaluated for the impulses asked for and kept (frame-free)
         c.stage("imp_bands", ("impulses", "geometry", "gaze", "sigma_given", "blur_rate"),
@@ -623,13 +624,31 @@ class Enhancer:
                       ppd_map: Callable[[], np.ndarray]) -> _SigmaBlocks:
         return _SigmaBlocks(geom, gaze, blur_rate, self.preset.fovea_deg, ppd_map)
 
-    def _headroom(self, foveated, luma, delta) -> amp.Extremes:
+    def _headroom(self, foveated, luma, delta, luma_blocks, luma_flat, sigma,
+                  sigma_blocks) -> amp.Extremes:
         """N_min and N_max of the image the noise is added to (section 4.2), under
-        :attr:`clipping` (:func:`fovexp.amplitude.clipping_extremes`; docs/METHOD.md, 6.6)."""
+        :attr:`clipping` (:func:`fovexp.amplitude.clipping_extremes`; docs/METHOD.md, 6.6).
+        When skipping, the paper's rule does not read the blocks the contrast left as they
+        were: their luminance is one constant (the luminance's block extremes) and the
+        change +0.0 there."""
         p = self.preset
+        known = None
+        if self.options.skip and self.clipping == "paper" and p.minmax_level == FLAT_BLOCK_LEVEL:
+            known = (self._unchanged_by_contrast(luma_flat, sigma, sigma_blocks), *luma_blocks())
         return amp.clipping_extremes(self.clipping, foveated, luma, delta,
                                      kernel_radius_px=self._kernel_radius_px(),
-                                     level=p.minmax_level, box_px=p.minmax_box_px)
+                                     level=p.minmax_level, box_px=p.minmax_box_px, known=known)
+
+    def _unchanged_by_contrast(self, luma_flat, sigma, sigma_blocks) -> np.ndarray:
+        """The level-3 blocks :meth:`_contrast` left out when skipping (its change is +0.0
+        there): :func:`fovexp.contrast.unchanged_blocks` at the largest sigma it took, the
+        map's maximum or the bound it was asked for by blocks with."""
+        source = self._sigma_source(sigma, sigma_blocks)
+        if callable(source):
+            largest = sigma_blocks().bound_px
+        else:
+            largest = float(source.max()) if source.size else 0.0
+        return unchanged_blocks(luma_flat(), largest)
 
     def _kernel_radius_px(self) -> float:
         """The Gabor kernel's truncation radius (section 4.4; the option's truncation)."""

@@ -32,6 +32,7 @@ import numba
 import numpy as np
 from scipy import ndimage
 
+from ._parallel import interleave
 from .jit import FASTMATH, flat_broadcast
 
 #: Burt-Adelson 5-tap binomial kernel; its variance is 1 px^2 at the level it filters.
@@ -119,6 +120,10 @@ def _reduce_2d(img: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
     return out
 
 
+#: Output rows :func:`_reduce_hwc` computes one after the other on a thread.
+_REDUCE_RUN_ROWS = 16
+
+
 @numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
 def _reduce_hwc(img, pad, lo, hi, out):  # pragma: no cover - compiled
     """:func:`reduce` of an (H, W, C) image with its border replicated ``pad`` px on every
@@ -134,8 +139,13 @@ def _reduce_hwc(img, pad, lo, hi, out):  # pragma: no cover - compiled
     ho, wo = out.shape[0], out.shape[1]
     n = w * c
     rows = img.reshape((h, n))
-    for i in numba.prange(ho):
-        jl, jh = max(lo[i], 0), min(hi[i], wo)
+    # runs of consecutive rows (which share source rows in the cache), the runs spread over
+    # the threads: the rows with columns to compute may be all in one part of the frame
+    runs = (ho + _REDUCE_RUN_ROWS - 1) // _REDUCE_RUN_ROWS
+    stride = interleave(runs)
+    for k in numba.prange(runs * _REDUCE_RUN_ROWS):
+        i = ((k // _REDUCE_RUN_ROWS) * stride) % runs * _REDUCE_RUN_ROWS + k % _REDUCE_RUN_ROWS
+        jl, jh = (max(lo[i], 0), min(hi[i], wo)) if i < ho else (0, 0)
         if jl >= jh:
             continue
         r = 2 * i - pad  # in the image's rows
@@ -676,33 +686,52 @@ def laplacian_levels(gaussian: list[np.ndarray], levels: int) -> dict[int, np.nd
 
 
 @numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
-def _block_extremes(img, add, block):  # pragma: no cover - compiled
+def _block_extremes(img, add, block, known, known_lo, known_hi):  # pragma: no cover
     """Extremes of ``img + add`` over every channel of each block, the rows streamed in order
     (a block row's rows one after the other: prefetched, where a block's own rows were a
-    jump of a row each); RGB with its channel count a constant the compiler unrolls."""
+    jump of a row each); RGB with its channel count a constant the compiler unrolls. The
+    blocks ``known`` marks ((0, 0): none) are not read: their extremes are
+    ``known_lo + 0.0`` and ``known_hi + 0.0``."""
     h, w, c = img.shape
     bh, bw = (h + block - 1) // block, (w + block - 1) // block
     lo = np.empty((bh, bw), dtype=img.dtype)
     hi = np.empty((bh, bw), dtype=img.dtype)
-    for by in numba.prange(bh):
+    some = known.shape[0] > 0
+    none = np.zeros(0, np.bool_)
+    # block rows spread over the threads: the known ones, often all in one part of the
+    # frame, cost nothing
+    stride = interleave(bh)
+    for i in numba.prange(bh):
+        by = (i * stride) % bh
+        skip = known[by] if some else none
         if c == 3:
-            _block_row_extremes(img, add, block, by, 3, lo[by], hi[by])
+            _block_row_extremes(img, add, block, by, 3, skip, lo[by], hi[by])
         elif c == 1:  # luminance (the paper's rule)
-            _block_row_extremes(img, add, block, by, 1, lo[by], hi[by])
+            _block_row_extremes(img, add, block, by, 1, skip, lo[by], hi[by])
         else:
-            _block_row_extremes(img, add, block, by, c, lo[by], hi[by])
+            _block_row_extremes(img, add, block, by, c, skip, lo[by], hi[by])
+        if some:
+            for bx in range(bw):
+                if skip[bx]:
+                    # + 0.0: the sum's zero (-0.0 + 0.0 is +0.0), as a block read would give
+                    lo[by, bx] = known_lo[by, bx] + 0.0
+                    hi[by, bx] = known_hi[by, bx] + 0.0
     return lo, hi
 
 
 @numba.njit(cache=True, inline="always", fastmath=FASTMATH, nogil=True)
-def _block_row_extremes(img, add, block, by, c, lo, hi):  # pragma: no cover - compiled
-    """:func:`_block_extremes` of block row ``by`` into ``lo`` and ``hi`` (bw,)."""
+def _block_row_extremes(img, add, block, by, c, skip, lo, hi):  # pragma: no cover - compiled
+    """:func:`_block_extremes` of block row ``by`` into ``lo`` and ``hi`` (bw,), but for the
+    blocks ``skip`` marks (empty: none)."""
     h, w = img.shape[0], img.shape[1]
     bw = lo.shape[0]
+    some = skip.shape[0] > 0
     ya, yb = by * block, min(by * block + block, h)
     for y in range(ya, yb):
         src, grey = img[y].reshape(-1), add[y]
         for bx in range(bw):
+            if some and skip[bx]:
+                continue
             xa, xb = bx * block, min(bx * block + block, w)
             mn = src[xa * c] + grey[xa] if y == ya else lo[bx]
             mx = mn if y == ya else hi[bx]
@@ -717,7 +746,8 @@ def _block_row_extremes(img, add, block, by, c, lo, hi):  # pragma: no cover - c
 
 
 def block_extremes(
-    image: np.ndarray, level: int, add: np.ndarray | None = None
+    image: np.ndarray, level: int, add: np.ndarray | None = None,
+    known: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Level ``level`` of the min and max pyramids (paper section 4.2): the minimum and maximum
     of each ``2**level x 2**level`` block (over all channels of an (H, W, C) image), of
@@ -725,13 +755,25 @@ def block_extremes(
 
     The paper builds the level from 2 x 2 neighbourhoods level by level; the extreme of the
     block is the same number, computed here in one pass (edge blocks are the partial ones).
+    ``known``: ``(mask, lo, hi)`` block grids: the blocks ``mask`` marks are not read, their
+    extremes are ``lo`` and ``hi`` (plus 0.0): what the caller knows they are (the flat
+    blocks the enhancer skips).
     """
     img = np.ascontiguousarray(image if image.ndim == 3 else image[..., None])
     if add is None:  # a zero image broadcast (no memory): a stride-0 view
         grey = np.broadcast_to(np.zeros(1, img.dtype).reshape(1, 1), img.shape[:2])
     else:
         grey = np.ascontiguousarray(add, dtype=img.dtype)
-    return _block_extremes(img, grey, level_scale(level))
+    block = level_scale(level)
+    if known is None:
+        mask, klo, khi = (np.zeros((0, 0), np.bool_),) + (np.zeros((0, 0), img.dtype),) * 2
+    else:
+        grid = (-(-img.shape[0] // block), -(-img.shape[1] // block))
+        if any(np.shape(a) != grid for a in known):
+            raise ValueError(f"known block grids must have shape {grid}")
+        mask = np.ascontiguousarray(known[0], dtype=np.bool_)
+        klo, khi = (np.ascontiguousarray(a, dtype=img.dtype) for a in known[1:])
+    return _block_extremes(img, grey, block, mask, klo, khi)
 
 
 @numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)

@@ -272,3 +272,27 @@ def test_the_tiles_of_taps_are_those_each_tap_reads():
         assert want.any() and (k > 2 or not want.all())  # a test that can tell
     with pytest.raises(ValueError, match="power of two"):
         pyramids.tiles_of_taps(x, y, k0, gaussian, top, 12)
+
+
+def test_block_extremes_take_the_known_blocks_without_reading_them():
+    """block_extremes(known=(mask, lo, hi)): the marked blocks' extremes are the given ones
+    plus 0.0 (-0.0 becomes +0.0, as a read of x + 0.0 gives) and their pixels are never read
+    (NaN there changes nothing); every other block as without them; the rows of known
+    blocks all in one part of the frame (the threads' share of the rest); grids of the
+    wrong shape refused."""
+    rng = np.random.default_rng(11)
+    img = rng.random((70, 90)).astype(np.float32)
+    add = rng.normal(0, 0.1, (70, 90)).astype(np.float32)
+    lo, hi = pyramids.block_extremes(img, 3, add)
+    mask = np.zeros(lo.shape, bool)
+    mask[4:, :] = True
+    mask[0, 2] = True
+    poisoned = img.copy()
+    poisoned[np.kron(mask, np.ones((8, 8), bool))[:70, :90]] = np.nan
+    known_lo = np.where(mask, np.float32(-0.0), lo)
+    known_hi = np.where(mask, np.float32(0.25), hi)
+    glo, ghi = pyramids.block_extremes(poisoned, 3, add, known=(mask, known_lo, known_hi))
+    assert np.array_equal(glo[~mask], lo[~mask]) and np.array_equal(ghi[~mask], hi[~mask])
+    assert (glo[mask] == 0).all() and not np.signbit(glo[mask]).any() and (ghi[mask] == 0.25).all()
+    with pytest.raises(ValueError, match="known block grids must have shape"):
+        pyramids.block_extremes(img, 3, add, known=(mask[:-1], known_lo, known_hi))
