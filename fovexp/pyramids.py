@@ -307,9 +307,11 @@ def packed_pyramid(
     columns: Callable[[int, int, int], tuple[np.ndarray, np.ndarray]] | None = None,
     buffer: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """``G_1 .. G_levels`` of :func:`gaussian_pyramid` of an (H, W, C) float image, written
-    into one flat buffer (no copy of the levels into it); returns it and a (levels + 1, 3)
-    table of each level's (start, height, width) in it (row 0 unused: ``G_0`` is the image).
+    """``G_1 .. G_levels`` of :func:`gaussian_pyramid` of a contiguous (H, W, C) float image,
+    written into one flat buffer (no copy of the levels into it); returns it and a
+    (levels + 1, 3) table of each level's (start, height, width) in it (row 0 unused:
+    ``G_0`` is the image; a level too small to build, where :func:`gaussian_pyramid` stops,
+    all zeros).
     ``columns(level, height, width)``: the ``[lo, hi)`` columns of each of that level's rows
     to compute (:func:`wanted_columns`); the others are left unset, for a reader that never
     reads them. ``buffer``: the buffer to write into (at least as large; a test fills it
