@@ -43,8 +43,8 @@ TARGET = 2.0  # the flat scene at least 2x faster than the textured one (64 impu
 #: The stages the paper's section 6.3 times: "building all the image pyramids and estimating
 #: frequency, amplitude, and orientation for each Gabor patch", and the synthesis (not the
 #: linearisation, the sigma map, the contrast enhancement or the encoding).
-PAPER_STAGES = ("luma", "luma_blocks", "luma_flat", "imp_blocks", "pyramid", "abs_laplacian",
-                "gradients", "headroom", "imp_band", "imp_active", "imp_frequency",
+PAPER_STAGES = ("luma_and_blocks", "luma", "luma_blocks", "luma_flat", "imp_blocks", "pyramid",
+                "abs_laplacian", "gradients", "headroom", "imp_band", "imp_active", "imp_frequency",
                 "imp_laplacian", "imp_headroom", "imp_amplitude", "imp_orientation", "noise")
 
 

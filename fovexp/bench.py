@@ -551,8 +551,7 @@ def _errors(job: Job, res: Any) -> dict[str, Any]:
 CPU_TRAFFIC_PLANES: dict[str, tuple[float, float, str]] = {
     "linear": (3, 3, "the frame in, linear light out"),
     "foveated": (3, 3, "linear light in, the foveated frame out"),
-    "luma": (3, 1, "RGB in, luminance out"),
-    "luma_blocks": (1, 0, "luminance in, its 8 x 8 block extremes out"),
+    "luma_and_blocks": (3, 1, "RGB in, luminance out (and its 8 x 8 block extremes)"),
     "pyramid": (4 / 3, 1 / 3, "each Gaussian level in, the next out"),
     "abs_laplacian": (5 / 3, 4 / 3, "G_k-1 and G_k in, |L_k| out (k >= 1)"),
     "contrast": (1, 1, "luminance in, its change out"),

@@ -22,6 +22,7 @@ import numpy as np
 
 from ._parallel import interleave, power
 from .jit import FASTMATH, MAGIC_F64, _bits_as_float64, _float64_bits, fma, two_to_the
+from .pyramids import channel_block_extremes, level_scale
 
 #: BT.601 luma weights. The release's Y of YCbCr, normalised as (Y - 16/255) / (219/255), equals
 #: 0.299 R + 0.587 G + 0.114 B (docs/METHOD.md, 5.4); its grey for orientation uses the same
@@ -353,6 +354,64 @@ def _luma_into(rgb, weights, out):  # pragma: no cover - compiled
         for x in range(w):
             dst[x] = (w0 * src[3 * x] + w1 * src[3 * x + 1]) + w2 * src[3 * x + 2]
     return out
+
+
+@numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
+def _luma_blocks_into(rgb, weights, block, out, lo, hi):  # pragma: no cover - compiled
+    """:func:`_luma_into` block row by block row, with each ``block`` square's extremes of
+    the luminance taken as its rows are written (down the block row's columns, then along
+    each block, as :func:`fovexp.pyramids.channel_block_extremes` takes them: min and max
+    are exact, the same numbers), not in a second pass over the frame."""
+    h, w = out.shape
+    bh, bw = lo.shape
+    w0, w1, w2 = weights[0], weights[1], weights[2]
+    for by in numba.prange(bh):
+        ya, yb = by * block, min(by * block + block, h)
+        col_lo = np.empty(w, dtype=out.dtype)
+        col_hi = np.empty(w, dtype=out.dtype)
+        for y in range(ya, yb):
+            src, dst = rgb[y].reshape(-1), out[y]  # indexed from 0: the loops vectorise
+            for x in range(w):
+                dst[x] = (w0 * src[3 * x] + w1 * src[3 * x + 1]) + w2 * src[3 * x + 2]
+            if y == ya:
+                for x in range(w):
+                    col_lo[x] = dst[x]
+                    col_hi[x] = dst[x]
+            else:
+                for x in range(w):
+                    col_lo[x] = min(col_lo[x], dst[x])
+                    col_hi[x] = max(col_hi[x], dst[x])
+        for bx in range(bw):
+            xa, xb = bx * block, min(bx * block + block, w)
+            mn, mx = col_lo[xa], col_hi[xa]
+            for x in range(xa + 1, xb):
+                mn = min(mn, col_lo[x])
+                mx = max(mx, col_hi[x])
+            lo[by, bx] = mn
+            hi[by, bx] = mx
+
+
+def luminance_and_block_extremes(
+    linear: np.ndarray, level: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`luminance` of an image and the minimum and maximum of it over each
+    ``2**level`` px square block ((bh, bw) each: :func:`fovexp.pyramids.channel_block_extremes`
+    of the luminance). Of a float32 (H, W, 3) image in one pass, the same numbers as the two
+    apart without reading the luminance back (the enhancer's skipping takes where the
+    luminance is flat from them); of another image through the two apart."""
+    rgb = np.asarray(linear)
+    if rgb.dtype != np.float32 or rgb.ndim != 3 or rgb.shape[2] != 3:
+        luma = luminance(linear)
+        lo, hi = channel_block_extremes(luma[..., None], level)
+        return luma, lo[..., 0], hi[..., 0]
+    block = level_scale(level)
+    rgb = np.ascontiguousarray(rgb)
+    h, w = rgb.shape[:2]
+    grid = (-(-h // block), -(-w // block))
+    luma = np.empty((h, w), np.float32)
+    lo, hi = np.empty(grid, np.float32), np.empty(grid, np.float32)
+    _luma_blocks_into(rgb, LUMA_BT601, block, luma, lo, hi)
+    return luma, lo, hi
 
 
 def luminance(linear: np.ndarray) -> np.ndarray:

@@ -418,10 +418,13 @@ class Enhancer:
                 self._sigma)
         c.stage("foveated", ("linear", "?sigma", "already_foveated", "?sigma_blocks"),
                 self._foveated)
-        c.stage("luma", ("foveated",), colour.luminance)
-        # level-3 block extremes of the luminance: where it is flat (skipping only)
-        c.stage("luma_blocks", ("luma",), lambda luma: tuple(e[..., 0] for e in (
-            pyramids.channel_block_extremes(luma[..., None], FLAT_BLOCK_LEVEL))))
+        # the luminance and, when skipping, its level-3 block extremes (where it is flat),
+        # taken in the same pass
+        c.stage("luma_and_blocks", ("foveated",), self._luma_and_blocks)
+        c.stage("luma", ("luma_and_blocks",), lambda lb: lb[0])
+        c.stage("luma_blocks", ("luma_and_blocks",), lambda lb: lb[1] if lb[1] is not None
+                else tuple(e[..., 0] for e in pyramids.channel_block_extremes(
+                    lb[0][..., None], FLAT_BLOCK_LEVEL)))
         # how far around each block the luminance is one constant (skipping only)
         c.stage("luma_flat", ("luma_blocks",), lambda b: pyramids.constant_radius_blocks(*b))
         c.stage("pyramid", ("luma",), lambda luma: pyramids.gaussian_pyramid(
@@ -569,6 +572,16 @@ class Enhancer:
                                    ppd_map=ppd_map())
         ecc, ppd = grids()
         return sigma_px(ecc, ppd, blur_rate, self.preset.fovea_deg, self._dtype)
+
+    def _luma_and_blocks(
+        self, foveated: np.ndarray,
+    ) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray] | None]:
+        """The luminance the method works on (section 4.5) and, when skipping, its level-3
+        block extremes, in one pass (:func:`fovexp.colour.luminance_and_block_extremes`)."""
+        if not self.options.skip:
+            return colour.luminance(foveated), None
+        luma, lo, hi = colour.luminance_and_block_extremes(foveated, FLAT_BLOCK_LEVEL)
+        return luma, (lo, hi)
 
     def _foveated(self, linear, sigma, already_foveated, sigma_blocks) -> np.ndarray:
         if already_foveated:

@@ -206,3 +206,23 @@ def test_flat_runs_copy_the_results_the_power_gives(transfer):
     enc = encode(got, 2.2, transfer)
     want = unshuffled(encode(got.reshape(-1)[perm], 2.2, transfer))
     assert enc.reshape(-1).tobytes() == want.tobytes()
+
+
+@pytest.mark.parametrize("shape,dtype", [((37, 53, 3), np.float32), ((64, 40, 3), np.float32),
+                                         ((21, 30, 3), np.float64), ((21, 30), np.float32)])
+def test_the_luminance_and_its_block_extremes_in_one_pass_are_the_two_apart(shape, dtype):
+    """colour.luminance_and_block_extremes: bit for bit colour.luminance and
+    pyramids.channel_block_extremes of it (partial edge blocks included; float64 and grey
+    through the two apart)."""
+    from fovexp import pyramids
+    from fovexp.colour import luminance, luminance_and_block_extremes
+
+    img = np.random.default_rng(4).random(shape).astype(dtype)
+    img[:16, :16] = 0.25  # flat blocks: extremes equal
+    luma, lo, hi = luminance_and_block_extremes(img, 3)
+    ref = luminance(img)
+    rlo, rhi = (e[..., 0] for e in pyramids.channel_block_extremes(ref[..., None], 3))
+    assert luma.dtype == ref.dtype and lo.shape == (-(-shape[0] // 8), -(-shape[1] // 8))
+    for got, want in ((luma, ref), (lo, rlo), (hi, rhi)):
+        assert np.array_equal(got, want) and got.dtype == want.dtype
+    assert lo[0, 0] == hi[0, 0] and (lo <= hi).all()
