@@ -347,13 +347,18 @@ def encode(
 @numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
 def _luma_into(rgb, weights, out):  # pragma: no cover - compiled
     """``out = (w0 R + w1 G) + w2 B`` of an (H, W, 3) image, in its dtype, row by row."""
-    h, w = out.shape
-    w0, w1, w2 = weights[0], weights[1], weights[2]
-    for y in numba.prange(h):
-        src, dst = rgb[y].reshape(-1), out[y]  # indexed from 0: the loop vectorises
-        for x in range(w):
-            dst[x] = (w0 * src[3 * x] + w1 * src[3 * x + 1]) + w2 * src[3 * x + 2]
+    for y in numba.prange(out.shape[0]):
+        _luma_row(rgb, weights, y, out)
     return out
+
+
+@numba.njit(cache=True, inline="always", fastmath=FASTMATH, nogil=True)
+def _luma_row(rgb, weights, y, out):  # pragma: no cover - compiled
+    """Row ``y`` of :func:`luminance`: ``(w0 R + w1 G) + w2 B``, in the image's dtype."""
+    w0, w1, w2 = weights[0], weights[1], weights[2]
+    src, dst = rgb[y].reshape(-1), out[y]  # indexed from 0: the loop vectorises
+    for x in range(dst.shape[0]):
+        dst[x] = (w0 * src[3 * x] + w1 * src[3 * x + 1]) + w2 * src[3 * x + 2]
 
 
 @numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
@@ -364,15 +369,13 @@ def _luma_blocks_into(rgb, weights, block, out, lo, hi):  # pragma: no cover - c
     are exact, the same numbers), not in a second pass over the frame."""
     h, w = out.shape
     bh, bw = lo.shape
-    w0, w1, w2 = weights[0], weights[1], weights[2]
     for by in numba.prange(bh):
         ya, yb = by * block, min(by * block + block, h)
         col_lo = np.empty(w, dtype=out.dtype)
         col_hi = np.empty(w, dtype=out.dtype)
         for y in range(ya, yb):
-            src, dst = rgb[y].reshape(-1), out[y]  # indexed from 0: the loops vectorise
-            for x in range(w):
-                dst[x] = (w0 * src[3 * x] + w1 * src[3 * x + 1]) + w2 * src[3 * x + 2]
+            _luma_row(rgb, weights, y, out)
+            dst = out[y]
             if y == ya:
                 for x in range(w):
                     col_lo[x] = dst[x]
