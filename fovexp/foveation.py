@@ -37,7 +37,7 @@ import numpy as np
 
 from ._parallel import interleave
 from .errors import FovexpError
-from .geometry import ARCMIN_PER_DEG, ViewingGeometry, _angle_deg, _ppd_at
+from .geometry import ARCMIN_PER_DEG, ViewingGeometry, _angle_deg32, _ppd_at
 from .jit import FASTMATH, flat_broadcast
 from .pyramids import (
     FLAT_BLOCK_LEVEL,
@@ -86,6 +86,9 @@ def _round(v, single):  # pragma: no cover - compiled
     return np.float64(np.float32(v)) if single else v
 
 
+_DEG_PER_ARCMIN = 1.0 / ARCMIN_PER_DEG
+
+
 @numba.njit(cache=True, inline="always", nogil=True, fastmath=FASTMATH)
 def _sigma_at(ecc, ppd, blur_rate, fovea, single):  # pragma: no cover - compiled
     """:func:`sigma_px` of one point, in float64. ``single``: the float32 result, each step
@@ -98,7 +101,12 @@ def _sigma_at(ecc, ppd, blur_rate, fovea, single):  # pragma: no cover - compile
     if a == a and a < 0.0:  # NaN stays NaN, as with np.maximum (and raises no warning)
         a = 0.0
     a = _round(a * _round(blur_rate, single), single)  # arcmin
-    a = _round(a / ARCMIN_PER_DEG, single)
+    # in float32, a / 60 is a times float64(1 / 60), rounded: that product is within 2**-52
+    # (relative) of the quotient, which is 2**-29 or more from every float32 rounding
+    # boundary (a / 60 = m 2**e / 15 with m < 2**24 odd: never a midpoint, and never
+    # nearer one than a fifteenth of 2**-24), so both round to the same float32; the
+    # multiplication is the loop's one division less
+    a = _round(a * _DEG_PER_ARCMIN if single else a / ARCMIN_PER_DEG, single)
     return _round(a * ppd, single)
 
 
@@ -121,11 +129,11 @@ def _exact_terms_row(ux, uy, vx, vy, d, pitch, x0, x1, ecc, ppd, ppd_row):  # pr
     if ppd_row.shape[0] > 0:
         kept = ppd_row[x0:x1]
         for i in range(cols.shape[0]):
-            ecc[i] = np.float32(_angle_deg(cols[i], uy, vx, vy, d))
+            ecc[i] = _angle_deg32(cols[i], uy, vx, vy, d)
             ppd[i] = kept[i]
         return
     for i in range(cols.shape[0]):
-        ecc[i] = np.float32(_angle_deg(cols[i], uy, vx, vy, d))
+        ecc[i] = _angle_deg32(cols[i], uy, vx, vy, d)
         ppd[i] = np.float32(_ppd_at(cols[i], uy, d, pitch))
 
 
@@ -195,14 +203,15 @@ def sigma_bound_px(
     """An upper bound of :func:`sigma_px` over the image without evaluating the map: sigma
     grows with eccentricity and ppd, each largest at a corner
     (:meth:`~fovexp.geometry.ViewingGeometry.max_eccentricity_and_ppd`). The margins cover
-    the map's float32 rounding: four float32 steps of the eccentricity (which matter where
-    the largest eccentricity is just past the fovea: e - fovea is then a few steps), a
+    the map's float32 arithmetic: eight float32 steps of the eccentricity (its float32
+    angle is within five, :func:`fovexp.geometry._angle_deg32`; they matter where the
+    largest eccentricity is just past the fovea: e - fovea is then a few steps), a
     relative 1e-4 for the products and 1e-3 px, which also cover a GPU's less exact
     trigonometry (its map is not read back). The blur stack and the contrast's boxes are
     sized by it (both backends), so that the map need not be evaluated where the image is
     flat; a bound a little high only makes them reach a little farther."""
     ecc, ppd = geom.max_eccentricity_and_ppd(gaze_px)
-    ecc += 4.0 * float(np.spacing(np.float32(ecc)))
+    ecc += 8.0 * float(np.spacing(np.float32(ecc)))
     bound = float(sigma_px(np.float64(ecc), np.float64(ppd), blur_rate, fovea_deg, np.float64))
     return bound * (1.0 + 1e-4) + 1e-3
 
