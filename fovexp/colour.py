@@ -79,6 +79,11 @@ def _pow01(v, p):  # pragma: no cover - compiled
     return poly * two_n if v > 0.0 else 0.0
 
 
+#: :func:`_transfer_runs`' ``bits`` when no maximum is asked for.
+_NO_BITS = np.zeros(0, np.uint32)
+#: The largest float32 bit pattern of a value in [+0, 1]: 1.0's. -0.0 (0x80000000), the
+#: negatives, infinities and NaNs are all above it as unsigned integers.
+ONE_F32_BITS = 0x3F800000
 #: Values per run of :func:`_transfer_runs`: 256 RGB pixels (long enough that the power's
 #: loop keeps its vector speed).
 _RUN = 768
@@ -87,21 +92,30 @@ _PERIOD = 3
 
 
 @numba.njit(cache=True, inline="always", fastmath=FASTMATH, nogil=True)
-def _transfer_runs(src, dst, p, offset, inverse):  # pragma: no cover - compiled
+def _transfer_runs(src, dst, p, offset, inverse, bits):  # pragma: no cover - compiled
     """``dst = T(src)`` of flat float32 runs: :func:`linearize`'s ``((v + offset) / (1 +
     offset)) ** p``, or with ``inverse`` :func:`encode`'s ``v ** p`` then the offset and a
     clip. A run of :data:`_RUN` values that repeats the :data:`_PERIOD` before it value for
     value (a flat region: grey, or one colour) copies their results, the same numbers (a
     value's result depends on the value alone); the others go through the power (it
-    vectorises). A flat region then costs a comparison and a copy, not the power."""
+    vectorises). A flat region then costs a comparison and a copy, not the power.
+
+    ``bits``: ``src`` viewed as uint32, or empty; the largest of them is returned (0 when
+    empty), taken run by run while the run is in the cache (:func:`linearize`'s
+    ``checked``)."""
     n = src.shape[0]
     lo, hi = np.float32(0.0), np.float32(1.0)
     scale = np.float32(1.0 / (1.0 + offset))
     gain, off = np.float32(1.0 + offset), np.float32(offset)
+    top = np.uint32(0)
     s = 0
     repeated = False  # whether the run before this one repeated its period
     while s < n:
         e = min(n, s + _RUN)
+        if bits.shape[0] > 0:
+            run_bits = bits[s:e]
+            for i in range(e - s):  # an integer maximum: it vectorises
+                top = max(top, run_bits[i])
         repeats = s >= _PERIOD
         if repeats:
             now, before = src[s:e], src[s - _PERIOD:e - _PERIOD]
@@ -131,15 +145,17 @@ def _transfer_runs(src, dst, p, offset, inverse):  # pragma: no cover - compiled
                 run_out[i] = v
         repeated = repeats
         s = e
+    return top
 
 
 @numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
-def _linearize_into(encoded, p, offset, out):  # pragma: no cover - compiled
+def _linearize_into(encoded, p, offset, out, bits, tops):  # pragma: no cover - compiled
     """``out = ((encoded + offset) / (1 + offset)) ** p`` of flat float32 arrays (offset 0:
     the plain power), in float32 up to the power, as NumPy computed it; in parts in
-    parallel, each in runs (:func:`_transfer_runs`)."""
+    parallel, each in runs (:func:`_transfer_runs`; ``bits``, ``encoded`` as uint32 or
+    empty: each part's largest into ``tops``, one per part)."""
     n = encoded.size
-    parts = 64  # no reductions: the thread count does not change a value
+    parts = tops.shape[0]  # no reductions: the thread count does not change a value
     # each thread's parts spread over the frame: a textured region costs the power, a flat
     # one a copy, and a thread given one half of a half-flat frame waited for the other
     stride = interleave(parts)
@@ -148,8 +164,35 @@ def _linearize_into(encoded, p, offset, out):  # pragma: no cover - compiled
         # slices indexed from 0 (an index of unknown sign keeps a loop scalar: fovexp/gabor.py)
         src = encoded[n * k // parts:n * (k + 1) // parts]
         dst = out[n * k // parts:n * (k + 1) // parts]
-        _transfer_runs(src, dst, p, offset, False)
+        part_bits = bits[n * k // parts:n * (k + 1) // parts] if bits.shape[0] > 0 else bits
+        tops[k] = _transfer_runs(src, dst, p, offset, False, part_bits)
     return out
+
+
+def linearize_checked(
+    encoded: np.ndarray, gamma: float, transfer: str = "power",
+) -> np.ndarray | None:
+    """:func:`linearize` of a float32 array, in the pass that also tells whether every value
+    is in [+0, 1] (finite, not NaN, not -0.0): the largest of the values' bit patterns as
+    unsigned integers, :data:`ONE_F32_BITS` or less. The linear image when they are all
+    there, else None: the caller's own check then says what is wrong (or accepts -0.0). An
+    image check and the linearisation had read the frame twice."""
+    src = np.ascontiguousarray(encoded, dtype=np.float32)
+    out = np.empty(src.shape, np.float32)
+    tops = np.empty(_LINEAR_PARTS, np.uint32)
+    flat = src.reshape(-1)
+    _linearize_into(flat, np.float64(np.float32(gamma)), _offset(transfer), out.reshape(-1),
+                    flat.view(np.uint32), tops)
+    return out if int(tops.max()) <= ONE_F32_BITS else None
+
+
+def _offset(transfer: str) -> float:
+    return _RELEASE_OFFSET if transfer == "release" else 0.0
+
+
+#: The parts :func:`_linearize_into` splits a frame into (a constant: the thread count does
+#: not change a value).
+_LINEAR_PARTS = 64
 
 
 def linearize(
@@ -163,11 +206,11 @@ def linearize(
     """
     scalar = np.dtype(dtype).type
     src = np.ascontiguousarray(encoded, dtype=dtype)
-    offset = _RELEASE_OFFSET if transfer == "release" else 0.0
+    offset = _offset(transfer)
     if scalar is np.float32:
         out = np.empty(src.shape, np.float32)
         _linearize_into(src.reshape(-1), np.float64(np.float32(gamma)), offset,
-                        out.reshape(-1))
+                        out.reshape(-1), _NO_BITS, np.empty(_LINEAR_PARTS, np.uint32))
         return out
     if transfer != "release":  # straight from the input: no copy
         return power(src, scalar(gamma))
@@ -219,7 +262,7 @@ def _encode_kept(src, g, kept, w, c, p, offset, clipped, row):  # pragma: no cov
             for x in range(e - s):
                 for ch in range(c):
                     clip[x * c + ch] = min(max(lin[x * c + ch] + gs[x], lo), hi)
-            _transfer_runs(clip, out, p, offset, True)
+            _transfer_runs(clip, out, p, offset, True, _NO_BITS)
             for x in range(e - s):
                 if gs[x] == 0.0:
                     for ch in range(c):
@@ -268,7 +311,7 @@ def _encode_into(img, a, b, n_grey, p, offset, kept, out):  # pragma: no cover -
             _add_clip_row(img[y].reshape(-1), a, b, y, w, 3, n_grey, clipped)
         else:
             _add_clip_row(img[y].reshape(-1), a, b, y, w, c, n_grey, clipped)
-        _transfer_runs(clipped, out[y].reshape(-1), p, offset, True)
+        _transfer_runs(clipped, out[y].reshape(-1), p, offset, True, _NO_BITS)
     return out
 
 

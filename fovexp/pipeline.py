@@ -116,6 +116,14 @@ def _finite_range(flat: np.ndarray) -> tuple[int, float, float]:
 def check_image(image: np.ndarray, what: str = "image", dtype: type = np.float32) -> np.ndarray:
     """Validate a display-encoded float image: (H, W) or (H, W, 3), finite, in [0, 1];
     returned as ``dtype``."""
+    a = _image_array(image, what)
+    _check_values(a, what)
+    return a.astype(dtype, copy=False)
+
+
+def _image_array(image: np.ndarray, what: str) -> np.ndarray:
+    """:func:`check_image`'s checks of the shape and the type: the array, (H, W, 1) as
+    (H, W)."""
     a = np.asarray(image)
     if a.ndim == 3 and a.shape[2] == 1:
         a = a[..., 0]
@@ -129,6 +137,11 @@ def check_image(image: np.ndarray, what: str = "image", dtype: type = np.float32
         raise FovexpError(f"{what} is {a.shape[1]}x{a.shape[0]} px: at least 16x16 is needed")
     if not np.issubdtype(a.dtype, np.floating):
         raise FovexpError(f"{what} must be a float array in [0, 1], got dtype {a.dtype}")
+    return a
+
+
+def _check_values(a: np.ndarray, what: str) -> None:
+    """:func:`check_image`'s check of the values: finite, in [0, 1]."""
     if a.flags.c_contiguous and a.size:
         n_bad, lo, hi = _finite_range(a.reshape(-1))
     else:  # another float type, or a strided view: NumPy's passes
@@ -140,7 +153,6 @@ def check_image(image: np.ndarray, what: str = "image", dtype: type = np.float32
         raise FovexpError(f"{what} has {int(n_bad)} NaN/Inf values (first at x={x}, y={y})")
     if lo < 0.0 or hi > 1.0:
         raise FovexpError(f"{what} values must lie in [0, 1], found [{lo:.4g}, {hi:.4g}]")
-    return a.astype(dtype, copy=False)
 
 
 class _StageCache:
@@ -154,6 +166,7 @@ class _StageCache:
         self._inputs: dict[str, Any] = {}
         self._values: dict[str, Any] = {}
         self.timings_s: dict[str, float] = {}
+        self._provided_s: dict[str, float] = {}  # :meth:`provide`'s times, not yet reported
         self._nested_s = 0.0  # time spent in stages pulled by the stage being computed
         #: what the stages are timed with (seconds); the GPU backend's profiler sets a clock
         #: that advances by the GPU time of each dispatch
@@ -194,6 +207,18 @@ class _StageCache:
 
     def cached(self, name: str) -> bool:
         return name in self._values
+
+    def provide(self, name: str, value: Any, elapsed_s: float) -> None:
+        """Set stage ``name``'s value, computed elsewhere from the current inputs (its
+        dependencies' values are the caller's to keep true), and its time, which the next
+        :meth:`start_timing` reports as the stage's."""
+        self._values[name] = value
+        self._provided_s[name] = elapsed_s
+
+    def start_timing(self) -> None:
+        """Start a frame's timings: the stages provided since the last frame with theirs."""
+        self.timings_s = dict(self._provided_s)
+        self._provided_s.clear()
 
     def has_input(self, name: str) -> bool:
         return name in self._inputs
@@ -477,8 +502,14 @@ class Enhancer:
         of a full-screen frame (the gaze stays in the frame's normalised coordinates): the
         experiment runner enhances just the processed half of its split screen this way.
         """
-        colour, alpha = split_alpha(image)
-        img = check_image(colour, dtype=self._dtype)
+        colour_in, alpha = split_alpha(image)
+        img = _image_array(colour_in, "image")
+        t0 = time.perf_counter()
+        linear = self._linear_checked(img)
+        linear_s = time.perf_counter() - t0
+        if linear is None:
+            _check_values(img, "image")
+        img = img.astype(self._dtype, copy=False)
         if alpha is not None:
             alpha = check_image(alpha, "alpha channel")
         sigma_given = None
@@ -499,6 +530,8 @@ class Enhancer:
                                       viewport)  # validates it
         self._c.set(image=img, shape=img.shape[:2], sigma_given=sigma_given, viewport=viewport,
                     already_foveated=bool(foveated or sigma_px is not None))
+        if linear is not None and not self._c.cached("linear"):
+            self._c.provide("linear", linear, linear_s)
         self._alpha = alpha  # no stage depends on it
         self._version += 1
 
@@ -527,7 +560,7 @@ class Enhancer:
             )
         gaze_t = (float(gaze[0]), float(gaze[1]))
         self._c.get("geometry").gaze_px(gaze_t)  # validates the gaze
-        self._c.timings_s = {}
+        self._c.start_timing()
         self._c.set(
             gaze=gaze_t, blur_rate=params.blur_rate, f_e=params.f_e, s_k=params.s_k,
             s_f=params.s_f, n_impulses=params.impulses, seed=params.seed, method=params.method,
@@ -548,6 +581,17 @@ class Enhancer:
 
     def _linear(self, image: np.ndarray) -> np.ndarray:
         return colour.linearize(image, self._gamma(), self.preset.transfer, self._dtype)
+
+    def _linear_checked(self, image: np.ndarray) -> np.ndarray | None:
+        """The ``linear`` stage of a frame being set, taken in the pass that checks its
+        values (:func:`fovexp.colour.linearize_checked`; the same numbers as :meth:`_linear`);
+        None where the values need :func:`check_image`'s own check (one out of [+0, 1]) or
+        the frame is not float32 in one block for a float32 engine. The GPU backend
+        linearises on the GPU: None."""
+        if (self._dtype != np.float32 or image.dtype != np.float32
+                or not image.flags.c_contiguous or not image.size):
+            return None
+        return colour.linearize_checked(image, self._gamma(), self.preset.transfer)
 
     def _encode(self, linear: np.ndarray) -> np.ndarray:
         return colour.encode(linear, self._gamma(), self.preset.transfer)

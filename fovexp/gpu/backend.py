@@ -244,6 +244,9 @@ class GpuEnhancer(Enhancer):
 
     set_image.__doc__ = Enhancer.set_image.__doc__
 
+    def _linear_checked(self, image: np.ndarray) -> np.ndarray | None:
+        return None  # linearised on the GPU (the "linear" stage): the values checked apart
+
     def enhance(self, *args: Any, **kwargs: Any) -> EnhanceResult:  # noqa: D102
         with self._current():
             if self._timer is not None:

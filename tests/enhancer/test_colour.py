@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from fovexp.colour import encode, linearize
+from fovexp.colour import encode, linearize, linearize_checked
 
 
 @pytest.mark.parametrize("transfer", ["power", "release"])
@@ -62,6 +62,28 @@ def test_linearize_is_the_transfer_function_written_out():
     assert rel.dtype == np.float64 and np.allclose(rel, ((v + 0.055) / 1.055) ** 2.2, rtol=1e-12)
     assert linearize(v, 2.2).dtype == np.float32
     assert linearize(np.float32(0.5), 1.0) == np.float32(0.5)
+
+
+@pytest.mark.parametrize("transfer,gamma", [("power", 2.2), ("power", 2.4), ("release", 2.2)])
+def test_the_checked_linearisation_is_linearize_or_none_where_a_value_is_out(transfer, gamma):
+    """linearize_checked: linearize's numbers bit for bit when every value is in [+0, 1]
+    (a textured frame with flat runs, RGB and grey, 0 and 1 themselves), None as soon as
+    one value is not: NaN, +-Inf, below 0, above 1, and -0.0 (which the caller's own check
+    accepts), wherever it is in the frame (first, last, in a flat run)."""
+    rng = np.random.default_rng(29)
+    img = rng.random((67, 301, 3), dtype=np.float32)
+    img[20:40] = np.float32(0.5)  # flat runs: copied, not raised to the power
+    img[0, 0, 0], img[1, 1, 1] = 0.0, 1.0
+    for a in (img, np.ascontiguousarray(img[..., 1])):
+        got = linearize_checked(a, gamma, transfer)
+        assert got is not None and got.dtype == np.float32
+        assert np.array_equal(got.view(np.uint32), linearize(a, gamma, transfer).view(np.uint32))
+    for bad in (np.nan, np.inf, -np.inf, -1e-30, np.nextafter(np.float32(1), np.float32(2)),
+                -0.0):
+        for where in ((0, 0, 0), (66, 300, 2), (30, 150, 1)):
+            a = img.copy()
+            a[where] = bad
+            assert linearize_checked(a, gamma, transfer) is None, (bad, where)
 
 
 def test_encode_adds_the_grey_images_clips_then_encodes():

@@ -272,6 +272,38 @@ def test_the_image_checks_parts_count_and_bound_as_numpy(dtype, size):
     assert _finite_range(a)[0] == np.count_nonzero(~np.isfinite(a))
 
 
+def test_the_frame_is_checked_and_linearised_in_one_pass(frame):
+    """set_image takes the linear stage in the pass that checks the values: the same
+    numbers as the stage computed apart (a strided view of the same frame, which the pass
+    does not take), its time reported as the linear stage's by the next enhance and not
+    again; the refusals are the check's own, and -0.0, out of the pass's range, is
+    accepted as before."""
+    enh, apart = Enhancer(LG), Enhancer(LG)
+    enh.set_image(frame)
+    assert enh._c.cached("linear")
+    h, w = frame.shape[:2]
+    wider = np.concatenate([frame, frame[:, :8]], axis=1)
+    apart.set_image(wider[:, :w])
+    assert not apart._c.cached("linear")
+    p = EnhanceParams(blur_rate=0.34, impulses=12)
+    res = enh.enhance((0.4, 0.6), p)
+    assert res.timings_s["linear"] > 0.0
+    assert "linear" not in enh.enhance((0.4, 0.6), p).timings_s
+    assert np.array_equal(enh._c.get("linear").view(np.uint32),
+                          apart._c.get("linear").view(np.uint32))
+    assert np.array_equal(res.output, apart.enhance((0.4, 0.6), p).output)
+    for bad, message in ((np.nan, r"1 NaN/Inf values \(first at x=5, y=3\)"),
+                         (1.5, r"found \[0(\.\d+)?, 1.5\]")):
+        a = frame.copy()
+        a[3, 5, 1] = bad
+        with pytest.raises(FovexpError, match=message):
+            enh.set_image(a)
+    a = frame.copy()
+    a[3, 5, 1] = -0.0
+    enh.set_image(a)  # accepted by the check's own pass (-0.0 is in [0, 1])
+    assert not enh._c.cached("linear") and enh._c.get("linear")[3, 5, 1] == 0.0
+
+
 def test_a_strided_view_is_checked_as_its_values(frame):
     """A view the one pass cannot take (rows with a stride) is checked by NumPy: the same
     refusals."""
