@@ -405,18 +405,27 @@ def _luma_row(rgb, weights, y, out):  # pragma: no cover - compiled
 
 
 @numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
-def _luma_blocks_into(rgb, weights, block, out, lo, hi):  # pragma: no cover - compiled
+def _luma_blocks_into(rgb, weights, block, out, lo, hi, encoded, p, offset, bits, tops):
+    # pragma: no cover - compiled
     """:func:`_luma_into` block row by block row, with each ``block`` square's extremes of
     the luminance taken as its rows are written (down the block row's columns, then along
     each block, as :func:`fovexp.pyramids.channel_block_extremes` takes them: min and max
-    are exact, the same numbers), not in a second pass over the frame."""
+    are exact, the same numbers), not in a second pass over the frame. With ``encoded``
+    (shape (H, W * 3); else empty), each row of ``rgb`` is first its linearisation
+    (:func:`_linearize_into`'s numbers) and ``tops[by]`` the largest of the block row's
+    ``bits`` (``encoded`` as uint32): the row is read once for the three."""
     h, w = out.shape
     bh, bw = lo.shape
+    linearise = encoded.shape[0] > 0
     for by in numba.prange(bh):
         ya, yb = by * block, min(by * block + block, h)
         col_lo = np.empty(w, dtype=out.dtype)
         col_hi = np.empty(w, dtype=out.dtype)
+        top = np.uint32(0)
         for y in range(ya, yb):
+            if linearise:
+                top = max(top, _transfer_runs(encoded[y], rgb[y].reshape(-1), p, offset,
+                                              False, bits[y]))
             _luma_row(rgb, weights, y, out)
             dst = out[y]
             if y == ya:
@@ -435,6 +444,8 @@ def _luma_blocks_into(rgb, weights, block, out, lo, hi):  # pragma: no cover - c
                 mx = max(mx, col_hi[x])
             lo[by, bx] = mn
             hi[by, bx] = mx
+        if linearise:
+            tops[by] = top
 
 
 def luminance_and_block_extremes(
@@ -456,8 +467,36 @@ def luminance_and_block_extremes(
     grid = (-(-h // block), -(-w // block))
     luma = np.empty((h, w), np.float32)
     lo, hi = np.empty(grid, np.float32), np.empty(grid, np.float32)
-    _luma_blocks_into(rgb, LUMA_BT601, block, luma, lo, hi)
+    none = np.zeros((0, 0), np.float32)
+    _luma_blocks_into(rgb, LUMA_BT601, block, luma, lo, hi, none, 0.0, 0.0, none.view(np.uint32),
+                      np.zeros(0, np.uint32))
     return luma, lo, hi
+
+
+def linearize_luminance_checked(
+    encoded: np.ndarray, gamma: float, transfer: str, level: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    """:func:`linearize_checked` of a float32 (H, W, 3) image and, in the same pass,
+    :func:`luminance_and_block_extremes` of the result: ``(linear, luma, lo, hi)``, the same
+    numbers as the three apart, when every value is in [+0, 1]; else None. An
+    already-foveated frame's luminance is its linearisation's: each row is read once."""
+    src = np.ascontiguousarray(encoded, dtype=np.float32)
+    if src.ndim != 3 or src.shape[2] != 3:
+        raise ValueError(f"an (H, W, 3) image, not {src.shape}")
+    h, w = src.shape[:2]
+    block = level_scale(level)
+    grid = (-(-h // block), -(-w // block))
+    linear = np.empty(src.shape, np.float32)
+    luma = np.empty((h, w), np.float32)
+    lo, hi = np.empty(grid, np.float32), np.empty(grid, np.float32)
+    tops = np.empty(grid[0], np.uint32)
+    rows = src.reshape(h, w * 3)
+    _luma_blocks_into(linear, LUMA_BT601, block, luma, lo, hi, rows,
+                      np.float64(np.float32(gamma)), _offset(transfer), rows.view(np.uint32),
+                      tops)
+    if int(tops.max()) > ONE_F32_BITS:
+        return None
+    return linear, luma, lo, hi
 
 
 def luminance(linear: np.ndarray) -> np.ndarray:

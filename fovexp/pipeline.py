@@ -504,10 +504,11 @@ class Enhancer:
         """
         colour_in, alpha = split_alpha(image)
         img = _image_array(colour_in, "image")
+        already_foveated = bool(foveated or sigma_px is not None)
         t0 = time.perf_counter()
-        linear = self._linear_checked(img)
-        linear_s = time.perf_counter() - t0
-        if linear is None:
+        provided = self._checked_stages(img, already_foveated)
+        provided_s = time.perf_counter() - t0
+        if provided is None:
             _check_values(img, "image")
         img = img.astype(self._dtype, copy=False)
         if alpha is not None:
@@ -529,9 +530,10 @@ class Enhancer:
             ViewingGeometry.for_image(self.display, img.shape[1], img.shape[0], "exact",
                                       viewport)  # validates it
         self._c.set(image=img, shape=img.shape[:2], sigma_given=sigma_given, viewport=viewport,
-                    already_foveated=bool(foveated or sigma_px is not None))
-        if linear is not None and not self._c.cached("linear"):
-            self._c.provide("linear", linear, linear_s)
+                    already_foveated=already_foveated)
+        if provided is not None and not self._c.cached("linear"):  # a new frame
+            for name, value in provided.items():  # the pass's time is the linear stage's
+                self._c.provide(name, value, provided_s if name == "linear" else 0.0)
         self._alpha = alpha  # no stage depends on it
         self._version += 1
 
@@ -582,16 +584,27 @@ class Enhancer:
     def _linear(self, image: np.ndarray) -> np.ndarray:
         return colour.linearize(image, self._gamma(), self.preset.transfer, self._dtype)
 
-    def _linear_checked(self, image: np.ndarray) -> np.ndarray | None:
-        """The ``linear`` stage of a frame being set, taken in the pass that checks its
-        values (:func:`fovexp.colour.linearize_checked`; the same numbers as :meth:`_linear`);
-        None where the values need :func:`check_image`'s own check (one out of [+0, 1]) or
-        the frame is not float32 in one block for a float32 engine. The GPU backend
-        linearises on the GPU: None."""
+    def _checked_stages(self, image: np.ndarray, already_foveated: bool) -> dict[str, Any] | None:
+        """The stages of a frame being set that are taken in the pass that checks its values,
+        the same numbers as the stages compute: ``linear``
+        (:func:`fovexp.colour.linearize_checked`) and, of an already-foveated RGB frame
+        (whose luminance is its linearisation's), ``luma_and_blocks`` too
+        (:func:`fovexp.colour.linearize_luminance_checked`). None where the values need
+        :func:`check_image`'s own check (one out of [+0, 1]) or the frame is not float32 in
+        one block for a float32 engine. The GPU backend linearises on the GPU: None."""
         if (self._dtype != np.float32 or image.dtype != np.float32
                 or not image.flags.c_contiguous or not image.size):
             return None
-        return colour.linearize_checked(image, self._gamma(), self.preset.transfer)
+        gamma, transfer = self._gamma(), self.preset.transfer
+        if not already_foveated or image.ndim != 3:
+            linear = colour.linearize_checked(image, gamma, transfer)
+            return None if linear is None else {"linear": linear}
+        taken = colour.linearize_luminance_checked(image, gamma, transfer, FLAT_BLOCK_LEVEL)
+        if taken is None:
+            return None
+        linear, luma, lo, hi = taken
+        return {"linear": linear,
+                "luma_and_blocks": (luma, (lo, hi) if self.options.skip else None)}
 
     def _encode(self, linear: np.ndarray) -> np.ndarray:
         return colour.encode(linear, self._gamma(), self.preset.transfer)

@@ -244,7 +244,7 @@ class GpuEnhancer(Enhancer):
 
     set_image.__doc__ = Enhancer.set_image.__doc__
 
-    def _linear_checked(self, image: np.ndarray) -> np.ndarray | None:
+    def _checked_stages(self, image: np.ndarray, already_foveated: bool) -> None:
         return None  # linearised on the GPU (the "linear" stage): the values checked apart
 
     def enhance(self, *args: Any, **kwargs: Any) -> EnhanceResult:  # noqa: D102

@@ -3,7 +3,13 @@
 import numpy as np
 import pytest
 
-from fovexp.colour import encode, linearize, linearize_checked
+from fovexp.colour import (
+    encode,
+    linearize,
+    linearize_checked,
+    linearize_luminance_checked,
+    luminance_and_block_extremes,
+)
 
 
 @pytest.mark.parametrize("transfer", ["power", "release"])
@@ -78,12 +84,19 @@ def test_the_checked_linearisation_is_linearize_or_none_where_a_value_is_out(tra
         got = linearize_checked(a, gamma, transfer)
         assert got is not None and got.dtype == np.float32
         assert np.array_equal(got.view(np.uint32), linearize(a, gamma, transfer).view(np.uint32))
+    # with the luminance and its level-3 block extremes (partial blocks at both edges)
+    lin = linearize(img, gamma, transfer)
+    taken = linearize_luminance_checked(img, gamma, transfer, 3)
+    assert taken is not None
+    for got, want in zip(taken, (lin, *luminance_and_block_extremes(lin, 3)), strict=True):
+        assert np.array_equal(got.view(np.uint32), want.view(np.uint32))
     for bad in (np.nan, np.inf, -np.inf, -1e-30, np.nextafter(np.float32(1), np.float32(2)),
                 -0.0):
         for where in ((0, 0, 0), (66, 300, 2), (30, 150, 1)):
             a = img.copy()
             a[where] = bad
             assert linearize_checked(a, gamma, transfer) is None, (bad, where)
+            assert linearize_luminance_checked(a, gamma, transfer, 3) is None, (bad, where)
 
 
 def test_encode_adds_the_grey_images_clips_then_encodes():

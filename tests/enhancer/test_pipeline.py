@@ -272,25 +272,34 @@ def test_the_image_checks_parts_count_and_bound_as_numpy(dtype, size):
     assert _finite_range(a)[0] == np.count_nonzero(~np.isfinite(a))
 
 
-def test_the_frame_is_checked_and_linearised_in_one_pass(frame):
-    """set_image takes the linear stage in the pass that checks the values: the same
-    numbers as the stage computed apart (a strided view of the same frame, which the pass
-    does not take), its time reported as the linear stage's by the next enhance and not
+@pytest.mark.parametrize("foveated", [False, True])
+def test_the_frame_is_checked_and_linearised_in_one_pass(frame, foveated):
+    """set_image takes the linear stage in the pass that checks the values, and of an
+    already-foveated frame the luminance and its block extremes too: the same numbers as
+    the stages computed apart (a strided view of the same frame, which the pass does not
+    take), the pass's time reported as the linear stage's by the next enhance and not
     again; the refusals are the check's own, and -0.0, out of the pass's range, is
     accepted as before."""
     enh, apart = Enhancer(LG), Enhancer(LG)
-    enh.set_image(frame)
-    assert enh._c.cached("linear")
+    enh.set_image(frame, foveated=foveated)
+    taken = ("linear", "luma_and_blocks") if foveated else ("linear",)
+    assert [enh._c.cached(n) for n in ("linear", "luma_and_blocks")] == [True, foveated]
     h, w = frame.shape[:2]
     wider = np.concatenate([frame, frame[:, :8]], axis=1)
-    apart.set_image(wider[:, :w])
+    apart.set_image(wider[:, :w], foveated=foveated)
     assert not apart._c.cached("linear")
     p = EnhanceParams(blur_rate=0.34, impulses=12)
     res = enh.enhance((0.4, 0.6), p)
     assert res.timings_s["linear"] > 0.0
     assert "linear" not in enh.enhance((0.4, 0.6), p).timings_s
-    assert np.array_equal(enh._c.get("linear").view(np.uint32),
-                          apart._c.get("linear").view(np.uint32))
+    for name in taken:
+        got, want = enh._c.get(name), apart._c.get(name)
+        if name == "luma_and_blocks":
+            got, want = (got[0], *got[1]), (want[0], *want[1])
+        else:
+            got, want = (got,), (want,)
+        for g, v in zip(got, want, strict=True):
+            assert np.array_equal(g.view(np.uint32), v.view(np.uint32)), name
     assert np.array_equal(res.output, apart.enhance((0.4, 0.6), p).output)
     for bad, message in ((np.nan, r"1 NaN/Inf values \(first at x=5, y=3\)"),
                          (1.5, r"found \[0(\.\d+)?, 1.5\]")):
