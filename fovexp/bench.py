@@ -549,6 +549,8 @@ def _errors(job: Job, res: Any) -> dict[str, Any]:
 #: taps' arithmetic at the measured FP32 rate (:func:`noise_taps`). Stages left out work per
 #: impulse or on grids of 1/64 of the frame and less.
 CPU_TRAFFIC_PLANES: dict[str, tuple[float, float, str]] = {
+    # set_image's pass, which also checks the values and, of an already-foveated RGB frame,
+    # takes luma_and_blocks (its plane out is then under this stage's time, not its floor)
     "linear": (3, 3, "the frame in, linear light out"),
     "foveated": (3, 3, "linear light in, the foveated frame out"),
     "luma_and_blocks": (3, 1, "RGB in, luminance out (and its 8 x 8 block extremes)"),

@@ -188,8 +188,8 @@ def sigma_on_blocks(
         raise ValueError(f"ppd_map must be float32 of shape {geom.shape}")
     if need is None:
         need, shift = np.ones((1, 1), np.bool_), 62  # one block: the whole frame
-    if out is None:
-        out = np.zeros(geom.shape, np.float32)
+    if out is None:  # every pixel written when every block is asked for (fresh zeros cost)
+        out = (np.empty if need.all() else np.zeros)(geom.shape, np.float32)
     ux, uy, vx, vy, d, pitch = geom.exact_terms(gaze_px)
     _exact_sigma_blocks(ux, uy, vx, vy, d, pitch, float(blur_rate) + 0.0, float(fovea_deg),
                         np.ascontiguousarray(need, dtype=np.bool_), int(shift),

@@ -335,7 +335,10 @@ class _SigmaBlocks:
         """The map, evaluated (at least) on the ``2**shift`` px blocks ``need`` marks; 0 where
         nothing asked for it yet."""
         if shift != self._shift or self.done.shape != need.shape:
-            self._sigma = np.zeros(self._geom.shape, np.float32)
+            # every block asked for at once (a frame with no flat block) writes every pixel
+            # below: an empty map takes pages kept from the last frame (fovexp.memory), where
+            # zeros (left untouched where no block is asked for) take fresh ones, 5 ms at 4K
+            self._sigma = (np.empty if need.all() else np.zeros)(self._geom.shape, np.float32)
             self.done, self._shift = np.zeros(need.shape, np.bool_), shift
         todo = need & ~self.done
         if todo.any():

@@ -143,6 +143,12 @@ def test_the_sigma_map_of_some_blocks_is_the_whole_maps_there(viewport):
         assert np.array_equal(got[px].view(np.uint32), full[px].view(np.uint32))
         assert np.array_equal(sigma_on_blocks(g, gaze, rate, fovea).view(np.uint32),
                               full.view(np.uint32))
+        # every block asked for writes every pixel (partial edge blocks too): the map may
+        # start empty then (sigma_on_blocks' own, _SigmaBlocks')
+        out = np.full((h, w), np.nan, np.float32)
+        every = np.ones_like(need)
+        got = sigma_on_blocks(g, gaze, rate, fovea, every, 3, out)
+        assert np.array_equal(got.view(np.uint32), full.view(np.uint32))
         # the geometry's px/deg map (gaze-free, kept by the enhancer) is the grids', and
         # the map read from it is the same map
         kept = g.ppd_map()
