@@ -101,8 +101,7 @@ def _transfer_runs(src, dst, p, offset, inverse, bits):  # pragma: no cover - co
     vectorises). A flat region then costs a comparison and a copy, not the power.
 
     ``bits``: ``src`` viewed as uint32, or empty; the largest of them is returned (0 when
-    empty), taken run by run while the run is in the cache (:func:`linearize`'s
-    ``checked``)."""
+    empty), taken run by run while the run is in the cache (:func:`linearize_checked`)."""
     n = src.shape[0]
     lo, hi = np.float32(0.0), np.float32(1.0)
     scale = np.float32(1.0 / (1.0 + offset))

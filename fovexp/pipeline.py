@@ -167,6 +167,7 @@ class _StageCache:
         self._values: dict[str, Any] = {}
         self.timings_s: dict[str, float] = {}
         self._provided_s: dict[str, float] = {}  # :meth:`provide`'s times, not yet reported
+        self._provided_from: dict[str, tuple[str, ...]] = {}  # provided stages' inputs
         self._nested_s = 0.0  # time spent in stages pulled by the stage being computed
         #: what the stages are timed with (seconds); the GPU backend's profiler sets a clock
         #: that advances by the GPU time of each dispatch
@@ -184,8 +185,10 @@ class _StageCache:
 
     def _invalidate(self, name: str) -> None:
         for stage, (deps, _) in self._fns.items():
-            if (name in deps or f"?{name}" in deps) and stage in self._values:
+            if ((name in deps or f"?{name}" in deps or name in self._provided_from.get(stage, ()))
+                    and stage in self._values):
                 del self._values[stage]
+                self._provided_from.pop(stage, None)
                 self._invalidate(stage)
 
     def get(self, name: str) -> Any:
@@ -199,6 +202,7 @@ class _StageCache:
             outer, self._nested_s = self._nested_s, 0.0
             t0 = self.clock()
             self._values[name] = fn(*args)
+            self._provided_from.pop(name, None)
             elapsed = self.clock() - t0
             # a stage's own time excludes the stages it pulled lazily ("?name" dependencies)
             self.timings_s[name] = self.timings_s.get(name, 0.0) + elapsed - self._nested_s
@@ -208,12 +212,16 @@ class _StageCache:
     def cached(self, name: str) -> bool:
         return name in self._values
 
-    def provide(self, name: str, value: Any, elapsed_s: float) -> None:
-        """Set stage ``name``'s value, computed elsewhere from the current inputs (its
-        dependencies' values are the caller's to keep true), and its time, which the next
-        :meth:`start_timing` reports as the stage's."""
+    def provide(self, name: str, value: Any, elapsed_s: float, inputs: tuple[str, ...]) -> None:
+        """Set stage ``name``'s value, computed elsewhere from the current ``inputs``, and its
+        time, which the next :meth:`start_timing` reports as the stage's. Its stage
+        dependencies need not be cached: setting one of ``inputs`` drops it (an
+        already-foveated frame's luminance, provided with its linearisation, is kept when
+        the gaze changes the ``foveated`` stage it would be computed from, and dropped when
+        the frame or its ``already_foveated`` changes)."""
         self._values[name] = value
         self._provided_s[name] = elapsed_s
+        self._provided_from[name] = inputs
 
     def start_timing(self) -> None:
         """Start a frame's timings: the stages provided since the last frame with theirs."""
@@ -227,6 +235,7 @@ class _StageCache:
         """Forget every input and stage value (what the stages hold is released with them)."""
         self._inputs.clear()
         self._values.clear()
+        self._provided_from.clear()
 
 
 _MISSING = object()
@@ -536,7 +545,8 @@ class Enhancer:
                     already_foveated=already_foveated)
         if provided is not None and not self._c.cached("linear"):  # a new frame
             for name, value in provided.items():  # the pass's time is the linear stage's
-                self._c.provide(name, value, provided_s if name == "linear" else 0.0)
+                self._c.provide(name, value, provided_s if name == "linear" else 0.0,
+                                ("image", "already_foveated"))
         self._alpha = alpha  # no stage depends on it
         self._version += 1
 

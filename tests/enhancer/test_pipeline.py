@@ -301,6 +301,14 @@ def test_the_frame_is_checked_and_linearised_in_one_pass(frame, foveated):
         for g, v in zip(got, want, strict=True):
             assert np.array_equal(g.view(np.uint32), v.view(np.uint32)), name
     assert np.array_equal(res.output, apart.enhance((0.4, 0.6), p).output)
+    # the same array set again as the other kind of frame, before any enhance: what the
+    # pass provided for the first kind is dropped, not used
+    again, fresh = Enhancer(LG), Enhancer(LG)
+    again.set_image(frame, foveated=foveated)
+    again.set_image(frame, foveated=not foveated)
+    fresh.set_image(wider[:, :w], foveated=not foveated)
+    assert np.array_equal(again.enhance((0.4, 0.6), p).output,
+                          fresh.enhance((0.4, 0.6), p).output)
     for bad, message in ((np.nan, r"1 NaN/Inf values \(first at x=5, y=3\)"),
                          (1.5, r"found \[0(\.\d+)?, 1.5\]")):
         a = frame.copy()
