@@ -176,13 +176,21 @@ def linearize_checked(
     unsigned integers, :data:`ONE_F32_BITS` or less. The linear image when they are all
     there, else None: the caller's own check then says what is wrong (or accepts -0.0). An
     image check and the linearisation had read the frame twice."""
-    src = np.ascontiguousarray(encoded, dtype=np.float32)
+    out, top = _linearize_f32(np.ascontiguousarray(encoded, dtype=np.float32), gamma, transfer,
+                              checked=True)
+    return out if top <= ONE_F32_BITS else None
+
+
+def _linearize_f32(src: np.ndarray, gamma: float, transfer: str,
+                   checked: bool) -> tuple[np.ndarray, int]:
+    """:func:`_linearize_into` of a C-contiguous float32 array: the linear array and, when
+    ``checked``, the largest of the values' bit patterns (else 0)."""
     out = np.empty(src.shape, np.float32)
-    tops = np.empty(_LINEAR_PARTS, np.uint32)
+    tops = np.zeros(_LINEAR_PARTS, np.uint32)
     flat = src.reshape(-1)
     _linearize_into(flat, np.float64(np.float32(gamma)), _offset(transfer), out.reshape(-1),
-                    flat.view(np.uint32), tops)
-    return out if int(tops.max()) <= ONE_F32_BITS else None
+                    flat.view(np.uint32) if checked else _NO_BITS, tops)
+    return out, int(tops.max())
 
 
 def _offset(transfer: str) -> float:
@@ -205,12 +213,8 @@ def linearize(
     """
     scalar = np.dtype(dtype).type
     src = np.ascontiguousarray(encoded, dtype=dtype)
-    offset = _offset(transfer)
     if scalar is np.float32:
-        out = np.empty(src.shape, np.float32)
-        _linearize_into(src.reshape(-1), np.float64(np.float32(gamma)), offset,
-                        out.reshape(-1), _NO_BITS, np.empty(_LINEAR_PARTS, np.uint32))
-        return out
+        return _linearize_f32(src, gamma, transfer, checked=False)[0]
     if transfer != "release":  # straight from the input: no copy
         return power(src, scalar(gamma))
     out = np.array(src, dtype=dtype)  # a copy: worked on in place below
@@ -460,16 +464,29 @@ def luminance_and_block_extremes(
         luma = luminance(linear)
         lo, hi = channel_block_extremes(luma[..., None], level)
         return luma, lo[..., 0], hi[..., 0]
-    block = level_scale(level)
-    rgb = np.ascontiguousarray(rgb)
+    luma, lo, hi, _ = _luma_blocks(np.ascontiguousarray(rgb), level)
+    return luma, lo, hi
+
+
+def _luma_blocks(
+    rgb: np.ndarray, level: int, encoded: np.ndarray | None = None, gamma: float = 0.0,
+    transfer: str = "power",
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """:func:`_luma_blocks_into` of a C-contiguous float32 (H, W, 3) ``rgb``: the luminance,
+    its ``2**level`` px block extremes and, with ``encoded`` (written into ``rgb`` first, its
+    linearisation), the largest of its values' bit patterns (else 0)."""
     h, w = rgb.shape[:2]
+    block = level_scale(level)
     grid = (-(-h // block), -(-w // block))
     luma = np.empty((h, w), np.float32)
     lo, hi = np.empty(grid, np.float32), np.empty(grid, np.float32)
-    none = np.zeros((0, 0), np.float32)
-    _luma_blocks_into(rgb, LUMA_BT601, block, luma, lo, hi, none, 0.0, 0.0, none.view(np.uint32),
-                      np.zeros(0, np.uint32))
-    return luma, lo, hi
+    tops = np.zeros(grid[0], np.uint32)
+    rows = (np.zeros((0, 0), np.float32) if encoded is None
+            else encoded.reshape(h, w * 3))
+    _luma_blocks_into(rgb, LUMA_BT601, block, luma, lo, hi, rows,
+                      np.float64(np.float32(gamma)), _offset(transfer), rows.view(np.uint32),
+                      tops)
+    return luma, lo, hi, int(tops.max()) if tops.size else 0
 
 
 def linearize_luminance_checked(
@@ -482,20 +499,9 @@ def linearize_luminance_checked(
     src = np.ascontiguousarray(encoded, dtype=np.float32)
     if src.ndim != 3 or src.shape[2] != 3:
         raise ValueError(f"an (H, W, 3) image, not {src.shape}")
-    h, w = src.shape[:2]
-    block = level_scale(level)
-    grid = (-(-h // block), -(-w // block))
     linear = np.empty(src.shape, np.float32)
-    luma = np.empty((h, w), np.float32)
-    lo, hi = np.empty(grid, np.float32), np.empty(grid, np.float32)
-    tops = np.empty(grid[0], np.uint32)
-    rows = src.reshape(h, w * 3)
-    _luma_blocks_into(linear, LUMA_BT601, block, luma, lo, hi, rows,
-                      np.float64(np.float32(gamma)), _offset(transfer), rows.view(np.uint32),
-                      tops)
-    if int(tops.max()) > ONE_F32_BITS:
-        return None
-    return linear, luma, lo, hi
+    luma, lo, hi, top = _luma_blocks(linear, level, src, gamma, transfer)
+    return None if top > ONE_F32_BITS else (linear, luma, lo, hi)
 
 
 def luminance(linear: np.ndarray) -> np.ndarray:

@@ -615,9 +615,8 @@ class Enhancer:
         taken = colour.linearize_luminance_checked(image, gamma, transfer, FLAT_BLOCK_LEVEL)
         if taken is None:
             return None
-        linear, luma, lo, hi = taken
-        return {"linear": linear,
-                "luma_and_blocks": (luma, (lo, hi) if self.options.skip else None)}
+        linear, *luma_and_blocks = taken
+        return {"linear": linear, "luma_and_blocks": self._luma_value(*luma_and_blocks)}
 
     def _encode(self, linear: np.ndarray) -> np.ndarray:
         return colour.encode(linear, self._gamma(), self.preset.transfer)
@@ -650,8 +649,12 @@ class Enhancer:
         block extremes, in one pass (:func:`fovexp.colour.luminance_and_block_extremes`)."""
         if not self.options.skip:
             return colour.luminance(foveated), None
-        luma, lo, hi = colour.luminance_and_block_extremes(foveated, FLAT_BLOCK_LEVEL)
-        return luma, (lo, hi)
+        return self._luma_value(*colour.luminance_and_block_extremes(foveated, FLAT_BLOCK_LEVEL))
+
+    def _luma_value(self, luma: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple:
+        """The ``luma_and_blocks`` stage's value: the luminance and, when skipping (which
+        alone reads them), its block extremes."""
+        return luma, (lo, hi) if self.options.skip else None
 
     def _foveated(self, linear, sigma, already_foveated, sigma_blocks) -> np.ndarray:
         if already_foveated:
