@@ -89,10 +89,45 @@ ONE_F32_BITS = 0x3F800000
 _RUN = 768
 #: The period a run is compared at: one RGB pixel (a grey image's equal values repeat too).
 _PERIOD = 3
+#: The largest code of a quantised input's table (:func:`code_table`): 16 bits. An 8-bit
+#: file's k / 255 is 257 k / 65535, the same number, so one table serves both.
+_TOP_CODE = 65535
+#: :func:`_transfer_runs`' tables when there are none (the inverse transfer's).
+_NO_TABLE = np.zeros(0, np.float32)
 
 
 @numba.njit(cache=True, inline="always", fastmath=FASTMATH, nogil=True)
-def _transfer_runs(src, dst, p, offset, inverse, bits):  # pragma: no cover - compiled
+def _code(u):  # pragma: no cover - compiled
+    """The index k of the code ``k / 65535`` nearest ``u`` (0 below 0, the top above 1 and
+    for NaN, which max passes on and the comparison sends to the top): the table's entry to
+    compare ``u`` with, always inside it. Unsigned: no negative index to wrap."""
+    x = max(u * np.float32(_TOP_CODE), np.float32(0.0))
+    return np.uint32((x if x <= np.float32(_TOP_CODE) else np.float32(_TOP_CODE))
+                     + np.float32(0.5))
+
+
+@numba.njit(cache=True, inline="always", fastmath=FASTMATH, nogil=True)
+def _table_run(run_in, run_out, codes_in, codes_out):  # pragma: no cover - compiled
+    """``run_out = codes_out[k]`` where ``run_in`` is ``codes_in[k]`` exactly, for a whole
+    run; False (``run_out`` partly written) when any value is not a code. Three values are
+    tried first, so that a frame of other numbers (a renderer's) pays three look-ups per
+    run, not one per value."""
+    m = run_in.shape[0]
+    for i in (0, m // 2, m - 1):
+        if codes_in[_code(run_in[i])] != run_in[i]:
+            return False
+    misses = 0
+    for i in range(m):  # no early exit
+        u = run_in[i]
+        k = _code(u)
+        misses += codes_in[k] != u
+        run_out[i] = codes_out[k]
+    return misses == 0
+
+
+@numba.njit(cache=True, inline="always", fastmath=FASTMATH, nogil=True)
+def _transfer_runs(src, dst, p, offset, inverse, bits, codes_in, codes_out):
+    # pragma: no cover - compiled
     """``dst = T(src)`` of flat float32 runs: :func:`linearize`'s ``((v + offset) / (1 +
     offset)) ** p``, or with ``inverse`` :func:`encode`'s ``v ** p`` then the offset and a
     clip. A run of :data:`_RUN` values that repeats the :data:`_PERIOD` before it value for
@@ -101,7 +136,11 @@ def _transfer_runs(src, dst, p, offset, inverse, bits):  # pragma: no cover - co
     vectorises). A flat region then costs a comparison and a copy, not the power.
 
     ``bits``: ``src`` viewed as uint32, or empty; the largest of them is returned (0 when
-    empty), taken run by run while the run is in the cache (:func:`linearize_checked`)."""
+    empty), taken run by run while the run is in the cache (:func:`linearize_checked`).
+
+    ``codes_in``, ``codes_out``: :func:`code_table`'s (else empty): a run whose values are
+    all codes ``k / 65535`` (an 8- or 16-bit file's) takes their results from it, the same
+    numbers as the power's; any other run goes through the power."""
     n = src.shape[0]
     lo, hi = np.float32(0.0), np.float32(1.0)
     scale = np.float32(1.0 / (1.0 + offset))
@@ -115,12 +154,17 @@ def _transfer_runs(src, dst, p, offset, inverse, bits):  # pragma: no cover - co
             run_bits = bits[s:e]
             for i in range(e - s):  # an integer maximum: it vectorises
                 top = max(top, run_bits[i])
+        run_in, run_out = src[s:e], dst[s:e]  # indexed from 0: the loops vectorise
+        if codes_in.shape[0] > 0 and _table_run(run_in, run_out, codes_in, codes_out):
+            # codes: a look-up per value costs what a repeat's comparison and copy do
+            repeated = False
+            s = e
+            continue
         repeats = s >= _PERIOD
         if repeats:
             now, before = src[s:e], src[s - _PERIOD:e - _PERIOD]
             for i in range(e - s):  # one pass, no early exit: it vectorises
                 repeats &= now[i] == before[i]
-        run_in, run_out = src[s:e], dst[s:e]  # indexed from 0: the loops vectorise
         if repeats and repeated:
             # the run before repeated the same period (its last values are this run's), and
             # _RUN is a multiple of it: its results are this run's, copied as one run
@@ -148,11 +192,13 @@ def _transfer_runs(src, dst, p, offset, inverse, bits):  # pragma: no cover - co
 
 
 @numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
-def _linearize_into(encoded, p, offset, out, bits, tops):  # pragma: no cover - compiled
+def _linearize_into(encoded, p, offset, out, bits, tops, codes_in, codes_out):
+    # pragma: no cover - compiled
     """``out = ((encoded + offset) / (1 + offset)) ** p`` of flat float32 arrays (offset 0:
     the plain power), in float32 up to the power, as NumPy computed it; in parts in
     parallel, each in runs (:func:`_transfer_runs`; ``bits``, ``encoded`` as uint32 or
-    empty: each part's largest into ``tops``, one per part)."""
+    empty: each part's largest into ``tops``, one per part; ``codes_in``, ``codes_out``:
+    :func:`code_table`'s, or empty)."""
     n = encoded.size
     parts = tops.shape[0]  # no reductions: the thread count does not change a value
     # each thread's parts spread over the frame: a textured region costs the power, a flat
@@ -164,7 +210,7 @@ def _linearize_into(encoded, p, offset, out, bits, tops):  # pragma: no cover - 
         src = encoded[n * k // parts:n * (k + 1) // parts]
         dst = out[n * k // parts:n * (k + 1) // parts]
         part_bits = bits[n * k // parts:n * (k + 1) // parts] if bits.shape[0] > 0 else bits
-        tops[k] = _transfer_runs(src, dst, p, offset, False, part_bits)
+        tops[k] = _transfer_runs(src, dst, p, offset, False, part_bits, codes_in, codes_out)
     return out
 
 
@@ -188,9 +234,32 @@ def _linearize_f32(src: np.ndarray, gamma: float, transfer: str,
     out = np.empty(src.shape, np.float32)
     tops = np.zeros(_LINEAR_PARTS, np.uint32)
     flat = src.reshape(-1)
-    _linearize_into(flat, np.float64(np.float32(gamma)), _offset(transfer), out.reshape(-1),
-                    flat.view(np.uint32) if checked else _NO_BITS, tops)
+    p, offset = np.float64(np.float32(gamma)), _offset(transfer)
+    _linearize_into(flat, p, offset, out.reshape(-1),
+                    flat.view(np.uint32) if checked else _NO_BITS, tops, *code_table(p, offset))
     return out, int(tops.max())
+
+
+_CODE_TABLES: dict[tuple[float, float], tuple[np.ndarray, np.ndarray]] = {}
+
+
+def code_table(p: float, offset: float) -> tuple[np.ndarray, np.ndarray]:
+    """The linearisation of every code ``k / 65535`` (k = 0 .. 65535, float32, divided as
+    :func:`fovexp.io.read_image` divides an 16-bit file's samples; an 8-bit file's
+    ``k / 255`` are among them): ``(codes, linear)``, each float32 (65536,), ``linear``
+    computed by the power itself (:func:`_transfer_runs`), so a value looked up in it is
+    the number the power gives. Made once per power and offset (512 KB; an 8-bit frame
+    reads 256 entries of each). A frame read from an image file is codes only, and its
+    linearisation then costs a look-up per value, not the power."""
+    key = (float(p), float(offset))
+    table = _CODE_TABLES.get(key)
+    if table is None:
+        codes = np.arange(_TOP_CODE + 1, dtype=np.float32) / np.float32(_TOP_CODE)
+        linear = np.empty_like(codes)
+        _linearize_into(codes, np.float64(p), offset, linear, _NO_BITS,
+                        np.zeros(1, np.uint32), _NO_TABLE, _NO_TABLE)
+        table = _CODE_TABLES.setdefault(key, (codes, linear))
+    return table
 
 
 def _offset(transfer: str) -> float:
@@ -265,7 +334,7 @@ def _encode_kept(src, g, kept, w, c, p, offset, clipped, row):  # pragma: no cov
             for x in range(e - s):
                 for ch in range(c):
                     clip[x * c + ch] = min(max(lin[x * c + ch] + gs[x], lo), hi)
-            _transfer_runs(clip, out, p, offset, True, _NO_BITS)
+            _transfer_runs(clip, out, p, offset, True, _NO_BITS, _NO_TABLE, _NO_TABLE)
             for x in range(e - s):
                 if gs[x] == 0.0:
                     for ch in range(c):
@@ -314,7 +383,8 @@ def _encode_into(img, a, b, n_grey, p, offset, kept, out):  # pragma: no cover -
             _add_clip_row(img[y].reshape(-1), a, b, y, w, 3, n_grey, clipped)
         else:
             _add_clip_row(img[y].reshape(-1), a, b, y, w, c, n_grey, clipped)
-        _transfer_runs(clipped, out[y].reshape(-1), p, offset, True, _NO_BITS)
+        _transfer_runs(clipped, out[y].reshape(-1), p, offset, True, _NO_BITS, _NO_TABLE,
+                       _NO_TABLE)
     return out
 
 
@@ -408,8 +478,8 @@ def _luma_row(rgb, weights, y, out):  # pragma: no cover - compiled
 
 
 @numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
-def _luma_blocks_into(rgb, weights, block, out, lo, hi, encoded, p, offset, bits, tops):
-    # pragma: no cover - compiled
+def _luma_blocks_into(rgb, weights, block, out, lo, hi, encoded, p, offset, bits, tops,
+                      codes_in, codes_out):  # pragma: no cover - compiled
     """:func:`_luma_into` block row by block row, with each ``block`` square's extremes of
     the luminance taken as its rows are written (down the block row's columns, then along
     each block, as :func:`fovexp.pyramids.channel_block_extremes` takes them: min and max
@@ -428,7 +498,7 @@ def _luma_blocks_into(rgb, weights, block, out, lo, hi, encoded, p, offset, bits
         for y in range(ya, yb):
             if linearise:
                 top = max(top, _transfer_runs(encoded[y], rgb[y].reshape(-1), p, offset,
-                                              False, bits[y]))
+                                              False, bits[y], codes_in, codes_out))
             _luma_row(rgb, weights, y, out)
             dst = out[y]
             if y == ya:
@@ -483,9 +553,10 @@ def _luma_blocks(
     tops = np.zeros(grid[0], np.uint32)
     rows = (np.zeros((0, 0), np.float32) if encoded is None
             else encoded.reshape(h, w * 3))
-    _luma_blocks_into(rgb, LUMA_BT601, block, luma, lo, hi, rows,
-                      np.float64(np.float32(gamma)), _offset(transfer), rows.view(np.uint32),
-                      tops)
+    p, offset = np.float64(np.float32(gamma)), _offset(transfer)
+    codes = code_table(p, offset) if encoded is not None else (_NO_TABLE, _NO_TABLE)
+    _luma_blocks_into(rgb, LUMA_BT601, block, luma, lo, hi, rows, p, offset,
+                      rows.view(np.uint32), tops, *codes)
     return luma, lo, hi, int(tops.max()) if tops.size else 0
 
 

@@ -261,3 +261,79 @@ def test_the_luminance_and_its_block_extremes_in_one_pass_are_the_two_apart(shap
     for got, want in ((luma, ref), (lo, rlo), (hi, rhi)):
         assert np.array_equal(got, want) and got.dtype == want.dtype
     assert lo[0, 0] == hi[0, 0] and (lo <= hi).all()
+
+
+def _power_path(src: np.ndarray, gamma: float, transfer: str) -> np.ndarray:
+    """Every value of ``src`` through the transfer's power (no code table)."""
+    from fovexp import colour
+
+    flat = np.ascontiguousarray(src, dtype=np.float32).reshape(-1)
+    out = np.empty_like(flat)
+    colour._linearize_into(flat, np.float64(np.float32(gamma)), colour._offset(transfer), out,
+                           colour._NO_BITS, np.zeros(8, np.uint32), colour._NO_TABLE,
+                           colour._NO_TABLE)
+    return out.reshape(src.shape)
+
+
+@pytest.mark.parametrize("transfer,gamma", [("power", 2.2), ("power", 2.4), ("release", 2.2)])
+def test_a_frame_of_file_codes_is_looked_up_as_the_numbers_the_power_gives(transfer, gamma):
+    """An 8- or 16-bit file's samples, read as fovexp.io divides them (k / 255, k / 65535 in
+    float32), are linearised from colour.code_table: bit for bit what the power gives them,
+    with a non-code value (NaN included), flat runs and a run of other numbers among them;
+    the check still refuses what it refused."""
+    from fovexp.io import _to_unit_float
+
+    rng = np.random.default_rng(31)
+    for raw in (rng.integers(0, 256, (45, 333, 3), dtype=np.uint8),
+                rng.integers(0, 65536, (45, 333, 3), dtype=np.uint16)):
+        img = _to_unit_float(raw)
+        img[10:14] = img[10, 0]  # flat rows of one code
+        img[20, 30:330] = rng.random((300, 3), dtype=np.float32)  # a run of other numbers
+        img[30, 7, 1] = np.float32(0.5)  # not a code: 32767.5 / 65535
+        for a in (img, np.ascontiguousarray(img[..., 0])):
+            want = _power_path(a, gamma, transfer)
+            assert np.array_equal(linearize(a, gamma, transfer).view(np.uint32),
+                                  want.view(np.uint32))
+            checked = linearize_checked(a, gamma, transfer)
+            assert checked is not None
+            assert np.array_equal(checked.view(np.uint32), want.view(np.uint32))
+        lin = _power_path(img, gamma, transfer)
+        taken = linearize_luminance_checked(img, gamma, transfer, 3)
+        assert taken is not None
+        for got, want in zip(taken, (lin, *luminance_and_block_extremes(lin, 3)), strict=True):
+            assert np.array_equal(got.view(np.uint32), want.view(np.uint32))
+        nan = img.copy()
+        nan[40, 50, 2] = np.nan
+        assert np.array_equal(linearize(nan, gamma, transfer).view(np.uint32),
+                              _power_path(nan, gamma, transfer).view(np.uint32))
+        for bad in (np.nan, np.inf, -np.inf, -1.0, 2.0, -0.0):
+            a = img.copy()
+            a[44, 332, 2] = bad
+            assert linearize_checked(a, gamma, transfer) is None, bad
+            assert linearize_luminance_checked(a, gamma, transfer, 3) is None, bad
+
+
+def test_the_code_table_is_what_a_frame_of_codes_reads(monkeypatch):
+    """Each 8-bit code k / 255 is the table's entry 257 k (fovexp.io's division); a frame of
+    codes takes its linear values from the table, and only a frame of codes: a sentinel
+    table shows which runs read it (a run with one value that is not a code goes through
+    the power, whole)."""
+    from fovexp import colour
+    from fovexp.io import _to_unit_float
+
+    p = np.float64(np.float32(2.2))
+    codes, linear = colour.code_table(p, 0.0)
+    eight = _to_unit_float(np.arange(256, dtype=np.uint8))
+    assert np.array_equal(codes[::257], eight)
+    assert np.array_equal(_to_unit_float(np.arange(65536, dtype=np.uint16)), codes)
+    assert np.array_equal(linear.view(np.uint32), _power_path(codes, 2.2, "power").view(np.uint32))
+    sentinel = np.full_like(linear, -7.0)
+    monkeypatch.setitem(colour._CODE_TABLES, (float(p), 0.0), (codes, sentinel))
+    img = _to_unit_float(np.random.default_rng(5).integers(0, 256, (8, 1024, 3), np.uint8))
+    img[5, 100, 0] = np.float32(0.3)  # 76.5 / 255: the run holding it is not codes only
+    got = linearize(img, 2.2)
+    looked_up = got == -7.0
+    assert looked_up.sum() >= img.size - colour._RUN
+    assert not looked_up[5, 100, 0] and not looked_up[5, 99, 2]
+    assert np.array_equal(got[~looked_up], _power_path(img, 2.2, "power")[~looked_up])
+    assert not (linearize(img + np.float32(1e-6), 2.2) == -7.0).any()
