@@ -376,6 +376,8 @@ def _splat_band(
     rr = int(math.ceil(r))
     group = su.shape[1]
     n = idx.shape[0]
+    flat = out.reshape(-1)  # the band's rows (C-contiguous), indexed as one (_kernel_rows)
+    stride = out.shape[1]
     for g0 in range(0, n, group):
         m = min(n, g0 + group) - g0
         # the carrier's direction, then the factors' phases and the envelopes' exponents,
@@ -416,29 +418,35 @@ def _splat_band(
             # the window of both presets' kernels (48 px) with its width a constant the
             # compiler unrolls (measured on the rows alone: 1.4x faster at 4K, 64 impulses);
             # any other width as it comes (one more copy per width costs compile time)
+            at = np.uint64((ya - y0) * stride + xo)  # the window's first value in flat
             if nwin == 48:
-                _kernel_rows(out, y0, ya, yb, xo, 48, er, ei, env, q, step_q, c, s, rc, rs, cs)
+                _kernel_rows(flat, stride, at, yb - ya + 1, 48, er, ei, env, q, step_q, c, s,
+                             rc, rs, cs)
             else:
-                _kernel_rows(out, y0, ya, yb, xo, nwin, er, ei, env, q, step_q, c, s, rc, rs,
-                             cs)
+                _kernel_rows(flat, stride, at, yb - ya + 1, nwin, er, ei, env, q, step_q, c, s,
+                             rc, rs, cs)
 
 
 @numba.njit(cache=True, inline="always", fastmath=FASTMATH, nogil=True)
-def _kernel_rows(out, y0, ya, yb, xo, nwin, er, ei, env, q, step_q, c, s, rc, rs, cs):
+def _kernel_rows(flat, stride, at, rows, nwin, er, ei, env, q, step_q, c, s, rc, rs, cs):
     # pragma: no cover - compiled
-    """Rows [ya, yb] of one kernel added to ``out`` (band-local rows from ``y0``): the x
-    factor ``er + i ei`` (window from column ``xo``) times the y factor, stepped down the
-    rows by the recurrence from ``env``, ``q``, ``c``, ``s``. Inlined: a constant ``nwin``
-    makes the row loop's trip count known."""
-    for y in range(ya, yb + 1):
+    """``rows`` rows of one kernel added to the rows of ``stride`` values in ``flat``, from
+    its index ``at`` (the window's first column in the kernel's first row): the x factor
+    ``er + i ei`` times the y factor, stepped down the rows by the recurrence from ``env``,
+    ``q``, ``c``, ``s``. Inlined: a constant ``nwin`` makes the row loop's trip count known.
+
+    The index is unsigned (``at``, ``j``): an index of unknown sign made Numba wrap negative
+    indices and kept the loop scalar (2x slower), and a row slice per row cost its bounds'
+    clamping (measured on the rows alone, 4K, 64 impulses: 112 -> 94 ms on one thread)."""
+    step = np.uint64(stride)
+    for _ in range(rows):
         cs[0] = env * c
         cs[1] = env * s
         cr, ci = cs[0], cs[1]
-        # the window as a row slice (xo >= 0: _window's pad): an index xo + j of unknown
-        # sign made Numba wrap negative indices, and kept the loop scalar (2x slower)
-        row = out[y - y0, xo:xo + nwin]
-        for j in range(nwin):  # row + cr er - ci ei as two fused multiply-adds
-            row[j] = fma(cr, er[j], fma(-ci, ei[j], row[j]))
+        for j in range(np.uint64(nwin)):  # + cr er - ci ei as two fused multiply-adds
+            k = at + j
+            flat[k] = fma(cr, er[j], fma(-ci, ei[j], flat[k]))
+        at += step
         env *= q
         q *= step_q
         c, s = c * rc - s * rs, s * rc + c * rs
