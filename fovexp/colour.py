@@ -245,7 +245,7 @@ _CODE_TABLES: dict[tuple[float, float], tuple[np.ndarray, np.ndarray]] = {}
 
 def code_table(p: float, offset: float) -> tuple[np.ndarray, np.ndarray]:
     """The linearisation of every code ``k / 65535`` (k = 0 .. 65535, float32, divided as
-    :func:`fovexp.io.read_image` divides an 16-bit file's samples; an 8-bit file's
+    :func:`fovexp.io.read_image` divides a 16-bit file's samples; an 8-bit file's
     ``k / 255`` are among them): ``(codes, linear)``, each float32 (65536,), ``linear``
     computed by the power itself (:func:`_transfer_runs`), so a value looked up in it is
     the number the power gives. Made once per power and offset (512 KB; an 8-bit frame
