@@ -91,7 +91,7 @@ _RUN = 768
 _PERIOD = 3
 #: The largest code of a quantised input's table (:func:`code_table`): 16 bits. An 8-bit
 #: file's k / 255 is 257 k / 65535, the same number, so one table serves both.
-_TOP_CODE = 65535
+_TOP_CODE = int(np.iinfo(np.uint16).max)
 #: :func:`_transfer_runs`' tables when there are none (the inverse transfer's).
 _NO_TABLE = np.zeros(0, np.float32)
 
@@ -244,9 +244,9 @@ _CODE_TABLES: dict[tuple[float, float], tuple[np.ndarray, np.ndarray]] = {}
 
 
 def code_table(p: float, offset: float) -> tuple[np.ndarray, np.ndarray]:
-    """The linearisation of every code ``k / 65535`` (k = 0 .. 65535, float32, divided as
-    :func:`fovexp.io.read_image` divides a 16-bit file's samples; an 8-bit file's
-    ``k / 255`` are among them): ``(codes, linear)``, each float32 (65536,), ``linear``
+    """The linearisation of every code ``k / 65535`` (k = 0 .. 65535, float32, divided by
+    the function :func:`fovexp.io.read_image` divides a 16-bit file's samples with; an
+    8-bit file's ``k / 255`` are among them): ``(codes, linear)``, each float32 (65536,), ``linear``
     computed by the power itself (:func:`_transfer_runs`), so a value looked up in it is
     the number the power gives. Made once per power and offset (512 KB; an 8-bit frame
     reads 256 entries of each). A frame read from an image file is codes only, and its
@@ -254,7 +254,9 @@ def code_table(p: float, offset: float) -> tuple[np.ndarray, np.ndarray]:
     key = (float(p), float(offset))
     table = _CODE_TABLES.get(key)
     if table is None:
-        codes = np.arange(_TOP_CODE + 1, dtype=np.float32) / np.float32(_TOP_CODE)
+        from .io import _to_unit_float  # the reader's own division: the codes it gives
+
+        codes = _to_unit_float(np.arange(_TOP_CODE + 1, dtype=np.uint16))
         linear = np.empty_like(codes)
         _linearize_into(codes, np.float64(p), offset, linear, _NO_BITS,
                         np.zeros(1, np.uint32), _NO_TABLE, _NO_TABLE)
