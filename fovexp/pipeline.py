@@ -851,14 +851,10 @@ class Enhancer:
         return np.where(band.open_, k, 0.0)
 
     def _noise(self, shape, imp, band, k, f, omega, n) -> np.ndarray:
-        full = np.zeros(len(imp))
-        freq = np.zeros(len(imp))
-        carrier = np.zeros(len(imp))
-        full[band.index] = k
-        freq[band.index] = f
-        carrier[band.index] = omega - 0.5 * np.pi
-        return gabor.synthesize(shape, imp, full, freq, carrier, n, self.preset.gabor_a_cpp,
-                                self.options.kernel_truncation, self.options.skip, self._dtype)
+        # the band's impulses' values as they are (no scatter into every impulse's)
+        return gabor.synthesize(shape, imp, k, f, omega - 0.5 * np.pi, n, self.preset.gabor_a_cpp,
+                                self.options.kernel_truncation, self.options.skip, self._dtype,
+                                index=band.index)
 
     def _compose(self, method, foveated, contrast, noise, image, already_foveated) -> np.ndarray:
         """The displayed frame: the grey contrast change and noise are added to every channel

@@ -103,6 +103,12 @@ def _exercise() -> Iterator[str]:
             enh.enhance((0.5, 0.5), EnhanceParams(impulses=4))
         yield "engine options"
 
+    # the impulses' cells (the GPU backend's grid of them; the CPU's set-up has its own copy
+    # compiled in)
+    from .gabor import cell_index
+    cell_index(np.zeros(2), 20.0)
+    yield "impulse cells"
+
     # fovexp stereo's warp (section 6.4), a kernel of the evaluation package
     from .evaluation.stereo import forward_warp
     forward_warp(np.zeros((4, 8), np.float32), np.ones((4, 8)))

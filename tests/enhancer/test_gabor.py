@@ -165,6 +165,34 @@ def test_synthesis_without_skipping_and_with_a_closer_cut():
     assert np.abs(cut - ref).max() < 1e-9 * max(1.0, np.abs(ref).max())
 
 
+@pytest.mark.parametrize("skip", [True, False])
+def test_the_values_of_some_impulses_are_the_noise_of_every_impulse_with_the_others_zero(skip):
+    """``index``: K, F and t given for some impulses only (the pipeline's band) sum to the
+    same bits as every impulse's arrays with zeros elsewhere, skipping or not; an index that
+    is not ascending or does not match the values is refused by name."""
+    h, w = 64, 80
+    imp = gabor.generate_impulses(w, h, 12, 0.06, 9)
+    m = len(imp)
+    rng = np.random.default_rng(3)
+    index = np.flatnonzero(rng.random(m) < 0.4)
+    k = rng.random(index.size)
+    k[::5] = 0.0  # a given K of 0 is no kernel either
+    f, t = rng.uniform(0.05, 0.45, index.size), rng.uniform(-np.pi, np.pi, index.size)
+    full = [np.zeros(m) for _ in range(3)]
+    for a, v in zip(full, (k, f, t), strict=True):
+        a[index] = v
+    want = gabor.synthesize((h, w), imp, *full, 12, 0.06, skip=skip)
+    got = gabor.synthesize((h, w), imp, k, f, t, 12, 0.06, skip=skip, index=index)
+    assert want.any() and np.array_equal(got, want)
+    # the cell rows the set-up counts are cell_index's
+    rows = gabor.cell_index(imp.y_px, imp.cell_px)
+    assert np.array_equal(rows, np.floor((imp.y_px + 0.5) / imp.cell_px).astype(np.int64) + 1)
+    with pytest.raises(ValueError, match="ascending"):
+        gabor.synthesize((h, w), imp, k[::-1], f, t, 12, 0.06, index=index[::-1])
+    with pytest.raises(ValueError, match=f"{index.size} values"):
+        gabor.synthesize((h, w), imp, k[1:], f, t, 12, 0.06, index=index)
+
+
 _MASK64 = 2**64 - 1
 
 
