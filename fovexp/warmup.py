@@ -103,8 +103,8 @@ def _exercise() -> Iterator[str]:
             enh.enhance((0.5, 0.5), EnhanceParams(impulses=4))
         yield "engine options"
 
-    # the impulses' cells (the GPU backend's grid of them; the CPU's set-up has its own copy
-    # compiled in)
+    # the impulses' cells (the GPU backend's grid of them; the CPU's noise compiles the same
+    # gabor._cell_of into its set-up)
     from .gabor import cell_index
     cell_index(np.zeros(2), 20.0)
     yield "impulse cells"
