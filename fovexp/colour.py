@@ -328,19 +328,20 @@ def _encode_kept(src, g, kept, w, c, p, offset, clipped, row):  # pragma: no cov
         e = min(w, s + _RUN_PX)
         # indexed from 0: the loops vectorise
         gs, ks, out = g[s:e], kept[s * c:e * c], row[s * c:e * c]
-        changed = False
+        changed = 0
         for x in range(e - s):  # no early exit: it vectorises
-            changed |= gs[x] != 0.0
+            changed += gs[x] != 0.0
         if changed:
             lin, clip = src[s * c:e * c], clipped[s * c:e * c]
             for x in range(e - s):
                 for ch in range(c):
                     clip[x * c + ch] = min(max(lin[x * c + ch] + gs[x], lo), hi)
             _transfer_runs(clip, out, p, offset, True, _NO_BITS, _NO_TABLE, _NO_TABLE)
-            for x in range(e - s):
-                if gs[x] == 0.0:
-                    for ch in range(c):
-                        out[x * c + ch] = ks[x * c + ch]
+            if changed < e - s:  # some pixels unchanged (the pixel loop branches on each)
+                for x in range(e - s):
+                    if gs[x] == 0.0:
+                        for ch in range(c):
+                            out[x * c + ch] = ks[x * c + ch]
         else:
             for i in range((e - s) * c):
                 out[i] = ks[i]
