@@ -193,6 +193,34 @@ def test_the_values_of_some_impulses_are_the_noise_of_every_impulse_with_the_oth
         gabor.synthesize((h, w), imp, k[1:], f, t, 12, 0.06, index=index)
 
 
+def test_each_band_holds_the_kernels_whose_first_row_it_holds_even_past_the_last_cells():
+    """``_band_impulses``, run as Python (NumPy's bounds checked): each band of rows gets the
+    impulses whose kernel's first image row lies in it and that reach the image, worked
+    out directly, including the bottom band of a frame where cells a quarter of r and a
+    kernel cut at 1e-6 (r = 35 px) put its rows past the last cell row's reach. There the
+    cell-row range had started past its end, and the compiled kernel read past the end of
+    ``row_start`` (the stress suite's std test failed once in a while with "negative
+    dimensions")."""
+    a, side = 0.06, 779
+    imp = gabor.generate_impulses(side, side, 12, a, 0, cell_scale=0.25)
+    r = gabor.kernel_radius_px(a, 1e-6)
+    n_rows = gabor.cell_counts(side, side, imp.cell_px)[1]
+    rows = gabor.cell_index(imp.y_px, imp.cell_px)
+    row_start = np.searchsorted(rows, np.arange(n_rows + 1)).astype(np.int64)
+    first = np.maximum(0, np.ceil(imp.y_px - r)).astype(np.int64)
+    reaches = ((np.floor(imp.y_px + r) >= first) & (first < side) & (imp.x_px + r >= 0)
+               & (imp.x_px - r <= side - 1))
+    counts = []
+    for y0 in range(0, side, 128):
+        y1 = min(side, y0 + 128)
+        got = gabor._band_impulses.py_func(imp.x_px, imp.y_px, row_start, imp.cell_px, r, y0,
+                                           y1, side)
+        want = np.flatnonzero(reaches & (first >= y0) & (first < y1))
+        assert np.array_equal(got, want), y0
+        counts.append(got.size)
+    assert counts[-1] == 0 and min(counts[:-1]) > 800  # the bottom band: past every kernel
+
+
 _MASK64 = 2**64 - 1
 
 
