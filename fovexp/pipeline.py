@@ -43,6 +43,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
+import numba
 import numpy as np
 
 from . import amplitude as amp
@@ -59,6 +60,7 @@ from .foveation import (
     sigma_px,
 )
 from .geometry import Display, GeometryModel, ViewingGeometry
+from .jit import FASTMATH
 from .memory import retain_freed_memory
 from .params import EngineOptions, EnhanceParams, ParameterTable, Preset, get_preset
 from .pyramids import FLAT_BLOCK_LEVEL
@@ -322,6 +324,29 @@ class EnhanceResult:
             raise FovexpError("this result is stale: the enhancer has processed another frame")
 
 
+@numba.njit(cache=True, fastmath=FASTMATH, nogil=True)
+def _open_impulses(index, x_px, y_px, sigma_px, f_low_cpp, f_high_cpp, level):
+    # pragma: no cover - compiled
+    """The :class:`ImpulseParams` fields of the impulses ``index`` (``x_px``, ``y_px``: every
+    impulse's; the others: those of ``index``) whose band is open (F_L < F_H), in one pass:
+    NumPy's gathers and seven selections took 8 ms at 4K and 64 impulses (0.4 M)."""
+    n = index.shape[0]
+    m = 0
+    for i in range(n):
+        m += f_low_cpp[i] < f_high_cpp[i]
+    out_index = np.empty(m, np.int64)
+    x, y = np.empty(m), np.empty(m)
+    s, lo, hi, lv = np.empty(m), np.empty(m), np.empty(m), np.empty(m)
+    j = 0
+    for i in range(n):
+        if f_low_cpp[i] < f_high_cpp[i]:
+            k = index[i]
+            out_index[j], x[j], y[j] = k, x_px[k], y_px[k]
+            s[j], lo[j], hi[j], lv[j] = sigma_px[i], f_low_cpp[i], f_high_cpp[i], level[i]
+            j += 1
+    return out_index, x, y, s, lo, hi, np.ones(m, np.bool_), lv
+
+
 class _SigmaBlocks:
     """The sigma map (px, section 5.2) of one geometry, gaze and blur-rate, evaluated block by
     block as stages ask for blocks (:meth:`on`) and kept: the pixels evaluated are the whole
@@ -358,33 +383,33 @@ class _SigmaBlocks:
 
 
 class _ImpulseBands:
-    """F_L, F_H and sigma (section 4.1) at the impulses, for one geometry, gaze, blur-rate and
-    sigma map, evaluated for the impulses asked for (:meth:`at`) and kept: the values are
-    those of evaluating every impulse (elementwise), and a frame sequence with the same gaze
-    evaluates each impulse once."""
+    """F_L, F_H, sigma (section 4.1) and the Laplacian level (eq. 8) at the impulses, for one
+    geometry, gaze, blur-rate and sigma map, evaluated for the impulses asked for
+    (:meth:`at`) and kept: the values are those of evaluating every impulse (elementwise),
+    and a frame sequence with the same gaze evaluates each impulse once."""
 
     def __init__(self, band_at: Callable[[np.ndarray, np.ndarray], tuple], x_px: np.ndarray,
                  y_px: np.ndarray) -> None:
         self._band_at, self._x, self._y = band_at, x_px, y_px
-        self._values = tuple(np.empty(len(x_px)) for _ in range(3))
+        self._values = tuple(np.empty(len(x_px)) for _ in range(4))
         self.done = np.zeros(len(x_px), dtype=np.bool_)
 
-    def at(self, index: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(sigma_px, f_low_cpp, f_high_cpp)`` of the impulses ``index`` (float64)."""
+    def at(self, index: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``(sigma_px, f_low_cpp, f_high_cpp, level)`` of the impulses ``index`` (float64)."""
         if not self.done.any() and len(index) == len(self.done):  # every impulse, at once
-            s, f_lo, f_hi = self._band_at(self._x, self._y)
-            for kept, v in zip(self._values, (s, f_lo, f_hi), strict=True):
+            values = self._band_at(self._x, self._y)
+            for kept, v in zip(self._values, values, strict=True):
                 kept[:] = v
             self.done[:] = True
-            return s, f_lo, f_hi
+            return values
         todo = index[~self.done[index]]
         if todo.size:
             for kept, v in zip(self._values, self._band_at(self._x[todo], self._y[todo]),
                                strict=True):
                 kept[todo] = v
             self.done[todo] = True
-        s, f_lo, f_hi = (v[index] for v in self._values)
-        return s, f_lo, f_hi
+        s, f_lo, f_hi, level = (v[index] for v in self._values)
+        return s, f_lo, f_hi, level
 
 
 class Enhancer:
@@ -746,8 +771,9 @@ class Enhancer:
                                        o.impulse_count, o.weights, o.cell_scale)
 
     def _band_at(self, geom, gaze, sigma_given, blur_rate, x, y):
-        """F_L, F_H and sigma at points (section 4.1): sigma exactly from the geometry when
-        the foveation is simulated here, else sampled from the given sigma map."""
+        """Sigma, F_L, F_H (section 4.1) and the Laplacian level (eq. 8) at points: sigma
+        exactly from the geometry when the foveation is simulated here, else sampled from
+        the given sigma map."""
         ecc = geom.eccentricity_deg(x, y, geom.gaze_px(gaze))
         ppd = geom.ppd(x, y)
         if sigma_given is None:
@@ -756,7 +782,7 @@ class Enhancer:
         else:
             s = pyramids.sample_bilinear(sigma_given, x, y, 0).astype(np.float64)
         f_lo, f_hi = frequency.frequency_band_cpp(ecc, ppd, s)
-        return s, f_lo, f_hi
+        return s, f_lo, f_hi, amp.laplacian_level(s, self.preset.attenuation)
 
     def _imp_bands(self, imp, geom, gaze, sigma_given, blur_rate) -> _ImpulseBands:
         # impulses whose kernel cannot reach the image are dropped with the others
@@ -774,16 +800,14 @@ class Enhancer:
         index = np.arange(len(imp))
         return self._band_params(imp, index, *bands.at(index))
 
-    def _band_params(self, imp, index, s, f_lo, f_hi) -> ImpulseParams:
+    def _band_params(self, imp, index, s, f_lo, f_hi, level) -> ImpulseParams:
         """:class:`ImpulseParams` of the impulses ``index``; when skipping, of those whose band
-        is open."""
-        x, y, open_ = imp.x_px[index], imp.y_px[index], f_lo < f_hi
+        is open (:func:`_open_impulses`)."""
         if self.options.skip:
-            keep = np.flatnonzero(open_)
-            index, x, y, s, f_lo, f_hi, open_ = (
-                a[keep] for a in (index, x, y, s, f_lo, f_hi, open_))
-        return ImpulseParams(index, x, y, s, f_lo, f_hi, open_,
-                             amp.laplacian_level(s, self.preset.attenuation))
+            return ImpulseParams(*_open_impulses(index, imp.x_px, imp.y_px, s, f_lo, f_hi,
+                                                 level))
+        return ImpulseParams(index, imp.x_px[index], imp.y_px[index], s, f_lo, f_hi,
+                             f_lo < f_hi, level)
 
     def _imp_active(self, imp, band, bands, luma_flat, imp_blocks, shape, sigma_given,
                     sigma_blocks) -> ImpulseParams:
@@ -922,8 +946,8 @@ class Enhancer:
         if name == "orientation_rad":
             gx, gy = c.get("gradients")
             return orientation.orientation_at(gx, gy, x, y, dtype=self._dtype).reshape(h, w)
-        s, f_lo, f_hi = self._band_at(geom, c.get("gaze"), c.get("sigma_given"),
-                                      c.get("blur_rate"), x, y)
+        s, f_lo, f_hi, level = self._band_at(geom, c.get("gaze"), c.get("sigma_given"),
+                                             c.get("blur_rate"), x, y)
         if name == "f_low_cpp":
             # +Inf where the blur removes nothing at this precision (sigma = 0, or so small
             # that 3 / (2 pi sigma) overflows float32): the band is empty there either way
@@ -935,7 +959,6 @@ class Enhancer:
         lap = c.get("abs_laplacian_full" if self.options.skip else "abs_laplacian")
         limit = amp.headroom_at(c.get("headroom"), self._kernel_radius_px(),
                                 shape=(h, w)).ravel()
-        level = amp.laplacian_level(s, self.preset.attenuation)
         pixels = ImpulseParams(np.arange(x.size), x, y, s, f_lo, f_hi, f_lo < f_hi, level)
         k = self._amplitude(pixels, amp.laplacian_amplitude_at(lap, level, x, y), limit,
                             c.get("s_k"))
