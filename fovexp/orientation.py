@@ -53,8 +53,7 @@ def orientation_at(
     :func:`fovexp.pyramids.sample_cubic`) from their level grid, then
     ``atan2(G_y, G_x) - pi/2``; ``-pi/2`` where ``|G| < GRADIENT_EPS`` (a flat area).
     Float32 (or ``dtype``)."""
-    gxs = sample_cubic(gx, x_px, y_px, level)
-    gys = sample_cubic(gy, x_px, y_px, level)
+    gxs, gys = sample_cubic(np.stack((gx, gy)), x_px, y_px, level)  # one pass, shared taps
 
     def omega(gxs: np.ndarray, gys: np.ndarray) -> np.ndarray:
         flat = np.hypot(gxs, gys) < GRADIENT_EPS

@@ -942,36 +942,55 @@ def _keys_weight(t):  # pragma: no cover - compiled
 
 
 @numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
-def _sample_cubic(grid, u, v):  # pragma: no cover - compiled
-    h, w = grid.shape
-    out = np.empty(u.shape[0])
+def _sample_cubic(ga, gb, u, v, out):  # pragma: no cover - compiled
+    """:func:`sample_cubic` of two grids of one shape at the points ``(u, v)`` (grid
+    coordinates) into ``out`` (2, points): a point's sixteen taps and their weights found
+    once for both (a pass per grid found them for each, and each weight again for each tap:
+    the gradients' pair at 0.4 M points, 7.5 -> 5.4 ms). The weights and columns are
+    written out: a tuple indexed in a loop, or a stack of grids, went through memory."""
+    h, w = ga.shape
     for i in numba.prange(u.shape[0]):
         iu = int(np.floor(u[i]))
         iv = int(np.floor(v[i]))
         fu = u[i] - iu
         fv = v[i] - iv
-        acc = 0.0
+        w0, w1 = _keys_weight(fu + 1.0), _keys_weight(fu + 1.0 - 1)
+        w2, w3 = _keys_weight(fu + 1.0 - 2), _keys_weight(fu + 1.0 - 3)
+        x0, x1 = min(max(iu - 1, 0), w - 1), min(max(iu, 0), w - 1)
+        x2, x3 = min(max(iu + 1, 0), w - 1), min(max(iu + 2, 0), w - 1)
+        a = 0.0
+        b = 0.0
         for j in range(4):
             wy = _keys_weight(fv + 1.0 - j)
             yy = min(max(iv - 1 + j, 0), h - 1)
-            for k in range(4):
-                xx = min(max(iu - 1 + k, 0), w - 1)
-                acc += wy * _keys_weight(fu + 1.0 - k) * grid[yy, xx]
-        out[i] = acc
-    return out
+            a += wy * w0 * ga[yy, x0]
+            a += wy * w1 * ga[yy, x1]
+            a += wy * w2 * ga[yy, x2]
+            a += wy * w3 * ga[yy, x3]
+            b += wy * w0 * gb[yy, x0]
+            b += wy * w1 * gb[yy, x1]
+            b += wy * w2 * gb[yy, x2]
+            b += wy * w3 * gb[yy, x3]
+        out[0, i] = a
+        out[1, i] = b
 
 
 def sample_cubic(grid: np.ndarray, x_px: np.ndarray, y_px: np.ndarray, level: int) -> np.ndarray:
     """Bicubic sample (Keys cubic convolution, a = -0.5, borders held) of a level-``level``
     grid at full-resolution coordinates: MATLAB's imresize 'bicubic' kernel (docs/METHOD.md, 5.5),
-    evaluated only at the points asked for. Returns float64 of the points' shape."""
+    evaluated only at the points asked for. Returns float64 of the points' shape; for a
+    pair of grids (2, h, w), both grids' samples, (2, *the points' shape), from one pass."""
     s = float(level_scale(level))
     x = np.asarray(x_px, dtype=np.float64)
     y = np.asarray(y_px, dtype=np.float64)
     x, y = np.broadcast_arrays(x, y)
-    grid = np.ascontiguousarray(grid)
-    if grid.dtype != np.float64:
-        grid = grid.astype(np.float32)
-    out = _sample_cubic(grid, x.ravel() / s,
-                        y.ravel() / s)
-    return out.reshape(x.shape)
+    grids = np.asarray(grid)
+    pair = grids.ndim == 3
+    if pair and grids.shape[0] != 2:
+        raise ValueError(f"a grid (h, w) or a pair of grids (2, h, w), not {grids.shape}")
+    ga, gb = (grids[0], grids[1]) if pair else (grids, grids)
+    ga, gb = (np.ascontiguousarray(g if g.dtype == np.float64 else g.astype(np.float32))
+              for g in (ga, gb))
+    out = np.empty((2, x.size))
+    _sample_cubic(ga, gb, x.ravel() / s, y.ravel() / s, out)
+    return out.reshape((2,) + x.shape) if pair else out[0].reshape(x.shape)

@@ -230,6 +230,15 @@ def test_sampling_a_level_at_full_resolution_coordinates():
         assert cubic[i] == pytest.approx(ref, abs=1e-12)
     assert pyramids.sample_cubic(grid, np.array([6.0]), np.array([4.0]), 1)[0] == pytest.approx(
         grid[2, 3])  # interpolating: a node gives its value
+    # a pair of grids in one pass: each grid's own samples, bit for bit, in float32 too
+    other = rng.random((7, 9))
+    for a, b in ((grid, other), (grid.astype(np.float32), other.astype(np.float32))):
+        pair = pyramids.sample_cubic(np.stack((a, b)), x.reshape(2, 4), y.reshape(2, 4), 1)
+        assert pair.shape == (2, 2, 4)
+        assert pair[0].tobytes() == pyramids.sample_cubic(a, x, y, 1).reshape(2, 4).tobytes()
+        assert pair[1].tobytes() == pyramids.sample_cubic(b, x, y, 1).reshape(2, 4).tobytes()
+    with pytest.raises(ValueError, match="pair of grids"):
+        pyramids.sample_cubic(np.stack((grid, grid, grid)), x, y, 1)
     near = pyramids.sample_nearest(grid, np.array([0.0, 7.4, 7.6, 100.0]),
                                    np.array([0.0, 3.0, 3.0, -3.0]), 4)
     assert near.tolist() == [grid[0, 0], grid[0, 1], grid[0, 2], grid[0, 8]]
