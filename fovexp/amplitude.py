@@ -49,15 +49,17 @@ import math
 from dataclasses import dataclass
 from typing import Literal, get_args
 
+import numba
 import numpy as np
 from scipy import ndimage
 
+from .jit import FASTMATH, as_dtype_of, flat_broadcast
 from .params import ClippingRule
 from .pyramids import (
     abs_laplacian_reach_px,
+    bilinear_at,
     block_extremes,
     level_scale,
-    sample_bilinear,
     sample_nearest,
     window_extremes,
 )
@@ -91,15 +93,29 @@ def laplacian_level(sigma_px: np.ndarray, attenuation: float) -> np.ndarray:
     return np.maximum(np.nan_to_num(level, nan=1.0, neginf=1.0), 1.0)
 
 
+@numba.njit(cache=True, inline="always", fastmath=FASTMATH, nogil=True)
+def _bracket(level, top):  # pragma: no cover - compiled
+    """:func:`bracketing_levels` of one level."""
+    lv = min(level, np.float64(top))
+    k0 = min(np.int64(math.floor(lv)), top - 1) if top > 1 else np.int64(1)
+    return k0, min(max(lv - k0, 0.0), 1.0)
+
+
+@numba.njit(cache=True, fastmath=FASTMATH, nogil=True)
+def _brackets(level, top, k0, t):  # pragma: no cover - compiled
+    for i in range(level.shape[0]):
+        k0[i], t[i] = _bracket(level[i], top)
+
+
 def bracketing_levels(level: np.ndarray, top: int) -> tuple[np.ndarray, np.ndarray]:
     """``(k0, t)``: the Laplacian levels ``k0`` and ``k0 + 1`` (at most ``top``, the coarsest
     built) between which continuous ``level`` lies, and its weight ``t`` on ``k0 + 1`` (eq. 9's
-    interpolation in the log-frequency domain)."""
-    level = np.minimum(np.asarray(level, dtype=np.float64), top)
-    k0 = np.minimum(np.floor(level).astype(np.int64), top - 1) if top > 1 else np.ones_like(
-        level, dtype=np.int64
-    )
-    return k0, np.clip(level - k0, 0.0, 1.0)
+    interpolation in the log-frequency domain). Compiled (:func:`_bracket`): the amplitude's
+    pass (:func:`laplacian_amplitude_at`) takes each point's levels the same way."""
+    shape, (flat,) = flat_broadcast(level)
+    k0, t = np.empty(flat.shape, np.int64), np.empty(flat.shape)
+    _brackets(flat, int(top), k0, t)
+    return k0.reshape(shape), t.reshape(shape)
 
 
 def laplacian_reach_px(k0: np.ndarray, top: int) -> np.ndarray:
@@ -109,24 +125,41 @@ def laplacian_reach_px(k0: np.ndarray, top: int) -> np.ndarray:
     return abs_laplacian_reach_px(np.minimum(np.asarray(k0) + 1, top))
 
 
+@numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
+def _laplacian_at(grids, top, level, x, y, out):  # pragma: no cover - compiled
+    """:func:`laplacian_amplitude_at` of each point: ``grids[k - 1]`` is |L_k|, ``top`` the
+    coarsest built. Each sample is held in its grid's dtype before the interpolation, as
+    :func:`fovexp.pyramids.sample_bilinear` returns it."""
+    for i in numba.prange(x.shape[0]):
+        k0, t = _bracket(level[i], top)
+        g0 = grids[k0 - 1]
+        lo = as_dtype_of(g0, bilinear_at(g0, x[i], y[i], np.float64(1 << (k0 - 1))))
+        hi = lo
+        if k0 + 1 <= top:
+            g1 = grids[k0]
+            hi = as_dtype_of(g1, bilinear_at(g1, x[i], y[i], np.float64(1 << k0)))
+        out[i] = (1.0 - t) * np.float64(lo) + t * np.float64(hi)
+
+
 def laplacian_amplitude_at(
     abs_levels: dict[int, np.ndarray], level: np.ndarray, x_px: np.ndarray, y_px: np.ndarray
 ) -> np.ndarray:
     """``|L|`` at continuous ``level`` (eq. 9, before ``s_k``), interpolated between the two
-    bracketing levels,
-    each sampled bilinearly at full-resolution coordinates (level k lives on G_{k-1}'s grid)."""
-    k0, t = bracketing_levels(level, max(abs_levels))
-    out = np.zeros(k0.shape, dtype=np.float64)
-    for k in np.unique(k0):
-        sel = k0 == k
-        xs, ys = x_px[sel], y_px[sel]
-        lo = sample_bilinear(abs_levels[int(k)], xs, ys, int(k) - 1)
-        if int(k) + 1 in abs_levels:
-            hi = sample_bilinear(abs_levels[int(k) + 1], xs, ys, int(k))
-        else:
-            hi = lo
-        out[sel] = (1.0 - t[sel]) * lo + t[sel] * hi
-    return out
+    bracketing levels, each sampled bilinearly at full-resolution coordinates (level k lives
+    on G_{k-1}'s grid). ``abs_levels``: |L_k| for k = 1 .. its largest key, one dtype.
+
+    One compiled pass over the points (:func:`_laplacian_at`), in parallel: each point's
+    levels and samples, the numbers the grouping by level, two samplings per level and the
+    interpolation in NumPy gave (0.4 M points at 4K, 64 impulses: 13.5 -> 3 ms)."""
+    top = max(abs_levels)
+    grids = [np.ascontiguousarray(abs_levels[k]) for k in range(1, top + 1)]
+    # one tuple length (a kernel per length otherwise): the levels past the coarsest built
+    # are never read
+    grids += [grids[-1]] * (max(MAX_LAPLACIAN_LEVEL, top) - top)
+    shape, (x, y, lv) = flat_broadcast(x_px, y_px, level)
+    out = np.empty(x.shape)
+    _laplacian_at(tuple(grids), int(top), lv, x, y, out)
+    return out.reshape(shape)
 
 
 #: Coarsest Laplacian level built: centre 2**-8.5 cycles/px, selected (a = 0.25) for sigmas up to

@@ -104,6 +104,18 @@ def fma(typingctx, a, b, c):  # pragma: no cover - compiled
     return ty(a, b, c), codegen
 
 
+@intrinsic
+def as_dtype_of(typingctx, array, value):  # pragma: no cover - compiled
+    """``value`` converted to ``array``'s dtype (a float64 rounded to float32 for a float32
+    array), as storing it in the array converts it: a kernel's value that NumPy code had
+    held in an array of that dtype keeps its bits."""
+    ty = array.dtype
+
+    def codegen(context, builder, signature, args):
+        return context.cast(builder, args[1], signature.args[1], ty)
+    return ty(array, value), codegen
+
+
 @numba.njit(cache=True, inline="always", fastmath=FASTMATH, nogil=True)
 def two_to_the(shifted):  # pragma: no cover - compiled
     """``2**n`` as a float64, for the integer ``n`` held in ``shifted = n + MAGIC_F64`` (a

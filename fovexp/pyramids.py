@@ -866,21 +866,28 @@ def channel_block_extremes(image: np.ndarray, level: int) -> tuple[np.ndarray, n
     return _channel_block_extremes(np.ascontiguousarray(image), level_scale(level))
 
 
+@numba.njit(cache=True, inline="always", fastmath=FASTMATH, nogil=True)
+def bilinear_at(grid, x, y, scale):  # pragma: no cover - compiled
+    """:func:`sample_bilinear` of one point, in float64 (compiled code's): its coordinates
+    on the grid (full-resolution ones over ``scale``) clamped to its extent (borders held),
+    then the two taps each way."""
+    h, w = grid.shape
+    fy = min(max(y / scale, 0.0), h - 1.0)
+    fx = min(max(x / scale, 0.0), w - 1.0)
+    iy = min(int(fy), max(h - 2, 0))
+    ix = min(int(fx), max(w - 2, 0))
+    ty, tx = fy - iy, fx - ix
+    iy1, ix1 = min(iy + 1, h - 1), min(ix + 1, w - 1)
+    top = (1.0 - tx) * np.float64(grid[iy, ix]) + tx * np.float64(grid[iy, ix1])
+    bottom = (1.0 - tx) * np.float64(grid[iy1, ix]) + tx * np.float64(grid[iy1, ix1])
+    return (1.0 - ty) * top + ty * bottom
+
+
 @numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
 def _bilinear(grid, x, y, scale, out):  # pragma: no cover - compiled
-    """:func:`sample_bilinear`: each point's coordinates on the grid clamped to its extent
-    (borders held), then the two taps each way, in float64."""
-    h, w = grid.shape
+    """:func:`sample_bilinear` (:func:`bilinear_at` of each point)."""
     for i in numba.prange(x.shape[0]):
-        fy = min(max(y[i] / scale, 0.0), h - 1.0)
-        fx = min(max(x[i] / scale, 0.0), w - 1.0)
-        iy = min(int(fy), max(h - 2, 0))
-        ix = min(int(fx), max(w - 2, 0))
-        ty, tx = fy - iy, fx - ix
-        iy1, ix1 = min(iy + 1, h - 1), min(ix + 1, w - 1)
-        top = (1.0 - tx) * np.float64(grid[iy, ix]) + tx * np.float64(grid[iy, ix1])
-        bottom = (1.0 - tx) * np.float64(grid[iy1, ix]) + tx * np.float64(grid[iy1, ix1])
-        out[i] = (1.0 - ty) * top + ty * bottom
+        out[i] = bilinear_at(grid, x[i], y[i], scale)
 
 
 def sample_bilinear(grid: np.ndarray, x_px: np.ndarray, y_px: np.ndarray, level: int) -> np.ndarray:
