@@ -325,11 +325,12 @@ class EnhanceResult:
 
 
 @numba.njit(cache=True, fastmath=FASTMATH, nogil=True)
-def _open_impulses(index, x_px, y_px, sigma_px, f_low_cpp, f_high_cpp, level):
+def _open_impulses(index, x_px, y_px, s_px, f_low_cpp, f_high_cpp, level):
     # pragma: no cover - compiled
     """The :class:`ImpulseParams` fields of the impulses ``index`` (``x_px``, ``y_px``: every
-    impulse's; the others: those of ``index``) whose band is open (F_L < F_H), in one pass:
-    NumPy's gathers and seven selections took 8 ms at 4K and 64 impulses (0.4 M)."""
+    impulse's; the others, sigma ``s_px`` included: those of ``index``) whose band is open
+    (F_L < F_H), in one pass: NumPy's gathers and seven selections took 7.7 ms at 4K and 64
+    impulses (0.4 M), this pass 3.9."""
     n = index.shape[0]
     m = 0
     for i in range(n):
@@ -342,7 +343,7 @@ def _open_impulses(index, x_px, y_px, sigma_px, f_low_cpp, f_high_cpp, level):
         if f_low_cpp[i] < f_high_cpp[i]:
             k = index[i]
             out_index[j], x[j], y[j] = k, x_px[k], y_px[k]
-            s[j], lo[j], hi[j], lv[j] = sigma_px[i], f_low_cpp[i], f_high_cpp[i], level[i]
+            s[j], lo[j], hi[j], lv[j] = s_px[i], f_low_cpp[i], f_high_cpp[i], level[i]
             j += 1
     return out_index, x, y, s, lo, hi, np.ones(m, np.bool_), lv
 
