@@ -59,8 +59,9 @@ from .pyramids import (
     abs_laplacian_reach_px,
     bilinear_at,
     block_extremes,
+    block_shift,
     level_scale,
-    sample_nearest,
+    nearest_cell,
     window_extremes,
 )
 
@@ -167,9 +168,50 @@ def laplacian_amplitude_at(
 MAX_LAPLACIAN_LEVEL = 8
 
 
+@numba.njit(cache=True, inline="always", fastmath=FASTMATH, nogil=True)
+def _limit_at(n_min, n_max, like):  # pragma: no cover - compiled
+    """:func:`headroom_limit` of one point, in the dtype of the array ``like`` (float32
+    arithmetic for float32 extremes, as NumPy's with its weak Python scalars); NaN passes
+    through and ``-0.0`` stays, as with NumPy's minimum and maximum."""
+    zero = as_dtype_of(like, 0.0)
+    a = as_dtype_of(like, 1.0) - n_max
+    m = a if (a <= n_min or a != a) else n_min
+    v = as_dtype_of(like, 2.0) * m
+    return v if (v >= zero or v != v) else zero
+
+
+@numba.njit(cache=True, fastmath=FASTMATH, nogil=True)
+def _limits(n_min, n_max, out):  # pragma: no cover - compiled
+    for i in range(out.shape[0]):
+        out[i] = _limit_at(n_min[i], n_max[i], out)
+
+
 def headroom_limit(n_min: np.ndarray, n_max: np.ndarray) -> np.ndarray:
-    """Largest K that keeps ``N_max + K/2 <= 1`` and ``N_min - K/2 >= 0``; never negative."""
-    return np.maximum(2.0 * np.minimum(1.0 - np.asarray(n_max), np.asarray(n_min)), 0.0)
+    """Largest K that keeps ``N_max + K/2 <= 1`` and ``N_min - K/2 >= 0``; never negative.
+    In the extremes' common dtype (float32 for float32 extremes)."""
+    dtype = np.result_type(np.asarray(n_min), np.asarray(n_max), np.float32)
+    shape, (lo, hi) = flat_broadcast(n_min, n_max, dtype=dtype)
+    out = np.empty(lo.shape, dtype)
+    _limits(lo, hi, out)
+    return out.reshape(shape)
+
+
+@numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
+def _limit_in_cells(lo, hi, block, x, y, out):  # pragma: no cover - compiled
+    """:func:`headroom_at` of points on cells of ``block`` px, in one pass: each point's
+    float32 position clipped at 0, its cell (:func:`fovexp.pyramids.nearest_cell`), the
+    limit there (:func:`_limit_at`), in parallel: NumPy's conversions, clips, two samplings
+    and the limit's passes took 6 ms at 4K and 64 impulses (0.4 M points), this pass 1 ms."""
+    h, w = lo.shape
+    shift = block_shift(block)
+    zero = np.float32(0.0)
+    for i in numba.prange(out.shape[0]):
+        xv, yv = np.float32(x[i]), np.float32(y[i])
+        xv = xv if (xv >= zero or xv != xv) else zero  # np.clip(v, 0, None): np.maximum
+        yv = yv if (yv >= zero or yv != yv) else zero
+        iy = nearest_cell(np.float64(yv), block, shift, h)
+        ix = nearest_cell(np.float64(xv), block, shift, w)
+        out[i] = _limit_at(lo[iy, ix], hi[iy, ix], out)
 
 
 @dataclass(frozen=True)
@@ -241,7 +283,9 @@ def headroom_at(
     # the cell an impulse reads is decided at its float32 position, as the GPU holds it (and
     # p + 0.5 is exact in float32 below 2**23): a position within a float32 step of a cell's
     # edge reads the same cell on both backends, where neighbouring cells' caps may differ
-    xc = np.clip(np.asarray(x_px, np.float32), 0, None)
-    yc = np.clip(np.asarray(y_px, np.float32), 0, None)
-    return headroom_limit(sample_nearest(ext.lo, xc, yc, ext.block),
-                          sample_nearest(ext.hi, xc, yc, ext.block))
+    dtype = np.result_type(ext.lo, ext.hi)
+    lo, hi = (np.ascontiguousarray(e, dtype) for e in (ext.lo, ext.hi))
+    shape, (x, y) = flat_broadcast(x_px, y_px)
+    out = np.empty(x.shape, dtype)
+    _limit_in_cells(lo, hi, int(ext.block), x, y, out)
+    return out.reshape(shape)

@@ -901,25 +901,36 @@ def sample_bilinear(grid: np.ndarray, x_px: np.ndarray, y_px: np.ndarray, level:
     return out.reshape(np.shape(x_px))
 
 
+@numba.njit(cache=True, inline="always", fastmath=FASTMATH, nogil=True)
+def block_shift(block):  # pragma: no cover - compiled
+    """``log2(block)`` for a power-of-two ``block``, else -1 (:func:`nearest_cell`)."""
+    if block & (block - 1) != 0:
+        return -1
+    shift = 0
+    while (1 << shift) < block:
+        shift += 1
+    return shift
+
+
+@numba.njit(cache=True, inline="always", fastmath=FASTMATH, nogil=True)
+def nearest_cell(v, block, shift, n):  # pragma: no cover - compiled
+    """The cell of ``block`` px (``shift``: :func:`block_shift`) along one axis of ``n``
+    cells that holds full-resolution coordinate ``v`` (:func:`sample_nearest`):
+    ``int64(v + 0.5)`` truncates as NumPy's ``astype`` does, ``//`` floors as NumPy's (for a
+    power-of-two block an arithmetic shift, which floors too, negative values included),
+    then the clip to the grid."""
+    i = np.int64(v + 0.5)
+    i = i >> shift if shift >= 0 else i // block
+    return min(max(i, 0), n - 1)
+
+
 @numba.njit(cache=True, fastmath=FASTMATH, nogil=True)
 def _nearest(grid, x, y, block, out):  # pragma: no cover - compiled
-    """:func:`sample_nearest` of 1-D points: ``int64(v + 0.5)`` truncates as NumPy's
-    ``astype`` does, ``//`` floors as NumPy's (for a power-of-two block an arithmetic shift,
-    which floors too, negative values included), then the clip to the grid."""
+    """:func:`sample_nearest` of 1-D points (:func:`nearest_cell`)."""
     h, w = grid.shape
-    if block & (block - 1) == 0:
-        shift = 0
-        while (1 << shift) < block:
-            shift += 1
-        for i in range(x.shape[0]):
-            iy = min(max(np.int64(y[i] + 0.5) >> shift, 0), h - 1)
-            ix = min(max(np.int64(x[i] + 0.5) >> shift, 0), w - 1)
-            out[i] = grid[iy, ix]
-        return
+    shift = block_shift(block)
     for i in range(x.shape[0]):
-        iy = min(max(np.int64(y[i] + 0.5) // block, 0), h - 1)
-        ix = min(max(np.int64(x[i] + 0.5) // block, 0), w - 1)
-        out[i] = grid[iy, ix]
+        out[i] = grid[nearest_cell(y[i], block, shift, h), nearest_cell(x[i], block, shift, w)]
 
 
 def sample_nearest(grid: np.ndarray, x_px: np.ndarray, y_px: np.ndarray, block: int) -> np.ndarray:

@@ -53,6 +53,33 @@ def test_headroom_limit_never_negative():
     assert np.allclose(k, [0.4, 0.0, 0.0])
 
 
+def test_headroom_limit_and_its_cells_are_the_numpy_formula_bit_for_bit():
+    """The compiled limit is max(2 min(1 - N_max, N_min), 0) as NumPy evaluates it: float32
+    arithmetic for float32 extremes, NaN passed through, -0.0 kept (NumPy's minimum and
+    maximum); at points on cells, each point's float32 position clipped at 0 and its cell
+    (``sample_nearest``), for blocks of a power of two and not."""
+    def numpy_limit(n_min, n_max):
+        return np.maximum(2.0 * np.minimum(1.0 - n_max, n_min), 0.0)
+
+    rng = np.random.default_rng(4)
+    lo = np.concatenate([rng.uniform(-0.2, 1.2, 2000), [0.2, -0.0, np.nan, 0.5, 0.0]])
+    hi = np.concatenate([rng.uniform(-0.2, 1.2, 2000), [1.0, 1.0, 0.3, np.nan, 0.5]])
+    for dtype in (np.float64, np.float32):
+        got = amp.headroom_limit(lo.astype(dtype), hi.astype(dtype))
+        assert got.dtype == dtype
+        assert got.tobytes() == numpy_limit(lo.astype(dtype), hi.astype(dtype)).tobytes()
+    grid_lo, grid_hi = (rng.uniform(0.0, 1.0, (9, 13)).astype(np.float32) for _ in range(2))
+    x, y = rng.uniform(-40.0, 140.0, (2, 3000))
+    x[:3], y[:3] = -0.0, [-1e-9, 7.5, 8.5]  # the clip at 0, and cells' edges
+    for block in (8, 6):
+        ext = amp.Extremes("blocks", grid_lo, grid_hi, block)
+        xc, yc = np.clip(x.astype(np.float32), 0, None), np.clip(y.astype(np.float32), 0, None)
+        want = numpy_limit(pyramids.sample_nearest(grid_lo, xc, yc, block),
+                           pyramids.sample_nearest(grid_hi, xc, yc, block))
+        got = amp.headroom_at(ext, 20.0, x, y)
+        assert got.dtype == np.float32 and got.tobytes() == want.tobytes()
+
+
 def test_the_formulas_of_eqs_7_to_9_by_hand():
     """f_c = sqrt(-2 ln a) / (2 pi sigma) (eq. 7, corrected), centre 2**-(l + 0.5) (eq. 6,
     levels from 1), l_a = log2(1 / f_c) - 0.5 at least 1 (eq. 8), and the release's gain
