@@ -772,9 +772,8 @@ class Enhancer:
                                        o.impulse_count, o.weights, o.cell_scale)
 
     def _band_at(self, geom, gaze, sigma_given, blur_rate, x, y):
-        """Sigma, F_L, F_H (section 4.1) and the Laplacian level (eq. 8) at points: sigma
-        exactly from the geometry when the foveation is simulated here, else sampled from
-        the given sigma map."""
+        """Sigma, F_L and F_H at points (section 4.1): sigma exactly from the geometry when
+        the foveation is simulated here, else sampled from the given sigma map."""
         ecc = geom.eccentricity_deg(x, y, geom.gaze_px(gaze))
         ppd = geom.ppd(x, y)
         if sigma_given is None:
@@ -783,12 +782,14 @@ class Enhancer:
         else:
             s = pyramids.sample_bilinear(sigma_given, x, y, 0).astype(np.float64)
         f_lo, f_hi = frequency.frequency_band_cpp(ecc, ppd, s)
-        return s, f_lo, f_hi, amp.laplacian_level(s, self.preset.attenuation)
+        return s, f_lo, f_hi
 
     def _imp_bands(self, imp, geom, gaze, sigma_given, blur_rate) -> _ImpulseBands:
-        # impulses whose kernel cannot reach the image are dropped with the others
+        # impulses whose kernel cannot reach the image are dropped with the others; the
+        # Laplacian level (eq. 8) with the band, in the same parts
         def band_at(x, y):
-            return self._band_at(geom, gaze, sigma_given, blur_rate, x, y)
+            s, f_lo, f_hi = self._band_at(geom, gaze, sigma_given, blur_rate, x, y)
+            return s, f_lo, f_hi, amp.laplacian_level(s, self.preset.attenuation)
 
         # in parts on threads, but for a given map: its sampling is a parallel kernel itself
         return _ImpulseBands(
@@ -947,8 +948,8 @@ class Enhancer:
         if name == "orientation_rad":
             gx, gy = c.get("gradients")
             return orientation.orientation_at(gx, gy, x, y, dtype=self._dtype).reshape(h, w)
-        s, f_lo, f_hi, level = self._band_at(geom, c.get("gaze"), c.get("sigma_given"),
-                                             c.get("blur_rate"), x, y)
+        s, f_lo, f_hi = self._band_at(geom, c.get("gaze"), c.get("sigma_given"),
+                                      c.get("blur_rate"), x, y)
         if name == "f_low_cpp":
             # +Inf where the blur removes nothing at this precision (sigma = 0, or so small
             # that 3 / (2 pi sigma) overflows float32): the band is empty there either way
@@ -960,6 +961,7 @@ class Enhancer:
         lap = c.get("abs_laplacian_full" if self.options.skip else "abs_laplacian")
         limit = amp.headroom_at(c.get("headroom"), self._kernel_radius_px(),
                                 shape=(h, w)).ravel()
+        level = amp.laplacian_level(s, self.preset.attenuation)
         pixels = ImpulseParams(np.arange(x.size), x, y, s, f_lo, f_hi, f_lo < f_hi, level)
         k = self._amplitude(pixels, amp.laplacian_amplitude_at(lap, level, x, y), limit,
                             c.get("s_k"))
