@@ -127,18 +127,19 @@ def laplacian_reach_px(k0: np.ndarray, top: int) -> np.ndarray:
 
 
 @numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
-def _laplacian_at(grids, top, level, x, y, out):  # pragma: no cover - compiled
-    """:func:`laplacian_amplitude_at` of each point: ``grids[k - 1]`` is |L_k|, ``top`` the
-    coarsest built. Each sample is held in its grid's dtype before the interpolation, as
+def _laplacian_at(grids, scales, top, level, x, y, out):  # pragma: no cover - compiled
+    """:func:`laplacian_amplitude_at` of each point: ``grids[k - 1]`` is |L_k|, on the grid
+    of ``scales[k - 1]`` full-resolution px per sample; ``top`` the coarsest built. Each
+    sample is held in its grid's dtype before the interpolation, as
     :func:`fovexp.pyramids.sample_bilinear` returns it."""
     for i in numba.prange(x.shape[0]):
         k0, t = _bracket(level[i], top)
         g0 = grids[k0 - 1]
-        lo = as_dtype_of(g0, bilinear_at(g0, x[i], y[i], np.float64(1 << (k0 - 1))))
+        lo = as_dtype_of(g0, bilinear_at(g0, x[i], y[i], scales[k0 - 1]))
         hi = lo
         if k0 + 1 <= top:
             g1 = grids[k0]
-            hi = as_dtype_of(g1, bilinear_at(g1, x[i], y[i], np.float64(1 << k0)))
+            hi = as_dtype_of(g1, bilinear_at(g1, x[i], y[i], scales[k0]))
         out[i] = (1.0 - t) * np.float64(lo) + t * np.float64(hi)
 
 
@@ -157,9 +158,10 @@ def laplacian_amplitude_at(
     # one tuple length (a kernel per length otherwise): the levels past the coarsest built
     # are never read
     grids += [grids[-1]] * (max(MAX_LAPLACIAN_LEVEL, top) - top)
+    scales = np.array([level_scale(k - 1) for k in range(1, len(grids) + 1)], np.float64)
     shape, (x, y, lv) = flat_broadcast(x_px, y_px, level)
     out = np.empty(x.shape)
-    _laplacian_at(tuple(grids), int(top), lv, x, y, out)
+    _laplacian_at(tuple(grids), scales, int(top), lv, x, y, out)
     return out.reshape(shape)
 
 
