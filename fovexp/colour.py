@@ -22,6 +22,7 @@ import numpy as np
 
 from ._parallel import interleave, power
 from .jit import FASTMATH, MAGIC_F64, _bits_as_float64, _float64_bits, fma, two_to_the
+from .memory import frame_empty
 from .pyramids import channel_block_extremes, level_scale
 
 #: BT.601 luma weights. The release's Y of YCbCr, normalised as (Y - 16/255) / (219/255), equals
@@ -231,7 +232,7 @@ def _linearize_f32(src: np.ndarray, gamma: float, transfer: str,
                    checked: bool) -> tuple[np.ndarray, int]:
     """:func:`_linearize_into` of a C-contiguous float32 array: the linear array and, when
     ``checked``, the largest of the values' bit patterns (else 0)."""
-    out = np.empty(src.shape, np.float32)
+    out = frame_empty(src.shape, np.float32)
     tops = np.zeros(_LINEAR_PARTS, np.uint32)
     flat = src.reshape(-1)
     p, offset = np.float64(np.float32(gamma)), _offset(transfer)
@@ -429,7 +430,7 @@ def encode(
             raise ValueError(f"unchanged has shape {unchanged.shape}, linear {lin.shape}")
         if not grey:  # nothing added anywhere: the encoded image itself
             return np.array(unchanged, dtype=dtype)
-    out = np.empty(lin.shape, dtype=dtype)
+    out = frame_empty(lin.shape, dtype)
     three = lin.ndim == 3
     if dtype == np.float32:
         # contiguous: on strided views the compiled loops measured 7x slower than a copy
@@ -551,7 +552,7 @@ def _luma_blocks(
     h, w = rgb.shape[:2]
     block = level_scale(level)
     grid = (-(-h // block), -(-w // block))
-    luma = np.empty((h, w), np.float32)
+    luma = frame_empty((h, w), np.float32)
     lo, hi = np.empty(grid, np.float32), np.empty(grid, np.float32)
     tops = np.zeros(grid[0], np.uint32)
     rows = (np.zeros((0, 0), np.float32) if encoded is None
@@ -573,7 +574,7 @@ def linearize_luminance_checked(
     src = np.ascontiguousarray(encoded, dtype=np.float32)
     if src.ndim != 3 or src.shape[2] != 3:
         raise ValueError(f"an (H, W, 3) image, not {src.shape}")
-    linear = np.empty(src.shape, np.float32)
+    linear = frame_empty(src.shape, np.float32)
     luma, lo, hi, top = _luma_blocks(linear, level, src, gamma, transfer)
     return None if top > ONE_F32_BITS else (linear, luma, lo, hi)
 
@@ -593,4 +594,4 @@ def luminance(linear: np.ndarray) -> np.ndarray:
         raise ValueError(f"luminance of an (H, W, 3) image or a grey one, not {linear.shape}")
     weights = LUMA_BT601_F64 if dtype == np.float64 else LUMA_BT601
     rgb = np.ascontiguousarray(linear, dtype=dtype)
-    return _luma_into(rgb, weights, np.empty(rgb.shape[:2], dtype))
+    return _luma_into(rgb, weights, frame_empty(rgb.shape[:2], dtype))

@@ -49,6 +49,7 @@ from ._parallel import interleave
 from .errors import FovexpError
 from .foveation import SigmaOnBlocks, _float_array, per_pixel_sigma
 from .jit import FASTMATH, MAGIC_EXACT_BELOW, int64_to_float64, rint_to_int64
+from .memory import frame_empty, frame_zeros
 from .pyramids import FLAT_BLOCK_LEVEL, blocks_reaching, level_scale
 
 #: Box-filter width per integer blur level (docs/METHOD.md, 5.3): level k averages ceil(4 k) px.
@@ -399,9 +400,9 @@ def _change_outside(
     """The change of every pixel outside the level-3 blocks ``flat`` marks (0 there); boxes up
     to level ``floor(max_sigma) + 1``."""
     if flat is None or not flat.any():  # nothing to leave out
-        return _strips(img, sigma, f_e, None, max_sigma, False, np.empty(img.shape, img.dtype))
-    # NumPy's zeros: the flat blocks' pages are never written (calloc)
-    return _strips(img, sigma, f_e, flat, max_sigma, False, np.zeros(img.shape, img.dtype))
+        return _strips(img, sigma, f_e, None, max_sigma, False, frame_empty(img.shape, img.dtype))
+    # zeros: the flat blocks are not written
+    return _strips(img, sigma, f_e, flat, max_sigma, False, frame_zeros(img.shape, img.dtype))
 
 
 def _strips(

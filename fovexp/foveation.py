@@ -39,6 +39,7 @@ from ._parallel import interleave
 from .errors import FovexpError
 from .geometry import ARCMIN_PER_DEG, ViewingGeometry, _angle_deg32, _ppd_at
 from .jit import FASTMATH, flat_broadcast
+from .memory import frame_empty
 from .pyramids import (
     FLAT_BLOCK_LEVEL,
     blocks_reaching,
@@ -690,7 +691,7 @@ def _foveate(
     kbuf = np.concatenate(plan.kernels)
     return _foveate_bands(
         img, sigma, plan.sigmas_px.astype(img.dtype), plan.pyramid_level, kbuf, kmeta, pbuf,
-        pmeta, pad, BAND_ROWS, flat, shift, np.empty(img.shape, img.dtype),
+        pmeta, pad, BAND_ROWS, flat, shift, frame_empty(img.shape, img.dtype),
     )
 
 

@@ -56,6 +56,7 @@ import numpy as np
 
 from ._parallel import interleave
 from .jit import FASTMATH, MAGIC_F64, fma, two_to_the
+from .memory import frame_empty
 
 #: Envelope value at which the kernel is truncated (docs/METHOD.md, 4).
 KERNEL_TRUNCATION = 0.01
@@ -666,8 +667,8 @@ def synthesize(
     touched = np.empty(-(-h // band), np.bool_)
     # the sums in padded rows, zeroed in the touched bands only; each band's image columns
     # copied into the result once the band is done (zeros where no kernel reaches)
-    sums = np.empty((h, w + 2 * pad + nwin), dtype=dtype)
-    out = np.empty(shape, dtype=dtype)
+    sums = frame_empty((h, w + 2 * pad + nwin), dtype)
+    out = frame_empty(shape, dtype)
     _splat(sums, out, impulses.x_px, impulses.y_px, impulses.weight, index, *per,
            normalisation(impulses_per_kernel, gabor_a_cpp, impulses.weights, truncation), skip,
            cell, r, gabor_a_cpp, band, nwin, pad, xs, ys, amp, k, t, row_start, touched)

@@ -61,7 +61,7 @@ from .foveation import (
 )
 from .geometry import Display, GeometryModel, ViewingGeometry
 from .jit import FASTMATH
-from .memory import retain_freed_memory
+from .memory import FramePool, frame_empty, frame_zeros, retain_freed_memory
 from .params import EngineOptions, EnhanceParams, ParameterTable, Preset, get_preset
 from .pyramids import FLAT_BLOCK_LEVEL
 
@@ -174,6 +174,8 @@ class _StageCache:
         #: what the stages are timed with (seconds); the GPU backend's profiler sets a clock
         #: that advances by the GPU time of each dispatch
         self.clock: Callable[[], float] = time.perf_counter
+        #: the stages' large arrays, in the buffers of the last frame's (fovexp.memory)
+        self.pool = FramePool()
 
     def stage(self, name: str, deps: tuple[str, ...], fn: Callable[..., Any]) -> None:
         self._fns[name] = (deps, fn)
@@ -203,7 +205,8 @@ class _StageCache:
             ]
             outer, self._nested_s = self._nested_s, 0.0
             t0 = self.clock()
-            self._values[name] = fn(*args)
+            with self.pool.active():
+                self._values[name] = fn(*args)
             self._provided_from.pop(name, None)
             elapsed = self.clock() - t0
             # a stage's own time excludes the stages it pulled lazily ("?name" dependencies)
@@ -238,6 +241,7 @@ class _StageCache:
         self._inputs.clear()
         self._values.clear()
         self._provided_from.clear()
+        self.pool.clear()
 
 
 _MISSING = object()
@@ -371,9 +375,9 @@ class _SigmaBlocks:
         nothing asked for it yet."""
         if shift != self._shift or self.done.shape != need.shape:
             # every block asked for at once (a frame with no flat block) writes every pixel
-            # below: an empty map takes pages kept from the last frame (fovexp.memory), where
-            # zeros (left untouched where no block is asked for) take fresh ones, 5 ms at 4K
-            self._sigma = (np.empty if need.all() else np.zeros)(self._geom.shape, np.float32)
+            # below: no zeros to write first
+            self._sigma = (frame_empty if need.all() else frame_zeros)(self._geom.shape,
+                                                                      np.float32)
             self.done, self._shift = np.zeros(need.shape, np.bool_), shift
         todo = need & ~self.done
         if todo.any():
@@ -544,7 +548,9 @@ class Enhancer:
         img = _image_array(colour_in, "image")
         already_foveated = bool(foveated or sigma_px is not None)
         t0 = time.perf_counter()
-        provided = self._checked_stages(img, already_foveated)
+        self._c.pool.next_frame()
+        with self._c.pool.active():
+            provided = self._checked_stages(img, already_foveated)
         provided_s = time.perf_counter() - t0
         if provided is None:
             _check_values(img, "image")

@@ -34,6 +34,7 @@ from scipy import ndimage
 
 from ._parallel import interleave
 from .jit import FASTMATH, flat_broadcast
+from .memory import frame_empty, frame_zeros
 
 #: Burt-Adelson 5-tap binomial kernel; its variance is 1 px^2 at the level it filters.
 BINOMIAL_5 = np.array([1.0, 4.0, 6.0, 4.0, 1.0], dtype=np.float32) / 16.0
@@ -329,7 +330,7 @@ def packed_pyramid(
     for m, (lh, lw) in enumerate(shapes, start=1):
         meta[m] = (start, lh, lw)
         start += lh * lw * c
-    buf = np.empty(start, image.dtype) if buffer is None else buffer[:start]
+    buf = frame_empty((start,), image.dtype) if buffer is None else buffer[:start]
     src = image
     for m, (lh, lw) in enumerate(shapes, start=1):
         out = buf[meta[m, 0]:meta[m, 0] + lh * lw * c].reshape(lh, lw, c)
@@ -564,8 +565,8 @@ def smoothed_abs_laplacian(
         mask = need.get(k) if need is not None else None
         if mask is None:
             mask = np.ones(tile_grid(fine.shape), dtype=np.bool_)
-        # NumPy's zeros: the tiles not computed are never touched (calloc)
-        out[k] = np.zeros(fine.shape, dtype=fine.dtype)
+        # zeros: the tiles not computed are not written
+        out[k] = frame_zeros(fine.shape, fine.dtype)
         _abs_laplacian_tiles(fine, coarse, mask, ABS_LAPLACIAN_TILE, out[k])
     return out
 

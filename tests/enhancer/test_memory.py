@@ -4,6 +4,7 @@ page faults."""
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 SCRIPT = r"""
@@ -52,3 +53,71 @@ def test_the_setting_is_left_alone_on_request(monkeypatch):
     monkeypatch.setattr(memory, "_done", False)
     monkeypatch.setenv("FOVEXP_MALLOC_DEFAULTS", "1")
     assert memory.retain_freed_memory() is False
+
+
+# ----------------------------------------------------------------------- the frame pool
+def _address(a):
+    return a.__array_interface__["data"][0]
+
+
+def test_a_pool_hands_a_buffer_out_again_only_once_no_array_uses_it():
+    from fovexp.memory import POOL_MIN_BYTES, FramePool, frame_empty
+
+    pool = FramePool()
+    shape = (POOL_MIN_BYTES // 4, 2)
+    with pool.active():
+        a = frame_empty(shape, np.float32)
+        b = frame_empty(shape, np.float32)
+        assert _address(a) != _address(b)  # a is in use
+        first = _address(a)
+        view = a[::2]
+        del a
+        assert _address(frame_empty(shape, np.float32)) not in (first, _address(b))  # the view
+        del view
+        again = frame_empty((shape[0] * 2,), np.int32)  # the same size, another shape and dtype
+        assert _address(again) == first and again.shape == (shape[0] * 2,)
+        small = frame_empty((4,), np.float32)  # NumPy's own below POOL_MIN_BYTES
+    assert small.base is None
+    assert frame_empty(shape, np.float32).base is None  # no pool active: NumPy's own
+    assert pool.nbytes == 3 * shape[0] * shape[1] * 4
+
+
+def test_a_pool_gives_back_what_went_unused_for_its_frames():
+    from fovexp.memory import POOL_IDLE_FRAMES, POOL_MIN_BYTES, FramePool
+
+    pool = FramePool()
+    kept = pool.empty((POOL_MIN_BYTES,), np.uint8)
+    pool.empty((POOL_MIN_BYTES,), np.uint8)  # dropped at once: free
+    for _ in range(POOL_IDLE_FRAMES):
+        pool.next_frame()
+    assert pool.nbytes == 2 * POOL_MIN_BYTES
+    pool.next_frame()
+    assert pool.nbytes == POOL_MIN_BYTES  # the free one given back, the one in use kept
+    del kept
+    pool.next_frame()
+    assert pool.nbytes == 0
+    z = pool.zeros((POOL_MIN_BYTES // 8,), np.float64)
+    assert not z.any()
+
+
+def test_an_enhancers_frames_reuse_their_buffers_and_never_touch_a_kept_output():
+    """From the second frame on, a frame's large arrays are the last frame's buffers (the pool
+    does not grow), and an output the caller kept is not one of them: it still holds its
+    frame's values after later frames (of other images) are computed."""
+    from fovexp import EnhanceParams, Enhancer, load_display
+
+    from engine_helpers import textured_image
+
+    enh = Enhancer(load_display("lg-oled55cx"))
+    params = EnhanceParams(blur_rate=0.34, impulses=12)
+    images = [textured_image(540, 960, seed=s) for s in (1, 2, 3)]
+    kept = enh.enhance((0.5, 0.5), params, image=images[0]).output
+    copy = kept.copy()
+    sizes = []
+    for j in range(4):
+        enh.enhance((0.45 + 0.05 * (j % 2), 0.5), params, image=images[1 + j % 2])
+        sizes.append(enh._c.pool.nbytes)
+    assert sizes[0] > 0 and sizes[1:] == sizes[1:2] * 3, sizes
+    assert np.array_equal(kept, copy)
+    fresh = Enhancer(load_display("lg-oled55cx"))
+    assert np.array_equal(fresh.enhance((0.5, 0.5), params, image=images[0]).output, copy)
