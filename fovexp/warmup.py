@@ -115,6 +115,22 @@ def _exercise() -> Iterator[str]:
     yield "stereo warp"
 
 
+def load_frame_kernels(enh: Any, params: Any, foveated: bool = False) -> None:
+    """Load (or compile) the kernels a frame of CPU enhancer ``enh`` calls with ``params``: a
+    small frame through an enhancer like it (the same display, preset, geometry, table and
+    options; ``enh`` itself keeps its stages). Loading a 4K frame's 24 kernels from the cache
+    takes about 0.3 s, Numba's first load included, mostly Python: ``fovexp enhance`` does it
+    while its image is read and decoded, which releases the GIL. Nothing for a GPU enhancer
+    (its shaders are built with it)."""
+    from .pipeline import Enhancer
+
+    if getattr(enh, "backend", "cpu") != "cpu":
+        return
+    twin = Enhancer(enh.display, enh.preset.name, enh.geometry_model, enh.table, enh.options)
+    twin.set_image(_textured(96, 160, 3), foveated=foveated)
+    twin.enhance((0.5, 0.5), params)
+
+
 def kernels() -> dict[str, object]:
     """``{module.name: dispatcher}`` of every Numba kernel in the loaded ``fovexp`` modules."""
     from numba.core.dispatcher import Dispatcher
