@@ -127,7 +127,13 @@ def load_frame_kernels(enh: Any, params: Any, foveated: bool = False) -> None:
     if getattr(enh, "backend", "cpu") != "cpu":
         return
     twin = Enhancer(enh.display, enh.preset.name, enh.geometry_model, enh.table, enh.options)
-    twin.set_image(_textured(96, 160, 3), foveated=foveated)
+    # a corner of the screen with the gaze at its centre (:func:`_exercise`): far enough out
+    # that the blur takes the pyramid and the band is open; flat in part, as most frames are
+    # (skipping's kernels)
+    frame = _textured(96, 160, 3)
+    frame[64:, :] = 0.5
+    viewport = (0, 0, enh.display.width_px, enh.display.height_px)
+    twin.set_image(frame, foveated=foveated, viewport=viewport)
     twin.enhance((0.5, 0.5), params)
 
 

@@ -373,3 +373,36 @@ def test_version_and_help_load_no_command(argv):
     assert "numba" not in mods and "numpy" not in mods
     assert not [m for m in mods if m.startswith("fovexp.") and m not in (
         "fovexp.cli", "fovexp._version", "fovexp.errors")]
+
+
+LOADED_SCRIPT = r"""
+import json, sys
+import numpy as np
+from fovexp import EnhanceParams, Enhancer, load_display
+from fovexp.warmup import kernels, load_frame_kernels
+foveated = sys.argv[1] == "foveated"
+enh = Enhancer(load_display("lg-oled55cx"))
+params = EnhanceParams(impulses=12, blur_rate=0.34)
+load_frame_kernels(enh, params, foveated=foveated)
+before = {n: len(d.overloads) for n, d in kernels().items()}
+rng = np.random.default_rng(0)
+frame = rng.random((540, 960, 3), dtype=np.float32)
+frame[300:, :] = 0.5  # flat blocks: skipping's kernels too
+enh.set_image(frame, foveated=foveated)
+enh.enhance((0.45, 0.5), params)
+after = {n: len(d.overloads) for n, d in kernels().items()}
+print(json.dumps({"loaded": sum(before.values()),
+                  "more": sorted(n for n in after if after[n] != before.get(n, 0))}))
+"""
+
+
+@pytest.mark.parametrize("mode", ["simulated", "foveated"])
+def test_the_kernels_loaded_before_the_read_are_all_the_frame_calls(mode):
+    """``fovexp enhance`` loads a frame's kernels while its image is read
+    (:func:`fovexp.warmup.load_frame_kernels`, on a small frame): a real frame then loads
+    none (of one with flat regions, simulated or already foveated)."""
+    out = subprocess.run([sys.executable, "-c", LOADED_SCRIPT, mode], capture_output=True,
+                         text=True, timeout=600)
+    assert out.returncode == 0, out.stderr[-3000:]
+    got = json.loads(out.stdout.strip().splitlines()[-1])
+    assert got["loaded"] >= 15 and got["more"] == [], got
