@@ -5,6 +5,8 @@ CPU (NumPy/Numba, :mod:`fovexp.pipeline`) or on the GPU (OpenGL 4.5 compute shad
 
 from __future__ import annotations
 
+import glob
+import sys
 from typing import Any
 
 from .errors import FovexpError
@@ -18,6 +20,24 @@ BACKENDS: tuple[str, ...] = ("auto", "cpu", "gpu")
 #: it once ("enhancer on the CPU: ..."), in words a lab can act on (a rig needs the GPU backend
 #: for its frame budget: a 4K wheel step takes about 0.4 s on the CPU).
 NO_GPU_EXTRA = "the GPU extra is not installed (a rig needs it: pip install 'fovexp[gpu]')"
+
+
+#: Why ``auto`` took the CPU on a Linux system that exposes no GPU device to user space.
+NO_GPU_DEVICE = ("no GPU device (no /dev/dri render node, /dev/nvidia* or /dev/dxg): OpenGL "
+                 "would be a software renderer, slower than the CPU backend")
+#: The device files through which Linux hands a GPU to user space: DRM render nodes (Mesa's
+#: drivers), NVIDIA's driver, WSL's GPU.
+_GPU_DEVICE_FILES = ("/dev/dri/renderD*", "/dev/nvidia[0-9]*", "/dev/dxg")
+
+
+def gpu_device_present() -> bool:
+    """Whether the system may have a hardware GPU for OpenGL: on Linux, one of its device
+    files exists (:data:`_GPU_DEVICE_FILES`); elsewhere, always (the context decides). Without
+    one, ``auto`` does not create an OpenGL context only to find Mesa's software renderer
+    (50 ms of every ``fovexp enhance`` on a machine without a GPU)."""
+    if not sys.platform.startswith("linux"):
+        return True
+    return any(glob.glob(pattern) for pattern in _GPU_DEVICE_FILES)
 
 
 def gpu_extra_installed() -> bool:
@@ -79,6 +99,8 @@ def make_enhancer(
                     f"the {preset!r} preset runs on the CPU backend only")
     if backend == "auto" and not gpu_extra_installed():
         return _cpu(display, preset, geometry, table, options, NO_GPU_EXTRA)
+    if backend == "auto" and ctx is None and not gpu_device_present():
+        return _cpu(display, preset, geometry, table, options, NO_GPU_DEVICE)
     from .gpu import GpuEnhancer, create_context, is_software, release_context, renderer_name
 
     unsupported = GpuEnhancer.unsupported(options or EngineOptions())

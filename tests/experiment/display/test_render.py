@@ -4,6 +4,7 @@ the GPU backend's output written into a texture GPU-side, and why ``auto`` chose
 
 from __future__ import annotations
 
+import sys
 import threading
 import time
 
@@ -12,6 +13,7 @@ import pytest
 
 import fovexp
 from fovexp import FovexpError, load_display, make_enhancer, make_params
+from fovexp.backends import NO_GPU_DEVICE, gpu_device_present
 from fovexp.experiment.display.render import TestRenderer, to_rgba8
 
 DISPLAY = load_display("lg-oled55cx")
@@ -106,12 +108,34 @@ def test_auto_says_why_it_chose_the_cpu() -> None:
     if renderer is not None and not renders_in_software(renderer):  # a hardware GPU
         assert auto.backend == "gpu" and auto.fallback_reason is None
         auto.close()
-    elif renderer is not None:  # llvmpipe here and in CI
+    elif renderer is not None and not gpu_device_present():  # llvmpipe, no GPU device: CI
+        assert auto.backend == "cpu" and auto.fallback_reason == NO_GPU_DEVICE
+    elif renderer is not None:  # llvmpipe beside a device it cannot use
         assert auto.backend == "cpu"
         assert auto.fallback_reason.startswith("the OpenGL renderer is software")
         assert renderer in auto.fallback_reason
     else:
         assert auto.backend == "cpu" and auto.fallback_reason.startswith("no GPU")
+
+
+def test_auto_skips_the_context_where_linux_shows_no_gpu_device(monkeypatch, tmp_path) -> None:
+    """On Linux without a GPU device file, ``auto`` takes the CPU without making an OpenGL
+    context (it would be Mesa's software renderer); with one, it makes the context and judges
+    it (here: llvmpipe, or a hardware GPU)."""
+    import fovexp.backends as backends
+
+    pytest.importorskip("moderngl")
+    if not sys.platform.startswith("linux"):
+        assert gpu_device_present()
+        return
+    monkeypatch.setattr(backends, "_GPU_DEVICE_FILES", (str(tmp_path / "renderD*"),))
+    assert not gpu_device_present()
+    made = []
+    monkeypatch.setattr("fovexp.gpu.create_context", lambda ctx=None: made.append(ctx))
+    auto = make_enhancer(DISPLAY, backend="auto")
+    assert auto.backend == "cpu" and auto.fallback_reason == NO_GPU_DEVICE and made == []
+    (tmp_path / "renderD128").touch()
+    assert gpu_device_present()
 
 
 def test_write_output_to_is_the_enhance_output_on_the_gpu() -> None:
