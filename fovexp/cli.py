@@ -377,6 +377,8 @@ _DONE = False
 
 
 def main(argv: list[str] | None = None) -> int:
+    global _DONE
+    _DONE = False  # a command of this call says so itself
     parser = build_parser()
     args = parser.parse_args(argv)
     plain_warnings("fovexp")

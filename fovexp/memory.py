@@ -15,8 +15,8 @@ Elsewhere than glibc (macOS, Windows, musl) it does nothing.
 The heap still fragments: a frame's arrays freed in another order than the last frame's leave
 holes that the next frame's 100 MB arrays do not fit, and the heap grows into fresh pages for
 several frames after the first (measured on that machine, an already-foveated 4K frame at 12
-impulses: 250-370 ms in the frames that grew it, 160 ms in those that did not, over the first
-eight frames of a run). A :class:`FramePool` keeps each large stage array's buffer for the
+impulses: frames 3-8 of a run 170-355 ms, the slow ones those that grew the heap, against
+160-170 ms for the others). A :class:`FramePool` keeps each large stage array's buffer for the
 next frame's array of the same size, so from the second frame on a frame's arrays are the
 last frame's buffers: no page fault and no heap growth, whatever the allocator. The Enhancer's
 stage cache makes its pool the active one (:meth:`FramePool.active`) while it computes a

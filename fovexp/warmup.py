@@ -118,7 +118,7 @@ def _exercise() -> Iterator[str]:
 def load_frame_kernels(enh: Any, params: Any, foveated: bool = False) -> None:
     """Load (or compile) the kernels a frame of CPU enhancer ``enh`` calls with ``params``: a
     small frame through an enhancer like it (the same display, preset, geometry, table and
-    options; ``enh`` itself keeps its stages). Loading a 4K frame's 24 kernels from the cache
+    options; ``enh`` itself keeps its stages). Loading a 4K frame's 25 kernels from the cache
     takes about 0.3 s, Numba's first load included, mostly Python: ``fovexp enhance`` does it
     while its image is read and decoded, which releases the GIL. Nothing for a GPU enhancer
     (its shaders are built with it)."""
