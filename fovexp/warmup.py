@@ -130,9 +130,10 @@ def load_frame_kernels(enh: Any, params: Any, foveated: bool = False) -> None:
     # a corner of the screen with the gaze at its centre (:func:`_exercise`): far enough out
     # that the blur takes the pyramid and the band is open; flat in part, as most frames are
     # (skipping's kernels)
-    frame = _textured(96, 160, 3)
-    frame[64:, :] = 0.5
-    viewport = (0, 0, enh.display.width_px, enh.display.height_px)
+    w, h = enh.display.width_px, enh.display.height_px
+    frame = _textured(min(96, h), min(160, w), 3)  # a display smaller than that: all of it
+    frame[frame.shape[0] * 2 // 3:, :] = 0.5
+    viewport = (0, 0, w, h)
     twin.set_image(frame, foveated=foveated, viewport=viewport)
     twin.enhance((0.5, 0.5), params)
 
