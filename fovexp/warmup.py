@@ -118,9 +118,10 @@ def _exercise() -> Iterator[str]:
 def load_frame_kernels(enh: Any, params: Any, foveated: bool = False) -> None:
     """Load (or compile) the kernels a frame of CPU enhancer ``enh`` calls with ``params``: a
     small frame through an enhancer like it (the same display, preset, geometry, table and
-    options; ``enh`` itself keeps its stages). Loading a 4K frame's 25 kernels from the cache
-    takes about 0.3 s, Numba's first load included, mostly Python: ``fovexp enhance`` does it
-    while its image is read and decoded, which releases the GIL. Nothing for a GPU enhancer
+    options; ``enh`` itself keeps its stages). Loading a 4K frame's 25 kernels from the cache,
+    Numba's first load included, with the small frame took 0.40-0.47 s (three runs), mostly
+    Python: ``fovexp enhance`` does it while its image is read and decoded, which releases
+    the GIL. Nothing for a GPU enhancer
     (its shaders are built with it)."""
     from .pipeline import Enhancer
 
