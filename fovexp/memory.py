@@ -39,6 +39,8 @@ from collections.abc import Iterator
 
 import numpy as np
 
+from ._parallel import zero_fill
+
 #: mallopt's parameters (malloc.h).
 _M_TRIM_THRESHOLD = -1
 _M_MMAP_THRESHOLD = -3
@@ -126,10 +128,12 @@ class FramePool:
             return buf.view(dt).reshape(shape)
 
     def zeros(self, shape: tuple[int, ...], dtype: np.dtype | type) -> np.ndarray:
-        """:meth:`empty`, zeroed."""
+        """:meth:`empty`, zeroed (on the threads: :func:`fovexp._parallel.zero_fill`)."""
         out = self.empty(shape, dtype)
-        out.fill(0)
-        return out
+        if out.nbytes < POOL_MIN_BYTES:
+            out.fill(0)
+            return out
+        return zero_fill(out)
 
     def next_frame(self) -> None:
         """Count a frame; give back the free buffers unused for :data:`POOL_IDLE_FRAMES`."""

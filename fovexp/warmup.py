@@ -22,6 +22,8 @@ from typing import Any
 
 import numpy as np
 
+from ._parallel import zero_fill
+
 
 @dataclass
 class CompileReport:
@@ -109,6 +111,10 @@ def _exercise() -> Iterator[str]:
     cell_index(np.zeros(2), 20.0)
     yield "impulse cells"
 
+    # the frame pool's zero fill (a 4K frame's zeroed arrays; these frames' are too small)
+    zero_fill(np.empty(16, np.float32))
+    yield "zero fill"
+
     # fovexp stereo's warp (section 6.4), a kernel of the evaluation package
     from .evaluation.stereo import forward_warp
     forward_warp(np.zeros((4, 8), np.float32), np.ones((4, 8)))
@@ -137,6 +143,8 @@ def load_frame_kernels(enh: Any, params: Any, foveated: bool = False) -> None:
     viewport = (0, 0, w, h)
     twin.set_image(frame, foveated=foveated, viewport=viewport)
     twin.enhance((0.5, 0.5), params)
+    # the frame pool's zero fill, which so small a frame's arrays do not reach (fovexp.memory)
+    zero_fill(np.empty(16, np.float32))
 
 
 def kernels() -> dict[str, object]:

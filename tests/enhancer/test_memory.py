@@ -100,6 +100,26 @@ def test_a_pool_gives_back_what_went_unused_for_its_frames():
     assert not z.any()
 
 
+def test_a_pools_zeros_are_zeros_in_a_buffer_written_before():
+    """:meth:`FramePool.zeros` reuses a buffer the last frame filled, and zeroes all of it on
+    the threads (fovexp._parallel.zero_fill), its odd-sized tail included."""
+    from fovexp._parallel import zero_fill
+    from fovexp.memory import POOL_MIN_BYTES, FramePool
+
+    pool = FramePool()
+    shape = (3, POOL_MIN_BYTES // 4 + 7)  # not a multiple of the fill's parts
+    dirty = pool.empty(shape, np.float32)
+    dirty.fill(np.nan)
+    address = dirty.__array_interface__["data"][0]
+    del dirty
+    pool.next_frame()
+    z = pool.zeros(shape, np.float32)
+    assert z.__array_interface__["data"][0] == address  # the same buffer, reused
+    assert np.array_equal(z, np.zeros(shape, np.float32))
+    with pytest.raises(ValueError, match="C-contiguous"):
+        zero_fill(np.zeros((4, 4))[:, ::2])
+
+
 def test_an_enhancers_frames_reuse_their_buffers_and_never_touch_a_kept_output():
     """From the second frame on, a frame's large arrays are the last frame's buffers (the pool
     does not grow), and an output the caller kept is not one of them: it still holds its

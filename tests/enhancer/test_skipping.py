@@ -231,3 +231,32 @@ def test_a_foveated_frame_evaluates_sigma_only_where_the_contrast_reads_it():
     px = np.kron(done, np.ones((8, 8), bool))[: image.shape[0], : image.shape[1]]
     partial = enh._c.get("sigma_blocks").on(done, 3)
     assert np.array_equal(_bits(partial[px]), _bits(sigma_full[px]))
+
+
+@pytest.mark.parametrize("set_kw", [{}, {"foveated": True}])
+def test_skipping_reads_no_memory_a_stage_did_not_write(monkeypatch, set_kw):
+    """The stages' arrays are not initialised (fovexp.memory.frame_empty): the blocks a
+    skipping stage leaves out are written 0 by the stage itself, or never read (the sigma
+    map evaluated block by block). With every such array handed out full of NaN, the output
+    and the maps are still the ones without skipping, bit for bit: a read of memory no stage
+    wrote would carry a NaN into them."""
+    from fovexp import memory
+
+    def poisoned(self, shape, dtype):
+        out = np.empty(shape, dtype)
+        out.fill(np.nan if np.dtype(dtype).kind == "f" else 0x5A)
+        return out
+
+    image = mixed_scene()
+    image[:, 760:] = image[380:, :] = 0.5  # flat to the right edge, and whole strips of rows
+    _, off = _both(image, (0.45, 0.55), set_kw)[1]
+    expected = {name: off.map(name) for name in MAPS}
+    monkeypatch.setattr(memory.FramePool, "empty", poisoned)
+    monkeypatch.setattr(memory, "POOL_MIN_BYTES", 0)  # every array the stages take
+    enh = Enhancer(LG, options=EngineOptions(skip=True))
+    enh.set_image(image, **set_kw)
+    on = enh.enhance((0.45, 0.55), EnhanceParams(blur_rate=0.57, impulses=24))
+    assert np.isnan(enh._c.get("sigma_blocks").on(
+        np.zeros_like(enh._c.get("sigma_blocks").done), 3)).any()  # the poison is there
+    for name in MAPS:
+        assert np.array_equal(_bits(on.map(name)), _bits(expected[name])), name
