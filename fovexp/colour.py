@@ -494,7 +494,13 @@ def _luma_blocks_into(rgb, weights, block, out, lo, hi, encoded, p, offset, bits
     h, w = out.shape
     bh, bw = lo.shape
     linearise = encoded.shape[0] > 0
-    for by in numba.prange(bh):
+    # block rows spread over the threads (:func:`_linearize_into`): a flat block row's runs
+    # cost a comparison and a copy, a textured one the power; in order, the thread given the
+    # top half of a frame textured at the top waited for the other (a three-quarters-flat 4K
+    # frame: 22.8 -> 20.0 ms, its linearisation and luminance pass)
+    stride = interleave(bh)
+    for i in numba.prange(bh):
+        by = (i * stride) % bh
         ya, yb = by * block, min(by * block + block, h)
         col_lo = np.empty(w, dtype=out.dtype)
         col_hi = np.empty(w, dtype=out.dtype)

@@ -586,7 +586,9 @@ def _splat(sums, out, x, y, weight, index, amplitude, frequency, carrier, norm, 
     kx, ky, kamp, kk, kt = xs[:m], ys[:m], amp[:m], k[:m], t[:m]
     nb = (height + band - 1) // band
     reach = 2 * int(math.ceil(r)) + 2  # rows past its band's end a kernel may write
-    for b in numba.prange(nb):
+    spread = interleave(nb)  # the touched bands, often all in one part of the frame
+    for i in numba.prange(nb):
+        b = (i * spread) % nb
         if touched[b]:
             for y in range(b * band, min(height, (b + 1) * band)):
                 row = sums[y]

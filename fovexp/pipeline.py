@@ -698,10 +698,12 @@ class Enhancer:
 
     def _abs_laplacian(self, pyr: list[np.ndarray], active: ImpulseParams) -> dict[int, np.ndarray]:
         """|L_k| of every level (section 4.2); when skipping, only on the tiles the active
-        impulses' samples read (:func:`_laplacian_need`), the others left 0."""
+        impulses' samples read (:func:`_laplacian_need`), the others not written: only
+        ``imp_laplacian`` reads this stage, at those impulses (the maps have
+        ``abs_laplacian_full``)."""
         top = len(pyr) - 1
         need = self._laplacian_need(pyr, active) if self.options.skip else None
-        return pyramids.smoothed_abs_laplacian(pyr, top, need)
+        return pyramids.smoothed_abs_laplacian(pyr, top, need, zero_rest=False)
 
     def _laplacian_need(self, pyr, active: ImpulseParams) -> dict[int, np.ndarray]:
         """Per level k, the tiles of |L_k| that the imp_laplacian stage reads at the active
