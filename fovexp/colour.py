@@ -295,22 +295,6 @@ def linearize(
     return power(out, scalar(gamma), out)
 
 
-@numba.njit(cache=True, inline="always", fastmath=FASTMATH, nogil=True)
-def _add_clip_row(src, a, b, y, w, c, n_grey, row):  # pragma: no cover - compiled
-    """``row = clip(src + a[y] + b[y], 0, 1)`` of one row (``c`` channels interleaved; the
-    first ``n_grey`` of the grey images added to every channel)."""
-    lo, hi = np.float32(0.0), np.float32(1.0)
-    for x in range(w):
-        g = np.float32(0.0)
-        if n_grey == 2:
-            g = a[y, x] + b[y, x]
-        elif n_grey == 1:
-            g = a[y, x]
-        for ch in range(c):
-            v = src[x * c + ch] + g if n_grey else src[x * c + ch]
-            row[x * c + ch] = min(max(v, lo), hi)
-
-
 #: Pixels per run of :func:`_encode_kept`: a run whose change is 0 throughout copies the input
 #: (256 RGB pixels, :data:`_RUN` values).
 _RUN_PX = _RUN // _PERIOD
@@ -349,46 +333,89 @@ def _encode_kept(src, g, kept, w, c, p, offset, clipped, row):  # pragma: no cov
         s = e
 
 
+@numba.njit(cache=True, inline="always", fastmath=FASTMATH, nogil=True)
+def _encode_runs(src, g, w, c, p, offset, clipped, row):  # pragma: no cover - compiled
+    """One row of :func:`_encode_into` without ``kept``: ``row = T^-1(clip(src + g))`` (``g``
+    the row's grey change, ``clipped`` scratch of the row's size), in runs of
+    :data:`_RUN_PX` pixels. A run whose change is exactly 0, as is the pixel's before it, and
+    whose pixels repeat that pixel value for value (a flat region the enhancement left as it
+    was) has that pixel's results: a copy, not the add, the clip and the power's run (the
+    same numbers: a pixel's result depends on its values alone, and ``v + 0`` differs from
+    ``v`` only at 0, which the power sends to 0 either way). Any other run is added, clipped
+    and raised to the power in runs (:func:`_transfer_runs`)."""
+    lo, hi = np.float32(0.0), np.float32(1.0)
+    s = 0
+    while s < w:
+        e = min(w, s + _RUN_PX)
+        # indexed from 0: the loops vectorise
+        gs, lin, out = g[s:e], src[s * c:e * c], row[s * c:e * c]
+        changed = 0
+        for x in range(e - s):  # no early exit: it vectorises
+            changed += gs[x] != 0.0
+        if changed == 0 and s > 0 and g[s - 1] == 0.0:
+            before = src[s * c - c:e * c - c]
+            differ = 0
+            for i in range((e - s) * c):
+                differ += lin[i] != before[i]
+            if differ == 0:
+                if c == 3:  # the pixel before's results in registers: strided stores
+                    p0, p1, p2 = row[s * 3 - 3], row[s * 3 - 2], row[s * 3 - 1]
+                    for x in range(e - s):
+                        out[3 * x], out[3 * x + 1], out[3 * x + 2] = p0, p1, p2
+                else:
+                    for i in range((e - s) * c):
+                        out[i] = row[s * c - c + i % c]
+                s = e
+                continue
+        clip = clipped[s * c:e * c]
+        for x in range(e - s):
+            for ch in range(c):
+                clip[x * c + ch] = min(max(lin[x * c + ch] + gs[x], lo), hi)
+        _transfer_runs(clip, out, p, offset, True, _NO_BITS, _NO_TABLE, _NO_TABLE)
+        s = e
+
+
 @numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
 def _encode_into(img, a, b, n_grey, p, offset, kept, out):  # pragma: no cover - compiled
     """:func:`encode` of float32 (H, W, C) ``img`` in one pass: clip(img + a + b, 0, 1) (the
     first ``n_grey`` of the grey (H, W) images ``a``, ``b`` added to every channel), to the
-    power ``p``, then the release's offset (``offset`` > 0) and a clip. Each row is clipped
-    into a row of its own first, then raised to the power in runs (:func:`_transfer_runs`).
-    With ``kept`` of ``img``'s shape (the encoded image ``img`` was linearised from; shape
-    (0, 0, 0): none), a pixel whose grey images add exactly 0 is ``kept``'s
-    (:func:`_encode_kept`)."""
+    power ``p``, then the release's offset (``offset`` > 0) and a clip. Each row's grey change
+    is summed into a row of its own first, then the row goes in runs: added, clipped and
+    raised to the power (:func:`_transfer_runs`), or copied where it repeats a pixel the
+    change left as it was (:func:`_encode_runs`). With ``kept`` of ``img``'s shape (the
+    encoded image ``img`` was linearised from; shape (0, 0, 0): none), a pixel whose grey
+    images add exactly 0 is ``kept``'s (:func:`_encode_kept`)."""
     h, w, c = img.shape
     keep = kept.shape[0] > 0 and n_grey > 0
     stride = interleave(h)  # each thread's rows spread over the frame (:func:`_linearize_into`)
     for i in numba.prange(h):
         y = (i * stride) % h
         clipped = np.empty(w * c, np.float32)
-        if keep:
-            g = np.empty(w, np.float32)
+        g = np.empty(w, np.float32)
+        if n_grey == 2:
+            ay, by = a[y], b[y]
+            for x in range(w):
+                g[x] = ay[x] + by[x]
+        elif n_grey == 1:
             ay = a[y]
-            if n_grey == 2:
-                by = b[y]
-                for x in range(w):
-                    g[x] = ay[x] + by[x]
-            else:
-                for x in range(w):
-                    g[x] = ay[x]
+            for x in range(w):
+                g[x] = ay[x]
+        else:
+            for x in range(w):
+                g[x] = 0.0
+        # RGB with its channel count a constant the compiler unrolls (measured: 4K encode
+        # 114 -> 84 ms, 2 cores); any other as it comes
+        if keep:
             if c == 3:
                 _encode_kept(img[y].reshape(-1), g, kept[y].reshape(-1), w, 3, p, offset,
                              clipped, out[y].reshape(-1))
             else:
                 _encode_kept(img[y].reshape(-1), g, kept[y].reshape(-1), w, c, p, offset,
                              clipped, out[y].reshape(-1))
-            continue
-        # RGB with its channel count a constant the compiler unrolls (measured: 4K encode
-        # 114 -> 84 ms, 2 cores); any other as it comes
-        if c == 3:
-            _add_clip_row(img[y].reshape(-1), a, b, y, w, 3, n_grey, clipped)
+        elif c == 3:
+            _encode_runs(img[y].reshape(-1), g, w, 3, p, offset, clipped, out[y].reshape(-1))
         else:
-            _add_clip_row(img[y].reshape(-1), a, b, y, w, c, n_grey, clipped)
-        _transfer_runs(clipped, out[y].reshape(-1), p, offset, True, _NO_BITS, _NO_TABLE,
-                       _NO_TABLE)
+            _encode_runs(img[y].reshape(-1), g, w, c, p, offset, clipped, out[y].reshape(-1))
     return out
 
 
