@@ -171,6 +171,32 @@ def zero_fill(a: np.ndarray) -> np.ndarray:
 
 
 @numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
+def _zero_outside_rows(a, spans):  # pragma: no cover - compiled
+    h = a.shape[0]
+    stride = interleave(h)  # the spans are often all in one part of the frame
+    for i in numba.prange(h):
+        y = (i * stride) % h
+        row = a[y]
+        lo, hi = spans[y, 0], spans[y, 1]
+        if hi <= lo:
+            lo = hi = row.shape[0]
+        head, tail = row[:lo], row[hi:]  # indexed from 0: the loops vectorise
+        for x in range(head.shape[0]):
+            head[x] = 0.0
+        for x in range(tail.shape[0]):
+            tail[x] = 0.0
+
+
+def zero_outside_rows(a: np.ndarray, spans: np.ndarray) -> np.ndarray:
+    """``a[y, :lo] = a[y, hi:] = 0`` for each row ``y`` of a 2-D array, ``(lo, hi) =
+    spans[y]`` (every column where ``hi <= lo``), on the threads; ``a``, written in place."""
+    if a.ndim != 2 or spans.shape != (a.shape[0], 2):
+        raise ValueError(f"spans of shape ({a.shape[0]}, 2) for a 2-D array, not {spans.shape}")
+    _zero_outside_rows(a, np.ascontiguousarray(spans, np.int64))
+    return a
+
+
+@numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
 def _multiply_adds(lanes, reps):  # pragma: no cover - compiled
     """``reps`` multiplies and adds on every value of each row of ``lanes`` (a row per task,
     small enough to stay in the L1 cache): work bound by each core's vector units and L1

@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import math
 import threading
+from typing import Literal, overload
 
 import numba
 import numpy as np
@@ -49,7 +50,7 @@ from ._parallel import interleave
 from .errors import FovexpError
 from .foveation import SigmaOnBlocks, _float_array, per_pixel_sigma
 from .jit import FASTMATH, MAGIC_EXACT_BELOW, int64_to_float64, rint_to_int64
-from .memory import frame_empty, frame_zeros
+from .memory import WrittenRows, frame_empty, frame_zeros
 from .pyramids import FLAT_BLOCK_LEVEL, blocks_reaching, level_scale
 
 #: Box-filter width per integer blur level (docs/METHOD.md, 5.3): level k averages ceil(4 k) px.
@@ -262,10 +263,10 @@ def _row_change(img, sigma, sat, y, xs, xe, oy, ox, pad, f_e, add_input, magic, 
 def _change_strips(img, sigma, pad, f_e, flat, shift, add_input, tables, largest, out):
     # pragma: no cover - compiled
     """:func:`_row_change` of every pixel whose ``2**shift`` square block ``flat`` does not
-    mark (``flat`` of shape (0, 0): every pixel), written into ``out``, and 0 where blocks
-    are left out (their boxes are one constant, their change is 0), on the threads: a
-    zeroed 4K map before the pass was one thread's 33 MB write, 4.7 ms of a
-    three-quarters-flat frame. The rows go in strips
+    mark (``flat`` of shape (0, 0): every pixel), written into ``out``, and 0 between them
+    in a row: each row is written from its first block to compute to its last
+    (:func:`_written_spans`), nothing elsewhere (those blocks are left out: their boxes are
+    one constant, their change is 0; :class:`fovexp.memory.WrittenRows`). The rows go in strips
     of ``tables.shape[1] - 2 pad - 1``, each summed into a table of its own
     (:func:`_table_into`, ``tables[p]`` for part ``p``; columns from the first to the last
     block it computes), which stays in the cache while its boxes are read. The strips are
@@ -296,10 +297,8 @@ def _change_strips(img, sigma, pad, f_e, flat, shift, add_input, tables, largest
                         if not flat[by, bx]:
                             b1 = bx
                             break
-                if b1 < 0:
+                if b1 < 0:  # a strip left out: its change is 0
                     largest[st] = -1.0
-                    for y in range(y0, y1):  # a strip left out: its change is 0
-                        _zero(out[y])
                     continue
                 x0, x1 = b0 << shift, min((b1 + 1) << shift, w)
             top = _table_into(img, pad, y0, y1 + 2 * pad, x0, x1 + 2 * pad, scratch, table)
@@ -312,7 +311,7 @@ def _change_strips(img, sigma, pad, f_e, flat, shift, add_input, tables, largest
                     continue
                 by = y >> shift
                 bx = 0
-                done = 0  # the row's pixels written so far
+                done = -1  # where the row's last run ended (none yet)
                 while bx < nbx:  # runs of consecutive blocks to compute, 0 between them
                     if flat[by, bx]:
                         bx += 1
@@ -320,11 +319,11 @@ def _change_strips(img, sigma, pad, f_e, flat, shift, add_input, tables, largest
                     c0 = bx
                     while bx < nbx and not flat[by, bx]:
                         bx += 1
-                    _zero(out[y, done:c0 << shift])
+                    if done >= 0:
+                        _zero(out[y, done:c0 << shift])
                     done = min(bx << shift, w)
                     _row_change(img, sigma, table, y, c0 << shift, done, y0, x0, pad, f_e,
                                 False, magic, out)
-                _zero(out[y, done:])
     return out
 
 
@@ -369,10 +368,24 @@ def contrast_enhance(linear: np.ndarray, sigma_map_px: np.ndarray, f_e: float) -
     return per_pixel_sigma(linear, sigma_map_px, _enhance_channels, float(f_e))
 
 
+@overload
 def contrast_change(
     grey: np.ndarray, sigma_map_px: np.ndarray, f_e: float,
-    grey_flat: np.ndarray | None = None,
-) -> np.ndarray:
+    grey_flat: np.ndarray | None = None, written: Literal[False] = False,
+) -> np.ndarray: ...
+
+
+@overload
+def contrast_change(
+    grey: np.ndarray, sigma_map_px: np.ndarray, f_e: float,
+    grey_flat: np.ndarray | None = None, *, written: Literal[True],
+) -> WrittenRows: ...
+
+
+def contrast_change(
+    grey: np.ndarray, sigma_map_px: np.ndarray, f_e: float,
+    grey_flat: np.ndarray | None = None, written: bool = False,
+) -> np.ndarray | WrittenRows:
     """``contrast_enhance(grey) - grey`` of an (H, W) linear luminance image, in one pass: the
     change the pipeline adds to every colour channel (the method works on luminance). Float32
     or float64 (the result has the image's dtype).
@@ -380,43 +393,84 @@ def contrast_change(
     ``grey_flat``: how far around each level-3 block the image is one constant
     (:func:`fovexp.pyramids.constant_radius_blocks` of its block extremes), to leave out the
     blocks whose boxes all lie in one constant region, where the change is exactly 0 (the
-    enhancer's skipping; the result is the same bit for bit)."""
+    enhancer's skipping; the result is the same bit for bit). ``written``: the change as
+    a :class:`fovexp.memory.WrittenRows`, its zeros outside each row's span not written."""
     img = _float_array(grey)
     sigma = _float_array(sigma_map_px)
     max_sigma = float(sigma.max()) if sigma.size else 0.0
     if max_sigma <= 0.0:
-        return frame_zeros(img.shape, img.dtype)
+        return _unchanged(img, written)
     flat = unchanged_blocks(grey_flat, max_sigma) if grey_flat is not None else None
-    return _change_outside(img, sigma, float(f_e), flat, max_sigma)
+    change = _change_outside(img, sigma, float(f_e), flat, max_sigma)
+    return change if written else change.full()
+
+
+@overload
+def contrast_change_where_needed(
+    grey: np.ndarray, sigma_on_blocks: SigmaOnBlocks, max_sigma_px: float, f_e: float,
+    grey_flat: np.ndarray, written: Literal[False] = False,
+) -> np.ndarray: ...
+
+
+@overload
+def contrast_change_where_needed(
+    grey: np.ndarray, sigma_on_blocks: SigmaOnBlocks, max_sigma_px: float, f_e: float,
+    grey_flat: np.ndarray, *, written: Literal[True],
+) -> WrittenRows: ...
 
 
 def contrast_change_where_needed(
     grey: np.ndarray, sigma_on_blocks: SigmaOnBlocks, max_sigma_px: float, f_e: float,
-    grey_flat: np.ndarray,
-) -> np.ndarray:
+    grey_flat: np.ndarray, written: bool = False,
+) -> np.ndarray | WrittenRows:
     """:func:`contrast_change` with skipping, asking for the sigma map only where the change
     is not known to be 0 (:data:`fovexp.foveation.SigmaOnBlocks`).
     ``max_sigma_px`` bounds the sigma map from above; it sets how far the boxes reach. The
     result is :func:`contrast_change`'s, bit for bit (the boxes' sums are exact integers,
-    whatever border the table has)."""
+    whatever border the table has); ``written`` as there."""
     img = _float_array(grey)
     if max_sigma_px <= 0.0:
-        return frame_zeros(img.shape, img.dtype)
+        return _unchanged(img, written)
     flat = unchanged_blocks(grey_flat, max_sigma_px)
     if flat.all():
-        return frame_zeros(img.shape, img.dtype)
+        return _unchanged(img, written)
     sigma = _float_array(sigma_on_blocks(~flat, FLAT_BLOCK_LEVEL))
-    return _change_outside(img, sigma, float(f_e), flat, max_sigma_px)
+    change = _change_outside(img, sigma, float(f_e), flat, max_sigma_px)
+    return change if written else change.full()
+
+
+def _unchanged(img: np.ndarray, written: bool) -> np.ndarray | WrittenRows:
+    """A change of 0 everywhere: zeros, or with ``written`` none written."""
+    if not written:
+        return frame_zeros(img.shape, img.dtype)
+    return WrittenRows(frame_empty(img.shape, img.dtype), np.zeros((img.shape[0], 2), np.int64))
+
+
+def _written_spans(flat: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """Each row's [start, stop) from its first level-3 block ``flat`` does not mark to its
+    last (empty where it marks them all): what :func:`_change_strips` writes."""
+    h, w = shape
+    block = level_scale(FLAT_BLOCK_LEVEL)
+    need = ~flat
+    some = need.any(axis=1)
+    first = np.argmax(need, axis=1)
+    last = need.shape[1] - 1 - np.argmax(need[:, ::-1], axis=1)
+    spans = np.zeros((need.shape[0], 2), np.int64)
+    spans[some, 0] = first[some] * block
+    spans[some, 1] = np.minimum((last[some] + 1) * block, w)
+    return np.repeat(spans, block, axis=0)[:h]
 
 
 def _change_outside(
     img: np.ndarray, sigma: np.ndarray, f_e: float, flat: np.ndarray | None, max_sigma: float,
-) -> np.ndarray:
-    """The change of every pixel outside the level-3 blocks ``flat`` marks (0 there); boxes up
-    to level ``floor(max_sigma) + 1``."""
-    if flat is not None and not flat.any():  # nothing to leave out
-        flat = None
-    return _strips(img, sigma, f_e, flat, max_sigma, False, frame_empty(img.shape, img.dtype))
+) -> WrittenRows:
+    """The change of every pixel outside the level-3 blocks ``flat`` marks (0 there, written
+    only between two blocks computed in a row); boxes up to level ``floor(max_sigma) + 1``."""
+    out = frame_empty(img.shape, img.dtype)
+    if flat is None or not flat.any():  # nothing to leave out
+        return WrittenRows.whole(_strips(img, sigma, f_e, None, max_sigma, False, out))
+    _strips(img, sigma, f_e, flat, max_sigma, False, out)
+    return WrittenRows(out, _written_spans(flat, img.shape))
 
 
 def _strips(

@@ -487,28 +487,40 @@ def _foveate_bands(
             for j in range(w * c):
                 out_row[j] = src_row[j]
             s_row, k_row, t_row = sigma[y], kk[y - y0], tt[y - y0]
+            flat_row = flat[y >> shift]
             k = 0  # the bracket found last: the sigma map is smooth along a row
-            for x in range(w):
-                s = s_row[x]
-                if s <= 0.0 or flat[y >> shift, x >> shift]:  # (a shift: no division)
-                    k_row[x] = -1
-                    t_row[x] = 0.0
+            bx0 = 0
+            while bx0 < w:  # block by block: a flat one is left as it is, its sigma not read
+                bx1 = min(w, ((bx0 >> shift) + 1) << shift)
+                if flat_row[bx0 >> shift]:
+                    kf, tf = k_row[bx0:bx1], t_row[bx0:bx1]  # indexed from 0: they vectorise
+                    for x in range(bx1 - bx0):
+                        kf[x] = -1
+                        tf[x] = 0.0
+                    bx0 = bx1
                     continue
-                # numpy.searchsorted(levels, s) - 1 (the levels below s, less one), walked to
-                # from the last pixel's instead of searched for: one or two comparisons (NaN
-                # sorts above every level there)
-                if s != s:
-                    k = n - 1
-                while k + 1 < n and levels[k + 1] < s:
-                    k += 1
-                while k >= 0 and levels[k] >= s:
-                    k -= 1
-                kb = min(k, n - 2)
-                t = min((s - levels[kb]) / (levels[kb + 1] - levels[kb]), 1.0)
-                k_row[x] = kb
-                t_row[x] = t
-                needs[kb, x] = True
-                needs[kb + 1, x] = True
+                for x in range(bx0, bx1):
+                    s = s_row[x]
+                    if s <= 0.0:
+                        k_row[x] = -1
+                        t_row[x] = 0.0
+                        continue
+                    # numpy.searchsorted(levels, s) - 1 (the levels below s, less one), walked
+                    # to from the last pibx1l's instead of searched for: one or two comparisons
+                    # (NaN sorts above every level there)
+                    if s != s:
+                        k = n - 1
+                    while k + 1 < n and levels[k + 1] < s:
+                        k += 1
+                    while k >= 0 and levels[k] >= s:
+                        k -= 1
+                    kb = min(k, n - 2)
+                    t = min((s - levels[kb]) / (levels[kb + 1] - levels[kb]), 1.0)
+                    k_row[x] = kb
+                    t_row[x] = t
+                    needs[kb, x] = True
+                    needs[kb + 1, x] = True
+                bx0 = bx1
         for lv in range(1, n):
             need = needs[lv]
             if not need.any():

@@ -50,13 +50,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Literal, overload
 
 import numba
 import numpy as np
 
 from ._parallel import interleave
 from .jit import FASTMATH, MAGIC_F64, fma, two_to_the
-from .memory import frame_empty, frame_zeros
+from .memory import WrittenRows, frame_empty, frame_zeros
 
 #: Envelope value at which the kernel is truncated (docs/METHOD.md, 4).
 KERNEL_TRUNCATION = 0.01
@@ -520,7 +521,8 @@ def _band_impulses(xs, ys, row_start, cell, r, y0, y1, width):  # pragma: no cov
 
 @numba.njit(cache=True, fastmath=FASTMATH, nogil=True)
 def _kernels(x, y, weight, index, amplitude, frequency, carrier, norm, skip, cell, r, band,
-             height, xs, ys, amp, k, t, row_start, touched):  # pragma: no cover - compiled
+             height, nwin, xs, ys, amp, k, t, row_start, touched, cols):
+    # pragma: no cover - compiled
     """The kernels :func:`_splat` sums, in one pass over the impulses (``x``, ``y``,
     ``weight``: every impulse's; ``amplitude``, ``frequency``, ``carrier``: those of the
     impulses ``index``, ascending, the others' 0): each one's position, its amplitude
@@ -528,15 +530,21 @@ def _kernels(x, y, weight, index, amplitude, frequency, carrier, norm, skip, cel
     ``ys``, ``amp``, ``k``, ``t`` (in impulse order; with ``skip``, those with a zero
     amplitude left out); ``row_start[q]``, how many lie in cell rows below ``q`` (the
     impulses are sorted by cell row: NumPy's ``searchsorted``); and the bands of ``band``
-    rows a kernel may reach (``touched``: the band of its first row, and the next). The
-    same numbers as NumPy's gathers, scatter and passes, which took 25 ms of the noise at
-    4K and 64 impulses (the pipeline's scatter into every impulse's arrays included), in
-    one pass. The count kept."""
+    rows a kernel may reach (``touched``: the band of its first row, and the next) and, per
+    band, the image columns its kernels' windows span (``cols[b]``: [start, stop), those of
+    the kernels whose first row lies in it or in the band before; empty, stop <= start, for
+    none). The same numbers as NumPy's gathers, scatter and passes, which took 25 ms of the
+    noise at 4K and 64 impulses (the pipeline's scatter into every impulse's arrays
+    included), in one pass. The count kept."""
     n = x.shape[0]
     given = index.shape[0]
     n_rows = row_start.shape[0] - 1
     counts = np.zeros(n_rows + 2, np.int64)  # bucket q + 1: cell row q (clamped)
     first = np.zeros(touched.shape[0], np.bool_)
+    nb = touched.shape[0]
+    lo = np.full(nb, np.iinfo(np.int64).max, np.int64)  # the windows' columns per band
+    hi = np.full(nb, np.iinfo(np.int64).min, np.int64)
+    rr = int(math.ceil(r))
     m = 0
     j = 0
     for i in range(n):
@@ -552,20 +560,31 @@ def _kernels(x, y, weight, index, amplitude, frequency, carrier, norm, skip, cel
         row = _cell_of(yi, cell)
         counts[min(max(row + 1, 0), n_rows + 1)] += 1
         y0 = min(max(math.ceil(yi - r), 0.0), height - 1.0)
-        first[np.int64(y0) // band] = True
+        b = np.int64(y0) // band
+        first[b] = True
+        x0 = np.int64(math.floor(x[i])) - rr  # the window's first column (_splat_band)
+        lo[b] = min(lo[b], x0)
+        hi[b] = max(hi[b], x0 + nwin)
         m += 1
     total = 0
     for q in range(n_rows + 1):
         total += counts[q]
         row_start[q] = total
-    for b in range(touched.shape[0]):
+    for b in range(nb):
         touched[b] = first[b] or (b > 0 and first[b - 1])
+        cols[b, 0], cols[b, 1] = lo[b], hi[b]
+        if b > 0 and first[b - 1]:
+            cols[b, 0] = min(cols[b, 0], lo[b - 1])
+            cols[b, 1] = max(cols[b, 1], hi[b - 1])
+        if not touched[b]:
+            cols[b, 0] = cols[b, 1] = 0
     return m
 
 
 @numba.njit(parallel=True, cache=True, fastmath=FASTMATH, nogil=True)
 def _splat(sums, out, x, y, weight, index, amplitude, frequency, carrier, norm, skip, cell, r, a,
-           band, nwin, pad, xs, ys, amp, k, t, row_start, touched):  # pragma: no cover - compiled
+           band, nwin, pad, xs, ys, amp, k, t, row_start, touched, cols, spans):
+    # pragma: no cover - compiled
     """The kernels of the impulses (:func:`_kernels`, into ``xs`` .. ``touched``, in this
     kernel: one compiled function to load, not two) summed into the padded rows ``sums``,
     then the image columns copied into ``out`` (H, W). Each kernel is added whole by the
@@ -577,12 +596,14 @@ def _splat(sums, out, x, y, weight, index, amplitude, frequency, carrier, norm, 
     running at once write one row. A row's sums are then in the same order whatever the
     thread count. Each odd band copies its rows and the next band's out once they are final
     (the first band copies its own). ``sums`` need not be zeros: the bands ``touched``
-    marks (those that may receive a kernel) are zeroed first; the others are never read,
-    their rows of ``out`` written 0."""
+    marks (those that may receive a kernel) are zeroed first, on the columns their kernels'
+    windows span (``cols``); the others are never read. Of ``out`` only those columns are
+    written, in the image, each row's in ``spans`` (the noise is 0 elsewhere:
+    :class:`fovexp.memory.WrittenRows`)."""
     height = out.shape[0]
     width = out.shape[1]
     m = _kernels(x, y, weight, index, amplitude, frequency, carrier, norm, skip, cell, r, band,
-                 height, xs, ys, amp, k, t, row_start, touched)
+                 height, nwin, xs, ys, amp, k, t, row_start, touched, cols)
     kx, ky, kamp, kk, kt = xs[:m], ys[:m], amp[:m], k[:m], t[:m]
     nb = (height + band - 1) // band
     reach = 2 * int(math.ceil(r)) + 2  # rows past its band's end a kernel may write
@@ -590,8 +611,11 @@ def _splat(sums, out, x, y, weight, index, amplitude, frequency, carrier, norm, 
     for i in numba.prange(nb):
         b = (i * spread) % nb
         if touched[b]:
+            # the padded row's columns the windows span (every window lies inside it)
+            p0 = min(max(cols[b, 0] + pad, 0), sums.shape[1])
+            p1 = min(max(cols[b, 1] + pad, p0), sums.shape[1])
             for y in range(b * band, min(height, (b + 1) * band)):
-                row = sums[y]
+                row = sums[y, p0:p1]
                 for x in range(row.shape[0]):
                     row[x] = 0.0
     for parity in range(2):
@@ -613,14 +637,49 @@ def _splat(sums, out, x, y, weight, index, amplitude, frequency, carrier, norm, 
                 continue
             c1 = min(height, y1 + band) if parity == 1 else y1  # this band and the next
             for y in range(y0, c1):
-                dst = out[y]
-                if not touched[y // band]:  # no kernel reaches the row
-                    for x in range(width):
-                        dst[x] = 0.0
-                    continue
-                src = sums[y, pad:pad + width]
-                for x in range(width):
+                bb = y // band
+                # the image columns the row's kernels span (none where no kernel reaches it)
+                x0 = min(max(cols[bb, 0], 0), width)
+                x1 = min(max(cols[bb, 1], x0), width) if touched[bb] else x0
+                spans[y, 0], spans[y, 1] = x0, x1
+                dst, src = out[y, x0:x1], sums[y, pad + x0:pad + x1]
+                for x in range(x1 - x0):
                     dst[x] = src[x]
+
+
+@overload
+def synthesize(
+    shape: tuple[int, int],
+    impulses: Impulses,
+    amplitude: np.ndarray,
+    frequency_cpp: np.ndarray,
+    carrier_rad: np.ndarray,
+    impulses_per_kernel: int,
+    gabor_a_cpp: float,
+    truncation: float = KERNEL_TRUNCATION,
+    skip: bool = True,
+    dtype: np.dtype | type = np.float32,
+    index: np.ndarray | None = None,
+    written: Literal[False] = False,
+) -> np.ndarray: ...
+
+
+@overload
+def synthesize(
+    shape: tuple[int, int],
+    impulses: Impulses,
+    amplitude: np.ndarray,
+    frequency_cpp: np.ndarray,
+    carrier_rad: np.ndarray,
+    impulses_per_kernel: int,
+    gabor_a_cpp: float,
+    truncation: float = KERNEL_TRUNCATION,
+    skip: bool = True,
+    dtype: np.dtype | type = np.float32,
+    index: np.ndarray | None = None,
+    *,
+    written: Literal[True],
+) -> WrittenRows: ...
 
 
 def synthesize(
@@ -635,7 +694,8 @@ def synthesize(
     skip: bool = True,
     dtype: np.dtype | type = np.float32,
     index: np.ndarray | None = None,
-) -> np.ndarray:
+    written: bool = False,
+) -> np.ndarray | WrittenRows:
     """Sum the Gabor kernels of ``impulses`` into an (H, W) noise image of ``dtype``.
 
     ``amplitude`` is K per impulse (in the release's units: the local std is K / 6),
@@ -644,7 +704,8 @@ def synthesize(
     other impulse's K is 0. The kernels are cut where their envelope is ``truncation``.
     With ``skip``, impulses with zero amplitude (empty band, flat surround, no headroom)
     cost nothing; without, every impulse is summed (adding exact zeros: the same result,
-    for measuring the saving).
+    for measuring the saving). ``written``: the noise as a :class:`fovexp.memory.WrittenRows`,
+    written only on the columns each row's kernels span (its zeros elsewhere not written).
     """
     h, w = shape
     n = len(impulses)
@@ -662,16 +723,21 @@ def synthesize(
     nwin, pad = _window(r)
     band = max(BAND_ROWS, 2 * int(math.ceil(r)) + 2)  # a kernel reaches into the next band only
     if skip and not per[0].any():  # no kernel: no buffers, no pass
-        return frame_zeros(shape, dtype)
+        if not written:
+            return frame_zeros(shape, dtype)
+        return WrittenRows(frame_empty(shape, dtype), np.zeros((h, 2), np.int64))
     size = index.size if skip else n
     xs, ys, amp, k, t = (np.empty(size) for _ in range(5))
     row_start = np.empty(cell_counts(w, h, cell)[1] + 1, np.int64)
     touched = np.empty(-(-h // band), np.bool_)
-    # the sums in padded rows, zeroed in the touched bands only; each band's image columns
-    # copied into the result once the band is done (zeros where no kernel reaches)
+    cols = np.empty((touched.shape[0], 2), np.int64)
+    spans = np.empty((h, 2), np.int64)
+    # the sums in padded rows, zeroed in the touched bands only, on their kernels' columns;
+    # those columns of each band copied into the result once the band is done
     sums = frame_empty((h, w + 2 * pad + nwin), dtype)
-    out = frame_empty(shape, dtype)
-    _splat(sums, out, impulses.x_px, impulses.y_px, impulses.weight, index, *per,
+    noise = WrittenRows(frame_empty(shape, dtype), spans)
+    _splat(sums, noise.values, impulses.x_px, impulses.y_px, impulses.weight, index, *per,
            normalisation(impulses_per_kernel, gabor_a_cpp, impulses.weights, truncation), skip,
-           cell, r, gabor_a_cpp, band, nwin, pad, xs, ys, amp, k, t, row_start, touched)
-    return out
+           cell, r, gabor_a_cpp, band, nwin, pad, xs, ys, amp, k, t, row_start, touched, cols,
+           spans)
+    return noise if written else noise.full()

@@ -36,10 +36,11 @@ import os
 import sys
 import threading
 from collections.abc import Iterator
+from dataclasses import dataclass
 
 import numpy as np
 
-from ._parallel import zero_fill
+from ._parallel import zero_fill, zero_outside_rows
 
 #: mallopt's parameters (malloc.h).
 _M_TRIM_THRESHOLD = -1
@@ -177,3 +178,35 @@ def frame_zeros(shape: tuple[int, ...], dtype: np.dtype | type) -> np.ndarray:
     """``np.zeros(shape, dtype)``, from the active :class:`FramePool` if there is one."""
     pool = _ACTIVE.get()
     return np.zeros(shape, dtype) if pool is None else pool.zeros(shape, dtype)
+
+
+@dataclass
+class WrittenRows:
+    """An (H, W) frame map written only on one span of columns per row, 0 elsewhere by
+    definition: what the stages that skip flat regions (the contrast change, the noise) give
+    the output stage, which reads each row on its spans only, so that neither the zeros of a
+    flat region are written nor read back (a 4K map is 33 MB). :meth:`full` writes them,
+    once, for a reader of the whole map (the maps, the other clipping rules)."""
+
+    values: np.ndarray  # (H, W); outside the spans, not initialised until :meth:`full`
+    spans: np.ndarray  # (H, 2) int64: each row's [start, stop) written; empty where stop <= start
+
+    @classmethod
+    def whole(cls, values: np.ndarray) -> WrittenRows:
+        """A map written everywhere."""
+        spans = np.empty((values.shape[0], 2), np.int64)
+        spans[:, 0], spans[:, 1] = 0, values.shape[1]
+        return cls(values, spans)
+
+    def full(self) -> np.ndarray:
+        """The whole map: 0 written outside the spans (in place, the first time)."""
+        if not self._complete:
+            zero_outside_rows(self.values, self.spans)
+            self._complete = True
+        return self.values
+
+    def __post_init__(self) -> None:
+        h, w = self.values.shape
+        if self.spans.shape != (h, 2):
+            raise ValueError(f"spans of shape ({h}, 2) for a map of {h} rows")
+        self._complete = bool((self.spans[:, 0] <= 0).all() and (self.spans[:, 1] >= w).all())

@@ -61,7 +61,7 @@ from .foveation import (
 )
 from .geometry import Display, GeometryModel, ViewingGeometry
 from .jit import FASTMATH
-from .memory import FramePool, frame_empty, retain_freed_memory
+from .memory import FramePool, WrittenRows, frame_empty, retain_freed_memory
 from .params import EngineOptions, EnhanceParams, ParameterTable, Preset, get_preset
 from .pyramids import FLAT_BLOCK_LEVEL
 
@@ -714,19 +714,21 @@ class Enhancer:
         k0, _ = amp.bracketing_levels(active.level, max(top, 1))
         return pyramids.tiles_of_taps(active.x_px, active.y_px, k0, pyr, top)
 
-    def _contrast(self, luma, sigma, f_e, luma_flat, sigma_blocks) -> np.ndarray:
+    def _contrast(self, luma, sigma, f_e, luma_flat, sigma_blocks) -> WrittenRows:
         """The change of luminance the contrast enhancement makes (grey, linear). The method
         processes luminance only (section 4.5): like the noise, this change is added to
         every channel of the foveated image. Skipping leaves out the blocks whose boxes are
         flat (the change is exactly 0 there), and asks for the sigma map only on the others
-        (:meth:`_sigma_source`)."""
+        (:meth:`_sigma_source`); their zeros are not written, outside each row's first and
+        last block computed (:class:`fovexp.memory.WrittenRows`: the output reads each row
+        on its span, the maps ask for the whole)."""
         if not self.options.skip:
-            return contrast_change(luma, sigma(), f_e)
+            return contrast_change(luma, sigma(), f_e, written=True)
         source = self._sigma_source(sigma, sigma_blocks)
         if not callable(source):
-            return contrast_change(luma, source, f_e, luma_flat())
+            return contrast_change(luma, source, f_e, luma_flat(), written=True)
         return contrast_change_where_needed(luma, source, sigma_blocks().bound_px, f_e,
-                                            luma_flat())
+                                            luma_flat(), written=True)
 
     def _sigma_source(self, sigma, sigma_blocks) -> np.ndarray | SigmaOnBlocks:
         """The sigma map for a stage that skips flat blocks: the whole map when it is given,
@@ -753,7 +755,10 @@ class Enhancer:
         known = None
         if self.options.skip and self.clipping == "paper" and p.minmax_level == FLAT_BLOCK_LEVEL:
             known = (self._unchanged_by_contrast(luma_flat, sigma, sigma_blocks), *luma_blocks())
-        return amp.clipping_extremes(self.clipping, foveated, luma, delta,
+        # the paper's rule reads the change on the blocks it does not know only, which the
+        # contrast wrote; the others read all of it
+        change = delta.values if known is not None else delta.full()
+        return amp.clipping_extremes(self.clipping, foveated, luma, change,
                                      kernel_radius_px=self._kernel_radius_px(),
                                      level=p.minmax_level, box_px=p.minmax_box_px, known=known)
 
@@ -882,11 +887,12 @@ class Enhancer:
         k = np.minimum(s_k * amp.RELEASE_AMPLITUDE_GAIN * lap_amp, limit)
         return np.where(band.open_, k, 0.0)
 
-    def _noise(self, shape, imp, band, k, f, omega, n) -> np.ndarray:
-        # the band's impulses' values as they are (no scatter into every impulse's)
+    def _noise(self, shape, imp, band, k, f, omega, n) -> WrittenRows:
+        # the band's impulses' values as they are (no scatter into every impulse's); written
+        # only on the columns each row's kernels span (fovexp.memory.WrittenRows)
         return gabor.synthesize(shape, imp, k, f, omega - 0.5 * np.pi, n, self.preset.gabor_a_cpp,
                                 self.options.kernel_truncation, self.options.skip, self._dtype,
-                                index=band.index)
+                                index=band.index, written=True)
 
     def _compose(self, method, foveated, contrast, noise, image, already_foveated) -> np.ndarray:
         """The displayed frame: the grey contrast change and noise are added to every channel
@@ -935,7 +941,7 @@ class Enhancer:
 
     def _contrast_change(self) -> np.ndarray:
         """The contrast's grey change of linear luminance, (H, W)."""
-        return self._c.get("contrast")
+        return self._c.get("contrast").full()
 
     def _read_map(self, name: str) -> np.ndarray:
         """Map ``name`` of :data:`POINT_MAPS`, ``sigma_px`` or ``noise`` (the method is
@@ -946,7 +952,7 @@ class Enhancer:
         if name == "sigma_px":
             return c.get("sigma")
         if name == "noise":
-            return c.get("noise")
+            return c.get("noise").full()
         geom = c.get("geometry")
         h, w = geom.shape
         yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)

@@ -337,3 +337,37 @@ def test_the_code_table_is_what_a_frame_of_codes_reads(monkeypatch):
     assert not looked_up[5, 100, 0] and not looked_up[5, 99, 2]
     assert np.array_equal(got[~looked_up], _power_path(img, 2.2, "power")[~looked_up])
     assert not (linearize(img + np.float32(1e-6), 2.2) == -7.0).any()
+
+
+@pytest.mark.parametrize("kept", [False, True])
+def test_grey_images_written_on_spans_are_read_there_only(kept):
+    """A grey image given as WrittenRows (the enhancer's contrast change and noise: zeros
+    outside each row's span never written) encodes as the whole image does, bit for bit,
+    whatever lies outside the spans (NaN here): nothing there is read."""
+    from fovexp.memory import WrittenRows
+
+    rng = np.random.default_rng(5)
+    h, w = 40, 600
+    img = rng.uniform(0.0, 1.0, (h, w, 3)).astype(np.float32)
+    img[:, 300:] = img[:, 299:300]  # flat to the right: its runs are copies
+    lin = linearize(img, 2.2)
+    grey, written = [], []
+    for seed, (lo, hi) in ((1, (0, 320)), (2, (250, 600))):
+        full = np.zeros((h, w), np.float32)
+        spans = np.zeros((h, 2), np.int64)
+        spans[5:30] = (lo, hi)  # other rows: nothing written
+        spans[17] = (hi, lo)  # an empty span: start past stop
+        values = np.full((h, w), np.nan, np.float32)
+        g = np.random.default_rng(seed).normal(0, 0.05, (h, w)).astype(np.float32)
+        for y in range(5, 30):
+            if y != 17:
+                full[y, lo:hi] = values[y, lo:hi] = g[y, lo:hi]
+        grey.append(full)
+        written.append(WrittenRows(values, spans))
+    unchanged = img if kept else None
+    for n in (1, 2):
+        want = encode(lin, 2.2, "power", *grey[:n], unchanged=unchanged)
+        got = encode(lin, 2.2, "power", *written[:n], unchanged=unchanged)
+        assert np.array_equal(want.view(np.uint32), got.view(np.uint32)), n
+    assert np.isnan(written[0].values).any()  # the encode left them as they were
+    assert np.array_equal(written[1].full(), grey[1])  # and full() writes the zeros

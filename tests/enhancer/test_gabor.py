@@ -388,3 +388,31 @@ def test_the_set_ups_exponential_is_libms_to_a_unit_in_the_last_place():
     z = np.array([-708.5, -1000.0, -np.inf])
     gabor._exp_into(z, z.size)
     assert (z == 0.0).all()
+
+
+def test_the_noise_is_written_on_the_columns_its_kernels_span_only():
+    """written=True: each row holds values only on the span its kernels' windows cover (one
+    kernel: its own window's columns, its rows; none elsewhere), the rest never written;
+    full() is the noise synthesize gives, bit for bit."""
+    h, w = 120, 400
+    imp = gabor.generate_impulses(w, h, 3, 0.06, 4)
+    m = len(imp)
+    rng = np.random.default_rng(3)
+    f, t = rng.uniform(0.05, 0.45, m), rng.uniform(-np.pi, np.pi, m)
+    one = np.zeros(m)
+    i = int(np.argmin(np.hypot(imp.x_px - 200, imp.y_px - 60)))
+    one[i] = 1.0
+    noise = gabor.synthesize((h, w), imp, one, f, t, 3, 0.06, written=True)
+    r = gabor.kernel_radius_px(0.06)
+    nwin, _ = gabor._window(r)
+    x0 = math.floor(imp.x_px[i]) - math.ceil(r)
+    rows = np.flatnonzero(noise.spans[:, 1] > noise.spans[:, 0])
+    assert rows.size and (noise.spans[rows] == (x0, x0 + nwin)).all()
+    assert rows[0] <= math.ceil(imp.y_px[i] - r) and math.floor(imp.y_px[i] + r) <= rows[-1]
+    assert rows[-1] - rows[0] < 2 * gabor.BAND_ROWS + 2 * nwin  # its band and the next, at most
+    full = noise.full()
+    assert np.array_equal(full, gabor.synthesize((h, w), imp, one, f, t, 3, 0.06))
+    assert np.abs(full).max() > 0
+    k = np.where(rng.random(m) < 0.5, 0.0, rng.random(m))
+    many = gabor.synthesize((h, w), imp, k, f, t, 3, 0.06, written=True)
+    assert np.array_equal(many.full(), gabor.synthesize((h, w), imp, k, f, t, 3, 0.06))

@@ -141,3 +141,22 @@ def test_an_enhancers_frames_reuse_their_buffers_and_never_touch_a_kept_output()
     assert np.array_equal(kept, copy)
     fresh = Enhancer(load_display("lg-oled55cx"))
     assert np.array_equal(fresh.enhance((0.5, 0.5), params, image=images[0]).output, copy)
+
+
+def test_written_rows_are_completed_with_zeros_outside_their_spans_once():
+    """WrittenRows.full() writes 0 outside each row's span (every column of a row whose span
+    is empty), keeps what was written, and does it once; a map written everywhere is whole."""
+    from fovexp.memory import WrittenRows
+
+    values = np.full((4, 6), np.nan, np.float32)
+    spans = np.array([[1, 3], [0, 6], [5, 2], [0, 0]])
+    values[0, 1:3], values[1] = 1.0, 2.0
+    rows = WrittenRows(values, spans)
+    want = np.zeros((4, 6), np.float32)
+    want[0, 1:3], want[1] = 1.0, 2.0
+    assert np.array_equal(rows.full(), want) and rows.full() is values
+    values[2, 0] = 7.0  # written after: not zeroed again
+    assert rows.full()[2, 0] == 7.0
+    assert WrittenRows.whole(np.ones((2, 3)))._complete
+    with pytest.raises(ValueError, match="spans of shape"):
+        WrittenRows(values, spans[:2])

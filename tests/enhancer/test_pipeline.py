@@ -195,13 +195,14 @@ def test_an_already_foveated_frame_is_kept_where_nothing_changes(frame):
     enh.set_image(foveated, foveated=True)
     params = EnhanceParams(blur_rate=0.34, impulses=12)
     res = enh.enhance((0.5, 0.5), params)
-    change = enh._c.get("contrast") + res.map("noise")
+    change = enh._c.get("contrast").full() + res.map("noise")
     zero = change == 0
     assert zero.mean() > 0.1 and (res.map("sigma_px") == 0).sum() < zero.sum()
     assert np.array_equal(res.output[zero], foveated[zero])
     assert np.array_equal(res.map("foveated"), foveated)
     lin = enh.linear("foveated")
-    plain = colour.encode(lin, enh._gamma(), "power", enh._c.get("contrast"), res.map("noise"))
+    plain = colour.encode(lin, enh._gamma(), "power", enh._c.get("contrast").full(),
+                          res.map("noise"))
     assert np.array_equal(res.output[~zero], plain[~zero])
     contrast_map = res.map("contrast")
     con = enh.enhance((0.5, 0.5), params.model_copy(update={"method": "contrast"}))
