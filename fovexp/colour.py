@@ -535,9 +535,9 @@ def _luma_blocks_into(rgb, weights, block, out, lo, hi, encoded, p, offset, bits
     the luminance taken as its rows are written (down the block row's columns, then along
     each block, as :func:`fovexp.pyramids.channel_block_extremes` takes them: min and max
     are exact, the same numbers), not in a second pass over the frame. With ``encoded``
-    (shape (H, W * 3); else empty), each row of ``rgb`` is first its linearisation
+    (shape (H, W * 3); else empty), each block row of ``rgb`` is first its linearisation
     (:func:`_linearize_into`'s numbers) and ``tops[by]`` the largest of the block row's
-    ``bits`` (``encoded`` as uint32): the row is read once for the three."""
+    ``bits`` (``encoded`` as uint32): the rows are read once for the three."""
     h, w = out.shape
     bh, bw = lo.shape
     linearise = encoded.shape[0] > 0
@@ -552,10 +552,14 @@ def _luma_blocks_into(rgb, weights, block, out, lo, hi, encoded, p, offset, bits
         col_lo = np.empty(w, dtype=out.dtype)
         col_hi = np.empty(w, dtype=out.dtype)
         top = np.uint32(0)
+        if linearise:
+            # the block row's rows as one run of values: a row's first values repeat the
+            # last of the row above where the frame is flat (a run per row cost the power
+            # of every row's first 256 pixels: a constant 4K frame 16.5 -> 14.5 ms)
+            n = (yb - ya) * encoded.shape[1]
+            top = _transfer_runs(encoded[ya:yb].reshape(n), rgb[ya:yb].reshape(n), p, offset,
+                                 False, bits[ya:yb].reshape(n), codes_in, codes_out)
         for y in range(ya, yb):
-            if linearise:
-                top = max(top, _transfer_runs(encoded[y], rgb[y].reshape(-1), p, offset,
-                                              False, bits[y], codes_in, codes_out))
             _luma_row(rgb, weights, y, out)
             dst = out[y]
             if y == ya:
