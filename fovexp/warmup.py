@@ -111,7 +111,8 @@ def _exercise() -> Iterator[str]:
     cell_index(np.zeros(2), 20.0)
     yield "impulse cells"
 
-    # the frame pool's zero fill (a 4K frame's zeroed arrays; these frames' are too small)
+    # the frame pool's zero fill (fovexp.memory.FramePool.zeros, of arrays larger than these
+    # frames')
     zero_fill(np.empty(16, np.float32))
     yield "zero fill"
 
@@ -143,8 +144,6 @@ def load_frame_kernels(enh: Any, params: Any, foveated: bool = False) -> None:
     viewport = (0, 0, w, h)
     twin.set_image(frame, foveated=foveated, viewport=viewport)
     twin.enhance((0.5, 0.5), params)
-    # the frame pool's zero fill, which so small a frame's arrays do not reach (fovexp.memory)
-    zero_fill(np.empty(16, np.float32))
 
 
 def kernels() -> dict[str, object]:
