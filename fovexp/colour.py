@@ -301,13 +301,24 @@ _RUN_PX = _RUN // _PERIOD
 
 
 @numba.njit(cache=True, inline="always", fastmath=FASTMATH, nogil=True)
+def _add_clip_power(lin, g, c, p, offset, clipped, out):  # pragma: no cover - compiled
+    """``out = T^-1(clip(lin + g, 0, 1))`` of a run of pixels (``c`` channels interleaved,
+    ``g`` their grey change, ``clipped`` scratch of ``lin``'s size): the add and the clip,
+    then the power in runs (:func:`_transfer_runs`)."""
+    lo, hi = np.float32(0.0), np.float32(1.0)
+    for x in range(g.shape[0]):
+        for ch in range(c):
+            clipped[x * c + ch] = min(max(lin[x * c + ch] + g[x], lo), hi)
+    _transfer_runs(clipped, out, p, offset, True, _NO_BITS, _NO_TABLE, _NO_TABLE)
+
+
+@numba.njit(cache=True, inline="always", fastmath=FASTMATH, nogil=True)
 def _encode_kept(src, g, kept, w, c, p, offset, clipped, row):  # pragma: no cover - compiled
     """One row of :func:`_encode_into` with ``kept``: ``row = T^-1(clip(src + g))`` (``g`` the
     row's grey change, ``clipped`` scratch of the row's size) except where ``g`` of a pixel
     is exactly 0: there the pixel is ``kept``'s (the encoded input ``src`` is the
     linearisation of). A run of :data:`_RUN_PX` pixels without a change is one copy: no
     add, clip or power, and ``src`` not read."""
-    lo, hi = np.float32(0.0), np.float32(1.0)
     s = 0
     while s < w:
         e = min(w, s + _RUN_PX)
@@ -317,11 +328,7 @@ def _encode_kept(src, g, kept, w, c, p, offset, clipped, row):  # pragma: no cov
         for x in range(e - s):  # no early exit: it vectorises
             changed += gs[x] != 0.0
         if changed:
-            lin, clip = src[s * c:e * c], clipped[s * c:e * c]
-            for x in range(e - s):
-                for ch in range(c):
-                    clip[x * c + ch] = min(max(lin[x * c + ch] + gs[x], lo), hi)
-            _transfer_runs(clip, out, p, offset, True, _NO_BITS, _NO_TABLE, _NO_TABLE)
+            _add_clip_power(src[s * c:e * c], gs, c, p, offset, clipped[s * c:e * c], out)
             if changed < e - s:  # some pixels unchanged (the pixel loop branches on each)
                 for x in range(e - s):
                     if gs[x] == 0.0:
@@ -343,7 +350,6 @@ def _encode_runs(src, g, w, c, p, offset, clipped, row):  # pragma: no cover - c
     same numbers: a pixel's result depends on its values alone, and ``v + 0`` differs from
     ``v`` only at 0, which the power sends to 0 either way). Any other run is added, clipped
     and raised to the power in runs (:func:`_transfer_runs`)."""
-    lo, hi = np.float32(0.0), np.float32(1.0)
     s = 0
     while s < w:
         e = min(w, s + _RUN_PX)
@@ -367,11 +373,7 @@ def _encode_runs(src, g, w, c, p, offset, clipped, row):  # pragma: no cover - c
                         out[i] = row[s * c - c + i % c]
                 s = e
                 continue
-        clip = clipped[s * c:e * c]
-        for x in range(e - s):
-            for ch in range(c):
-                clip[x * c + ch] = min(max(lin[x * c + ch] + gs[x], lo), hi)
-        _transfer_runs(clip, out, p, offset, True, _NO_BITS, _NO_TABLE, _NO_TABLE)
+        _add_clip_power(lin, gs, c, p, offset, clipped[s * c:e * c], out)
         s = e
 
 
