@@ -416,3 +416,31 @@ def test_the_noise_is_written_on_the_columns_its_kernels_span_only():
     k = np.where(rng.random(m) < 0.5, 0.0, rng.random(m))
     many = gabor.synthesize((h, w), imp, k, f, t, 3, 0.06, written=True)
     assert np.array_equal(many.full(), gabor.synthesize((h, w), imp, k, f, t, 3, 0.06))
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_the_vector_rows_are_the_loops_bits(dtype):
+    """The 48-column window's rows in vectors held over the rows (gabor._vector_rows) add
+    each value exactly as the loop does (gabor._kernel_rows: fma(cr, er, fma(-ci, ei, v))),
+    rows of an array wider than the window, the window at an unaligned column, a kernel that
+    is not its group's first."""
+    import numba
+
+    @numba.njit
+    def both(flat_v, flat_l, stride, at, rows, er, ei, fr, fi, j):
+        gabor._vector_rows(flat_v, np.uint64(stride), np.uint64(at), np.int64(rows), er, ei,
+                           fr, fi, np.int64(j), 3)
+        gabor._kernel_rows(flat_l, stride, np.uint64(at), rows, 48, er, ei, fr, fi, j)
+
+    rng = np.random.default_rng(3)
+    stride, rows = 101, 41
+    flat = rng.standard_normal(stride * (rows + 2)).astype(dtype)
+    er, ei = (rng.standard_normal(48).astype(dtype) for _ in range(2))
+    fr, fi = (rng.standard_normal((rows, 64)).astype(dtype) for _ in range(2))
+    flat_v, flat_l = flat.copy(), flat.copy()
+    both(flat_v, flat_l, stride, stride + 7, rows, er, ei, fr, fi, 5)
+    assert flat_v.tobytes() == flat_l.tobytes()
+    changed = flat_v != flat
+    assert changed.sum() == rows * 48  # the window's values, and nothing else
+    end = stride + 7 + (rows - 1) * stride + 48  # one past the window's last value
+    assert not changed[:stride + 7].any() and not changed[end:].any()
