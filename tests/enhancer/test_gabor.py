@@ -444,3 +444,35 @@ def test_the_vector_rows_are_the_loops_bits(dtype):
     assert changed.sum() == rows * 48  # the window's values, and nothing else
     end = stride + 7 + (rows - 1) * stride + 48  # one past the window's last value
     assert not changed[:stride + 7].any() and not changed[end:].any()
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_the_x_factors_four_chains_as_one_vector_are_the_scalar_steps(dtype):
+    """gabor._four_chains steps the x factor's four chains as one vector: every value is
+    the scalar recurrence's (written out here in Python's float64 arithmetic), converted
+    to the output's dtype, and nothing past the steps asked for is written."""
+    import numba
+
+    @numba.njit
+    def chains(er, ei, e, g, c, s, rc4, rs4, sq16, steps):
+        gabor._four_chains(er, ei, (e[0], e[1], e[2], e[3]), (g[0], g[1], g[2], g[3]),
+                           (c[0], c[1], c[2], c[3]), (s[0], s[1], s[2], s[3]), rc4, rs4,
+                           sq16, np.int64(steps))
+
+    rng = np.random.default_rng(4)
+    e, g = rng.uniform(0.2, 1.0, 4), rng.uniform(0.8, 1.1, 4)
+    angle = rng.uniform(0, 2 * np.pi, 4)
+    c, s = np.cos(angle), np.sin(angle)
+    rc4, rs4, sq16 = math.cos(0.7), math.sin(0.7), 0.93
+    steps = 11
+    er, ei = np.full(48, 7.0, dtype), np.full(48, 7.0, dtype)
+    chains(er, ei, e, g, c, s, rc4, rs4, sq16, steps)
+    want_r, want_i = np.full(48, 7.0, dtype), np.full(48, 7.0, dtype)
+    e, g, c, s = ([float(v) for v in x] for x in (e, g, c, s))
+    for t in range(steps):
+        for p in range(4):
+            want_r[4 * t + p], want_i[4 * t + p] = e[p] * c[p], e[p] * s[p]
+            e[p], g[p] = e[p] * g[p], g[p] * sq16
+            c[p], s[p] = c[p] * rc4 - s[p] * rs4, s[p] * rc4 + c[p] * rs4
+    assert er.tobytes() == want_r.tobytes() and ei.tobytes() == want_i.tobytes()
+    assert (er[4 * steps:] == 7.0).all()
