@@ -438,7 +438,8 @@ def _four_chains(typingctx, er, ei, e, g, c, s, rc4, rs4, sq16, steps):
     return types.none(er, ei, e, g, c, s, rc4, rs4, sq16, steps), codegen
 
 
-#: Impulses whose set-up (:func:`_splat_band`) is computed together, in loops that vectorise.
+#: Impulses whose set-up (:func:`_splat_band`) is computed together, in loops that vectorise
+#: (a multiple of :data:`_Y_LANES`).
 SETUP_GROUP = 64
 
 
@@ -491,7 +492,7 @@ def _splat_band(
             su[15, j] *= amp[i]  # the y factor scaled by the impulse's amplitude
             rows = max(rows, min(y1 - 1, int(math.floor(ys[i] + r)))
                        - max(y0, int(math.ceil(ys[i] - r))) + 1)
-        _y_factors(su, m, rows, step_q, yf)
+        _y_factors(su, np.int64(m), np.int64(rows), step_q, yf)
         for j in range(m):
             i = idx[g0 + j]
             yi = ys[i]
@@ -514,28 +515,79 @@ def _splat_band(
                 _kernel_rows(flat, stride, at, yb - ya + 1, nwin, er, ei, yf[0], yf[1], j)
 
 
-@numba.njit(cache=True, fastmath=FASTMATH, nogil=True)
-def _y_factors(su, m, rows, step_q, yf):  # pragma: no cover - compiled
+#: Kernels whose y factors :func:`_y_factors` steps as one vector (two of AVX-512's, four of
+#: AVX2's: independent lanes, so one row's steps do not wait on the last's).
+_Y_LANES = 16
+
+
+@intrinsic
+def _y_factors(typingctx, su, m, rows, step_q, yf):  # pragma: no cover - compiled
     """The y factors of the first ``rows`` rows of the ``m`` kernels set up in ``su``
     (:func:`_splat_band`: rows 10 to 13 the carrier's sine and cosine at the first row and
     its turn per row, 15 the envelope there times the amplitude, 17 its ratio to the next),
-    into ``yf[0][row, j]`` (real) and ``yf[1][row, j]`` (imaginary), in ``yf``'s dtype:
+    into ``yf[0, row, j]`` (real) and ``yf[1, row, j]`` (imaginary), in ``yf``'s dtype:
     ``env (c + i s)``, then ``env`` times the ratio, the ratio times ``step_q``, and the
-    carrier turned. Each kernel's steps are its own recurrence's, in the same order; they
-    are taken for the whole group at once, the impulses in a loop that vectorises. Stepped
-    kernel by kernel, each row waited on the previous row's carrier turn (a multiply and a
-    subtraction), and the rows' multiply-adds waited with it. Rows 10, 11, 15 and 17 of
-    ``su`` are left at the last row's step."""
-    s, c, rs, rc = su[10, :m], su[11, :m], su[12, :m], su[13, :m]
-    env, q = su[15, :m], su[17, :m]
-    for row in range(rows):
-        fr, fi = yf[0, row, :m], yf[1, row, :m]
-        for j in range(m):
-            fr[j] = env[j] * c[j]
-            fi[j] = env[j] * s[j]
-            env[j] *= q[j]
-            q[j] *= step_q
-            c[j], s[j] = c[j] * rc[j] - s[j] * rs[j], s[j] * rc[j] + c[j] * rs[j]
+    carrier turned. Each kernel's steps are its own recurrence's, in the same order; the
+    kernels go :data:`_Y_LANES` at a time, as the lanes of one vector held in registers
+    over the rows (``su`` and ``yf`` have a multiple of it columns; lanes past ``m`` step
+    whatever ``su`` holds there, and their factors are not read). Stepped kernel by kernel,
+    each row waited on the last row's carrier turn (a multiply, then a subtraction), and the
+    rows' multiply-adds waited with it; in a loop over the kernels, each row's state went
+    through memory."""
+    dt = yf.dtype
+    if not (isinstance(su, types.Array) and su.dtype == types.float64 and su.ndim == 2
+            and isinstance(yf, types.Array) and yf.ndim == 3
+            and dt in (types.float32, types.float64) and step_q == types.float64
+            and all(isinstance(t, types.Integer) and t.bitwidth == 64 for t in (m, rows))):
+        return None
+    f64 = ir.DoubleType()
+    vty = ir.VectorType(f64, _Y_LANES)
+    out_elem = ir.FloatType() if dt == types.float32 else f64
+    out_vty = ir.VectorType(out_elem, _Y_LANES)
+    align = 4 if dt == types.float32 else 8
+    i64 = ir.IntType(64)
+
+    def codegen(context, builder, signature, args):
+        su_v, m_v, rows_v, step_v, yf_v = args
+        su_a = context.make_array(signature.args[0])(context, builder, su_v)
+        yf_a = context.make_array(signature.args[4])(context, builder, yf_v)
+        group = builder.extract_value(su_a.shape, 1)  # su's and yf's columns
+        yf_rows = builder.extract_value(yf_a.shape, 1)
+
+        def at(ptr, index, ty):
+            return builder.bitcast(builder.gep(ptr, [index]), ty.as_pointer())
+
+        def su_row(k, j0):
+            index = builder.add(builder.mul(ir.Constant(i64, k), group), j0)
+            return builder.load(at(su_a.data, index, vty), align=8)
+
+        step = builder.insert_element(ir.Constant(vty, ir.Undefined), step_v,
+                                      ir.Constant(i64, 0))
+        step = builder.shuffle_vector(step, ir.Constant(vty, ir.Undefined),
+                                      ir.Constant(ir.VectorType(ir.IntType(32), _Y_LANES),
+                                                  None))
+        blocks = builder.udiv(builder.add(m_v, ir.Constant(i64, _Y_LANES - 1)),
+                              ir.Constant(i64, _Y_LANES))
+        with cgutils.for_range(builder, blocks) as block:
+            j0 = builder.mul(block.index, ir.Constant(i64, _Y_LANES))
+            s0, c0, rs, rc = (su_row(k, j0) for k in (10, 11, 12, 13))
+            state = [cgutils.alloca_once_value(builder, v)
+                     for v in (su_row(15, j0), su_row(17, j0), c0, s0)]
+            with cgutils.for_range(builder, rows_v) as loop:
+                env, q, c, s = (builder.load(a) for a in state)
+                for part, value in enumerate((builder.fmul(env, c), builder.fmul(env, s))):
+                    if out_elem != f64:
+                        value = builder.fptrunc(value, out_vty)
+                    row = builder.add(builder.mul(ir.Constant(i64, part), yf_rows), loop.index)
+                    index = builder.add(builder.mul(row, group), j0)
+                    builder.store(value, at(yf_a.data, index, out_vty), align=align)
+                builder.store(builder.fmul(env, q), state[0])
+                builder.store(builder.fmul(q, step), state[1])
+                builder.store(builder.fsub(builder.fmul(c, rc), builder.fmul(s, rs)), state[2])
+                builder.store(builder.fadd(builder.fmul(s, rc), builder.fmul(c, rs)), state[3])
+        return context.get_dummy_value()
+
+    return types.none(su, m, rows, step_q, yf), codegen
 
 
 @numba.njit(cache=True, inline="always", fastmath=FASTMATH, nogil=True)
@@ -776,7 +828,8 @@ def _splat(sums, out, x, y, weight, index, amplitude, frequency, carrier, norm, 
             er = np.empty(nwin, dtype=sums.dtype)
             ei = np.empty(nwin, dtype=sums.dtype)
             yf = np.empty((2, 2 * int(math.ceil(r)) + 1, SETUP_GROUP), dtype=sums.dtype)
-            su = np.empty((21, SETUP_GROUP), dtype=np.float64)
+            # zeros: what _y_factors steps in the lanes past a group's last kernel, at first
+            su = np.zeros((21, SETUP_GROUP), dtype=np.float64)
             idx = _band_impulses(kx, ky, row_start, cell, r, y0, y1, width)
             _splat_band(sums[y0:ye], y0, ye, pad, kx, ky, kamp, kk, kt, idx, r, a, nwin, er, ei,
                         yf, su)

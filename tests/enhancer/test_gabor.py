@@ -476,3 +476,32 @@ def test_the_x_factors_four_chains_as_one_vector_are_the_scalar_steps(dtype):
             c[p], s[p] = c[p] * rc4 - s[p] * rs4, s[p] * rc4 + c[p] * rs4
     assert er.tobytes() == want_r.tobytes() and ei.tobytes() == want_i.tobytes()
     assert (er[4 * steps:] == 7.0).all()
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_the_y_factors_as_vector_lanes_are_each_kernels_scalar_steps(dtype):
+    """gabor._y_factors steps a group's kernels as the lanes of one vector: every kernel's
+    row factors are its own recurrence's (written out here in Python's float64
+    arithmetic), converted to the factors' dtype, for a group that is not a whole number
+    of vectors; rows past those asked for are not written."""
+    import numba
+
+    @numba.njit
+    def y_factors(su, m, rows, step_q, yf):
+        gabor._y_factors(su, np.int64(m), np.int64(rows), step_q, yf)
+
+    rng = np.random.default_rng(5)
+    group, m, rows, step_q = gabor.SETUP_GROUP, 21, 9, 0.955
+    su = rng.uniform(-1.0, 1.0, (21, group))
+    su[15], su[17] = rng.uniform(0.1, 1.0, group), rng.uniform(0.9, 1.2, group)
+    yf = np.full((2, rows + 2, group), 7.0, dtype)
+    y_factors(su, m, rows, step_q, yf)
+    for j in range(m):
+        s, c, rs, rc, env, q = (float(su[k, j]) for k in (10, 11, 12, 13, 15, 17))
+        want = np.empty((2, rows), dtype)
+        for row in range(rows):
+            want[0, row], want[1, row] = env * c, env * s
+            env, q = env * q, q * step_q
+            c, s = c * rc - s * rs, s * rc + c * rs
+        assert yf[:, :rows, j].tobytes() == want.tobytes()
+    assert (yf[:, rows:] == 7.0).all()
