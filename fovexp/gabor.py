@@ -389,7 +389,7 @@ def _four_chains(typingctx, er, ei, e, g, c, s, rc4, rs4, sq16, steps):
     as a vector a step is bound by the turn's latency (a multiply, then an add)."""
     dt = er.dtype
     quads = (e, g, c, s)
-    if not (dt in (types.float32, types.float64) and ei == er
+    if not (dt in (types.float32, types.float64) and ei == er and er.layout == "C"
             and all(isinstance(t, types.UniTuple) and t.count == 4 and t.dtype == types.float64
                     for t in quads)
             and all(t == types.float64 for t in (rc4, rs4, sq16))
@@ -529,14 +529,14 @@ def _y_factors(typingctx, su, m, rows, step_q, yf):  # pragma: no cover - compil
     ``env (c + i s)``, then ``env`` times the ratio, the ratio times ``step_q``, and the
     carrier turned. Each kernel's steps are its own recurrence's, in the same order; the
     kernels go :data:`_Y_LANES` at a time, as the lanes of one vector held in registers
-    over the rows (``su`` and ``yf`` have a multiple of it columns; lanes past ``m`` step
-    whatever ``su`` holds there, and their factors are not read). Stepped kernel by kernel,
-    each row waited on the last row's carrier turn (a multiply, then a subtraction), and the
-    rows' multiply-adds waited with it; in a loop over the kernels, each row's state went
-    through memory."""
+    over the rows (``su`` and ``yf``, C-contiguous, have a multiple of it columns; lanes
+    past ``m`` step whatever ``su`` holds there, and their factors are not read). Stepped
+    kernel by kernel, each row waited on the last row's carrier turn (a multiply, then a
+    subtraction), and the rows' multiply-adds waited with it; in a loop over the kernels,
+    each row's state went through memory."""
     dt = yf.dtype
     if not (isinstance(su, types.Array) and su.dtype == types.float64 and su.ndim == 2
-            and isinstance(yf, types.Array) and yf.ndim == 3
+            and isinstance(yf, types.Array) and yf.ndim == 3 and su.layout == yf.layout == "C"
             and dt in (types.float32, types.float64) and step_q == types.float64
             and all(isinstance(t, types.Integer) and t.bitwidth == 64 for t in (m, rows))):
         return None
@@ -551,8 +551,8 @@ def _y_factors(typingctx, su, m, rows, step_q, yf):  # pragma: no cover - compil
         su_v, m_v, rows_v, step_v, yf_v = args
         su_a = context.make_array(signature.args[0])(context, builder, su_v)
         yf_a = context.make_array(signature.args[4])(context, builder, yf_v)
-        group = builder.extract_value(su_a.shape, 1)  # su's and yf's columns
-        yf_rows = builder.extract_value(yf_a.shape, 1)
+        group = builder.extract_value(su_a.shape, 1)  # su's columns
+        yf_rows, yf_cols = (builder.extract_value(yf_a.shape, k) for k in (1, 2))
 
         def at(ptr, index, ty):
             return builder.bitcast(builder.gep(ptr, [index]), ty.as_pointer())
@@ -579,7 +579,7 @@ def _y_factors(typingctx, su, m, rows, step_q, yf):  # pragma: no cover - compil
                     if out_elem != f64:
                         value = builder.fptrunc(value, out_vty)
                     row = builder.add(builder.mul(ir.Constant(i64, part), yf_rows), loop.index)
-                    index = builder.add(builder.mul(row, group), j0)
+                    index = builder.add(builder.mul(row, yf_cols), j0)
                     builder.store(value, at(yf_a.data, index, out_vty), align=align)
                 builder.store(builder.fmul(env, q), state[0])
                 builder.store(builder.fmul(q, step), state[1])
@@ -588,6 +588,9 @@ def _y_factors(typingctx, su, m, rows, step_q, yf):  # pragma: no cover - compil
         return context.get_dummy_value()
 
     return types.none(su, m, rows, step_q, yf), codegen
+
+
+assert SETUP_GROUP % _Y_LANES == 0, "_y_factors steps whole vectors of a group's columns"
 
 
 @numba.njit(cache=True, inline="always", fastmath=FASTMATH, nogil=True)
@@ -630,7 +633,8 @@ def _vector_rows(typingctx, flat, stride, at, rows, er, ei, fr, fi, j, nvec):
     with the loop four times: 77-89 -> 72-82 ms (one thread 144 -> 128 ms)."""
     dt = flat.dtype
     if not (isinstance(nvec, types.IntegerLiteral) and dt in (types.float32, types.float64)
-            and all(isinstance(a, types.Array) and a.dtype == dt for a in (er, ei, fr, fi))
+            and all(isinstance(a, types.Array) and a.dtype == dt and a.layout == "C"
+                    for a in (flat, er, ei, fr, fi))
             and all(isinstance(t, types.Integer) and t.bitwidth == 64
                     for t in (stride, at, rows, j))):
         return None
