@@ -21,10 +21,11 @@ References
 
 from __future__ import annotations
 
+import numba
 import numpy as np
-from scipy import ndimage
 
 from ._parallel import over_points
+from .jit import FASTMATH
 from .pyramids import sample_cubic
 
 #: Gaussian-pyramid level the gradients are computed on (paper section 4.3).
@@ -38,11 +39,65 @@ GRADIENT_EPS = 1e-5
 
 def sobel_gradients(grey_level: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``(G_x, G_y)``: Sobel derivatives along x (right) and y (down), replicated borders
-    (float32, or float64 when the level is)."""
+    (float32, or float64 when the level is): ``scipy.ndimage.sobel(g, axis, mode="nearest")``
+    for axis 1 and 0, bit for bit (:func:`_sobel_into`)."""
     g = np.asarray(grey_level)
-    if g.dtype != np.float64:
-        g = g.astype(np.float32)
-    return ndimage.sobel(g, axis=1, mode="nearest"), ndimage.sobel(g, axis=0, mode="nearest")
+    g = np.ascontiguousarray(g, dtype=np.float64 if g.dtype == np.float64 else np.float32)
+    if g.ndim != 2:
+        raise ValueError(f"Sobel gradients of a 2-D level, not shape {g.shape}")
+    gx, gy = np.empty_like(g), np.empty_like(g)
+    if g.size:
+        _sobel_into(g, gx, gy)
+    return gx, gy
+
+
+@numba.njit(cache=True, inline="always", fastmath=FASTMATH, nogil=True)
+def _difference(a, b, c):  # pragma: no cover - compiled
+    """SciPy's correlate1d with ``[-1, 0, 1]`` at ``b`` (``a`` before, ``c`` after): in
+    float64, ``b * 0 + (a - c) * -1`` (the products kept: ``b * 0`` is -0.0 for negative
+    ``b``)."""
+    return np.float64(b) * 0.0 + (np.float64(a) - np.float64(c)) * -1.0
+
+
+@numba.njit(cache=True, inline="always", fastmath=FASTMATH, nogil=True)
+def _smoothing(a, b, c):  # pragma: no cover - compiled
+    """SciPy's correlate1d with ``[1, 2, 1]`` at ``b``: in float64, ``b * 2 + (a + c) * 1``."""
+    return np.float64(b) * 2.0 + (np.float64(a) + np.float64(c)) * 1.0
+
+
+@numba.njit(cache=True, fastmath=FASTMATH, nogil=True)
+def _sobel_into(g, gx, gy):  # pragma: no cover - compiled
+    """``gx``, ``gy`` = the Sobel derivatives of ``g`` (H, W), the border replicated, as
+    ``scipy.ndimage.sobel`` computes them: the central difference along the axis first
+    (:func:`_difference`), stored in the output's dtype, then the smoothing across it
+    (:func:`_smoothing`), stored. A compiled pass over a 4K frame's 480 x 270 level-3 grid
+    instead of SciPy's line buffers (1.0-1.5 ms), and no SciPy import on the path of
+    ``fovexp enhance``."""
+    h, w = g.shape
+    dx, dy = np.empty_like(gx), np.empty_like(gy)
+    for y in range(h):
+        # rows as slices indexed from 0, interior columns without clamping: they vectorise
+        row, up, down = g[y], g[max(y - 1, 0)], g[min(y + 1, h - 1)]
+        dxr, dyr = dx[y], dy[y]
+        for x in range(w):
+            dyr[x] = _difference(up[x], row[x], down[x])
+        mid, left, right, out = row[1:], row[0:], row[2:], dxr[1:]
+        for x in range(w - 2):
+            out[x] = _difference(left[x], mid[x], right[x])
+        dxr[0] = _difference(row[0], row[0], row[min(1, w - 1)])
+        if w > 1:
+            dxr[w - 1] = _difference(row[w - 2], row[w - 1], row[w - 1])
+    for y in range(h):
+        row, up, down = dx[y], dx[max(y - 1, 0)], dx[min(y + 1, h - 1)]
+        gxr, dyr, gyr = gx[y], dy[y], gy[y]
+        for x in range(w):
+            gxr[x] = _smoothing(up[x], row[x], down[x])
+        mid, left, right, out = dyr[1:], dyr[0:], dyr[2:], gyr[1:]
+        for x in range(w - 2):
+            out[x] = _smoothing(left[x], mid[x], right[x])
+        gyr[0] = _smoothing(dyr[0], dyr[0], dyr[min(1, w - 1)])
+        if w > 1:
+            gyr[w - 1] = _smoothing(dyr[w - 2], dyr[w - 1], dyr[w - 1])
 
 
 def orientation_at(

@@ -14,7 +14,8 @@ out, exactly: impulses whose band is empty (F_L >= F_H: the fovea and its surrou
 4.1) and impulses whose |L| neighbourhood is one constant luminance (flat regions: |L|, hence K,
 is exactly 0 there, section 4.2) get no amplitude, frequency or orientation and add no noise;
 |L| is computed only on the tiles such impulses read; the contrast change is not computed on
-blocks whose boxes are flat (it is exactly 0); the foveation leaves flat regions as they are.
+blocks whose boxes are flat (it is exactly 0); the foveation leaves flat regions as they are;
+the pyramid's first level takes flat blocks as their constant, unread.
 The arithmetic of each stage is written so that these results are exact (pyramids and blurs
 as "centre + weighted differences", an integer summed-area table), so the output is the same
 bit for bit with ``skip=False`` (tested). Full-resolution maps of the parameters are computed
@@ -492,8 +493,7 @@ class Enhancer:
                     lb[0][..., None], FLAT_BLOCK_LEVEL)))
         # how far around each block the luminance is one constant (skipping only)
         c.stage("luma_flat", ("luma_blocks",), lambda b: pyramids.constant_radius_blocks(*b))
-        c.stage("pyramid", ("luma",), lambda luma: pyramids.gaussian_pyramid(
-            luma, amp.MAX_LAPLACIAN_LEVEL))
+        c.stage("pyramid", ("luma", "?luma_flat", "?luma_blocks"), self._pyramid)
         c.stage("abs_laplacian", ("pyramid", "imp_active"), self._abs_laplacian)
         c.stage("abs_laplacian_full", ("pyramid",), lambda pyr: (
             pyramids.smoothed_abs_laplacian(pyr, len(pyr) - 1)))  # the maps'
@@ -695,6 +695,15 @@ class Enhancer:
         blocks = sigma_blocks()
         source = self._sigma_source(sigma, sigma_blocks) if self.options.skip else sigma()
         return foveate(linear, source, skip=self.options.skip, max_sigma_px=blocks.bound_px)
+
+    def _pyramid(self, luma, luma_flat, luma_blocks) -> list[np.ndarray]:
+        """The luminance's Gaussian pyramid (section 4.2); when skipping, its first level
+        takes the blocks where the luminance is one constant as that constant, unread (the
+        same numbers: :func:`fovexp.pyramids.reduce`)."""
+        constant = None
+        if self.options.skip:
+            constant = (luma_flat(), luma_blocks()[0], pyramids.level_scale(FLAT_BLOCK_LEVEL))
+        return pyramids.gaussian_pyramid(luma, amp.MAX_LAPLACIAN_LEVEL, constant=constant)
 
     def _abs_laplacian(self, pyr: list[np.ndarray], active: ImpulseParams) -> dict[int, np.ndarray]:
         """|L_k| of every level (section 4.2); when skipping, only on the tiles the active

@@ -127,6 +127,46 @@ def test_an_interleaved_reduce_and_its_border_read_in_place_are_exact(dtype):
         pyramids.reduce(rgb, pad_px=-1)
 
 
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_a_reduce_given_its_flat_blocks_is_the_same_and_does_not_read_them(dtype):
+    """``reduce(constant=...)`` (the enhancer's first pyramid level when skipping) gives the
+    plain reduce's bytes on images flat in parts (a textured quadrant, specks, stripes of
+    other constants, -0.0 and infinite flat regions, all of it constant), shapes odd and
+    even down to one pixel; and where it is told a block is flat it writes the constant
+    without reading the pixels (a lie about them shows)."""
+    rng = np.random.default_rng(5)
+    shapes = ((1, 1), (1, 9), (9, 1), (3, 5), (8, 8), (17, 23), (65, 129), (100, 37))
+    for h, w in shapes:
+        for kind in range(6):
+            img = np.full((h, w), 0.5, dtype)
+            if kind == 0:
+                img[:h // 2, :w // 2] = rng.random((h // 2, w // 2))
+            elif kind == 1:
+                img[rng.random((h, w)) < 0.01] = 0.7
+            elif kind == 2:
+                img[:, :w // 3] = 0.25
+                img[h // 2:, 2 * w // 3:] = rng.random((h - h // 2, w - 2 * w // 3))
+            elif kind == 3:
+                img[:, w // 2:] = -0.0
+            elif kind == 4:
+                img[: h // 2] = np.inf
+            lo, hi = pyramids.channel_block_extremes(img[..., None], 3)
+            constant = (pyramids.constant_radius_blocks(lo, hi), lo[..., 0], 8)
+            with np.errstate(invalid="ignore"):
+                want = pyramids.reduce(img)
+                got = pyramids.reduce(img, constant=constant)
+            assert got.dtype == want.dtype and got.tobytes() == want.tobytes(), (h, w, kind)
+    img = rng.random((40, 48)).astype(dtype)
+    told = np.zeros((5, 6), np.int32)
+    told[2, 3] = 1  # block (2, 3) and its neighbours said to be the constant 7
+    got = pyramids.reduce(img, constant=(told, np.full((5, 6), 7.0, dtype), 8))
+    assert (got[8:12, 12:16] == 7.0).all() and not (np.delete(got, slice(12, 16), 1) == 7).any()
+    with pytest.raises(ValueError, match="constant blocks of shape"):
+        pyramids.reduce(img, constant=(told[:4], np.zeros((4, 6), dtype), 8))
+    with pytest.raises(ValueError, match="without padding"):
+        pyramids.reduce(img, pad_px=2, constant=(told, np.zeros((5, 6), dtype), 8))
+
+
 def test_the_pyramids_levels_and_laplacian_bands():
     img = np.random.default_rng(5).random((40, 24))
     pyr = pyramids.gaussian_pyramid(img, 10)
