@@ -343,7 +343,9 @@ def test_the_code_table_is_what_a_frame_of_codes_reads(monkeypatch):
 def test_grey_images_written_on_spans_are_read_there_only(kept):
     """A grey image given as WrittenRows (the enhancer's contrast change and noise: zeros
     outside each row's span never written) encodes as the whole image does, bit for bit,
-    whatever lies outside the spans (NaN here): nothing there is read."""
+    whatever lies outside the spans (NaN here): nothing there is read. Spans that overlap,
+    that leave a gap between them, and one of two empty. With the kept image, the linear
+    image is not read outside the spans either: those columns are the kept pixels."""
     from fovexp.memory import WrittenRows
 
     rng = np.random.default_rng(5)
@@ -352,16 +354,20 @@ def test_grey_images_written_on_spans_are_read_there_only(kept):
     img[:, 300:] = img[:, 299:300]  # flat to the right: its runs are copies
     lin = linearize(img, 2.2)
     grey, written = [], []
-    for seed, (lo, hi) in ((1, (0, 320)), (2, (250, 600))):
+    for seed, (lo, hi), gap in ((1, (0, 320), (0, 100)), (2, (250, 600), (400, 600))):
         full = np.zeros((h, w), np.float32)
         spans = np.zeros((h, 2), np.int64)
         spans[5:30] = (lo, hi)  # other rows: nothing written
         spans[17] = (hi, lo)  # an empty span: start past stop
+        spans[32:36] = gap  # two spans with a gap between them
+        if seed == 2:
+            spans[36:39] = (lo, hi)  # the first empty, this one not
         values = np.full((h, w), np.nan, np.float32)
         g = np.random.default_rng(seed).normal(0, 0.05, (h, w)).astype(np.float32)
-        for y in range(5, 30):
-            if y != 17:
-                full[y, lo:hi] = values[y, lo:hi] = g[y, lo:hi]
+        for y in range(h):
+            x0, x1 = spans[y]
+            if x1 > x0:
+                full[y, x0:x1] = values[y, x0:x1] = g[y, x0:x1]
         grey.append(full)
         written.append(WrittenRows(values, spans))
     unchanged = img if kept else None
@@ -369,5 +375,15 @@ def test_grey_images_written_on_spans_are_read_there_only(kept):
         want = encode(lin, 2.2, "power", *grey[:n], unchanged=unchanged)
         got = encode(lin, 2.2, "power", *written[:n], unchanged=unchanged)
         assert np.array_equal(want.view(np.uint32), got.view(np.uint32)), n
+        if kept:
+            untouched = lin.copy()
+            for y in range(h):
+                x0 = min([wr.spans[y, 0] for wr in written[:n] if wr.spans[y, 1] > wr.spans[y, 0]],
+                         default=w)
+                x1 = max([wr.spans[y, 1] for wr in written[:n] if wr.spans[y, 1] > wr.spans[y, 0]],
+                         default=0)
+                untouched[y, :x0] = untouched[y, max(x1, x0):] = np.nan
+            got = encode(untouched, 2.2, "power", *written[:n], unchanged=unchanged)
+            assert np.array_equal(want.view(np.uint32), got.view(np.uint32)), n
     assert np.isnan(written[0].values).any()  # the encode left them as they were
     assert np.array_equal(written[1].full(), grey[1])  # and full() writes the zeros
