@@ -95,8 +95,8 @@ def laplacian_level(sigma_px: np.ndarray, attenuation: float) -> np.ndarray:
 
 
 @numba.njit(cache=True, inline="always", fastmath=FASTMATH, nogil=True)
-def _bracket(level, top):  # pragma: no cover - compiled
-    """:func:`bracketing_levels` of one level."""
+def bracket(level, top):  # pragma: no cover - compiled
+    """:func:`bracketing_levels` of one level (compiled: a kernel's own loop calls it)."""
     lv = min(level, np.float64(top))
     k0 = min(np.int64(math.floor(lv)), top - 1) if top > 1 else np.int64(1)
     return k0, min(max(lv - k0, 0.0), 1.0)
@@ -105,13 +105,13 @@ def _bracket(level, top):  # pragma: no cover - compiled
 @numba.njit(cache=True, fastmath=FASTMATH, nogil=True)
 def _brackets(level, top, k0, t):  # pragma: no cover - compiled
     for i in range(level.shape[0]):
-        k0[i], t[i] = _bracket(level[i], top)
+        k0[i], t[i] = bracket(level[i], top)
 
 
 def bracketing_levels(level: np.ndarray, top: int) -> tuple[np.ndarray, np.ndarray]:
     """``(k0, t)``: the Laplacian levels ``k0`` and ``k0 + 1`` (at most ``top``, the coarsest
     built) between which continuous ``level`` lies, and its weight ``t`` on ``k0 + 1`` (eq. 9's
-    interpolation in the log-frequency domain). Compiled (:func:`_bracket`): the amplitude's
+    interpolation in the log-frequency domain). Compiled (:func:`bracket`): the amplitude's
     pass (:func:`laplacian_amplitude_at`) takes each point's levels the same way."""
     shape, (flat,) = flat_broadcast(level)
     k0, t = np.empty(flat.shape, np.int64), np.empty(flat.shape)
@@ -133,7 +133,7 @@ def _laplacian_at(grids, scales, top, level, x, y, out):  # pragma: no cover - c
     sample is held in its grid's dtype before the interpolation, as
     :func:`fovexp.pyramids.sample_bilinear` returns it."""
     for i in numba.prange(x.shape[0]):
-        k0, t = _bracket(level[i], top)
+        k0, t = bracket(level[i], top)
         g0 = grids[k0 - 1]
         lo = as_dtype_of(g0, bilinear_at(g0, x[i], y[i], scales[k0 - 1]))
         hi = lo

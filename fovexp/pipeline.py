@@ -330,27 +330,57 @@ class EnhanceResult:
 
 
 @numba.njit(cache=True, fastmath=FASTMATH, nogil=True)
-def _open_impulses(index, x_px, y_px, s_px, f_low_cpp, f_high_cpp, level):
-    # pragma: no cover - compiled
-    """The :class:`ImpulseParams` fields of the impulses ``index`` (``x_px``, ``y_px``: every
-    impulse's; the others, sigma ``s_px`` included: those of ``index``) whose band is open
-    (F_L < F_H), in one pass: NumPy's gathers and seven selections took 7.7 ms at 4K and 64
-    impulses (0.4 M), this pass 3.9."""
+def _open_impulses(index, x_px, y_px, s_px, f_low_cpp, f_high_cpp, level, radius, bx, by,
+                   reach, top):  # pragma: no cover - compiled
+    """The :class:`ImpulseParams` fields of the impulses ``index`` (``x_px``, ``y_px``, and
+    ``bx``, ``by`` when given: every impulse's; the others, sigma ``s_px`` included: those
+    of ``index``) whose band is open (F_L < F_H), in one pass: NumPy's gathers and seven
+    selections took 7.7 ms at 4K and 64 impulses (0.4 M), this pass 3.9.
+
+    With ``radius`` (else of shape (0, 0)): of those, the ones whose |L| samples do not read
+    only a constant region, :meth:`Enhancer._imp_active`'s rule: the constant radius of the
+    impulse's block (``radius[by, bx]``) below ``reach`` at its bracketing level."""
+    flat_rule = radius.shape[0] > 0
     n = index.shape[0]
+    keep = np.empty(n, np.bool_)
     m = 0
     for i in range(n):
-        m += f_low_cpp[i] < f_high_cpp[i]
-    out_index = np.empty(m, np.int64)
-    x, y = np.empty(m), np.empty(m)
-    s, lo, hi, lv = np.empty(m), np.empty(m), np.empty(m), np.empty(m)
+        ok = f_low_cpp[i] < f_high_cpp[i]
+        if ok and flat_rule:
+            k = index[i]
+            ok = radius[by[k], bx[k]] < reach[amp.bracket(level[i], top)[0]]
+        keep[i] = ok
+        m += ok
+    # one slot more than kept: each impulse is written, and the next kept one overwrites
+    # the others (no branch in the loop)
+    out_index = np.empty(m + 1, np.int64)
+    x, y = np.empty(m + 1), np.empty(m + 1)
+    s, lo, hi, lv = np.empty(m + 1), np.empty(m + 1), np.empty(m + 1), np.empty(m + 1)
     j = 0
     for i in range(n):
-        if f_low_cpp[i] < f_high_cpp[i]:
-            k = index[i]
-            out_index[j], x[j], y[j] = k, x_px[k], y_px[k]
-            s[j], lo[j], hi[j], lv[j] = s_px[i], f_low_cpp[i], f_high_cpp[i], level[i]
-            j += 1
-    return out_index, x, y, s, lo, hi, np.ones(m, np.bool_), lv
+        k = index[i]
+        out_index[j], x[j], y[j] = k, x_px[k], y_px[k]
+        s[j], lo[j], hi[j], lv[j] = s_px[i], f_low_cpp[i], f_high_cpp[i], level[i]
+        j += keep[i]
+    return (out_index[:m], x[:m], y[:m], s[:m], lo[:m], hi[:m], np.ones(m, np.bool_),
+            lv[:m])
+
+
+@numba.njit(cache=True, fastmath=FASTMATH, nogil=True)
+def _not_flat_at(radius, bx, by, limit):  # pragma: no cover - compiled
+    """The impulses (indices) whose block's constant radius ``radius[by, bx]`` is below
+    ``limit``: ``np.flatnonzero(radius[by, bx] < limit)`` without the gathered array."""
+    out = np.empty(bx.shape[0], np.int64)
+    m = 0
+    for i in range(bx.shape[0]):
+        out[m] = i
+        m += radius[by[i], bx[i]] < limit  # no branch: the next index overwrites
+    return out[:m]
+
+
+#: :func:`_open_impulses` without the flat rule.
+_NO_RULE = (np.zeros((0, 0), np.int32), np.zeros(0, np.int64), np.zeros(0, np.int64),
+            np.zeros(1, np.int64), 1)
 
 
 class _SigmaBlocks:
@@ -827,7 +857,7 @@ class Enhancer:
         is open (:func:`_open_impulses`)."""
         if self.options.skip:
             return ImpulseParams(*_open_impulses(index, imp.x_px, imp.y_px, s, f_lo, f_hi,
-                                                 level))
+                                                 level, *_NO_RULE))
         return ImpulseParams(index, imp.x_px[index], imp.y_px[index], s, f_lo, f_hi,
                              f_lo < f_hi, level)
 
@@ -851,15 +881,14 @@ class Enhancer:
         if radius.max() < reach.min():  # nothing flat at the smallest reach: nothing is
             return band()
         bx, by = imp_blocks
-        at_impulse = radius[by, bx]
         bound = (float(sigma_given.max()) if sigma_given is not None
                  else sigma_blocks().bound_px)
         k0_max, _ = amp.bracketing_levels(
             amp.laplacian_level(np.array([bound]), self.preset.attenuation), top)
-        index = np.flatnonzero(at_impulse < reach[k0_max[0]])
-        band = self._band_params(imp, index, *bands().at(index))
-        k0, _ = amp.bracketing_levels(band.level, top)
-        return band.subset(at_impulse[band.index] < reach[k0])
+        index = _not_flat_at(radius, bx, by, reach[k0_max[0]])
+        # the open ones, then at each impulse's own level, in one pass
+        return ImpulseParams(*_open_impulses(index, imp.x_px, imp.y_px, *bands().at(index),
+                                             radius, bx, by, reach, top))
 
     def _imp_blocks(self, imp, shape) -> tuple[np.ndarray, np.ndarray]:
         """The level-3 block (column, row) of each impulse, clamped to the image (frame-free:

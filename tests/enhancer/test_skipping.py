@@ -104,6 +104,19 @@ def test_skipping_leaves_work_out():
     k_all[band_all.index] = off_enh._c.get("imp_amplitude")
     left_out = np.setdiff1d(np.arange(len(band_all.index)), active.index)
     assert (k_all[left_out] == 0).all()
+    # exactly the rule, in NumPy over every impulse: the band open, and the constant radius
+    # of the impulse's block below the reach of |L| at its own bracketing level
+    from fovexp import amplitude, pyramids
+
+    shape = on_enh._c.get("shape")
+    top = max(min(amplitude.MAX_LAPLACIAN_LEVEL, pyramids.pyramid_depth(shape, 99)), 1)
+    reach = np.asarray(pyramids.blocks_reaching(
+        amplitude.laplacian_reach_px(np.arange(top + 1), top),
+        pyramids.level_scale(pyramids.FLAT_BLOCK_LEVEL)))
+    bx, by = on_enh._c.get("imp_blocks")
+    k0, _ = amplitude.bracketing_levels(band_all.level, top)
+    rule = open_ & (on_enh._c.get("luma_flat")[by, bx] < reach[k0])
+    assert np.array_equal(active.index, np.flatnonzero(rule))
     need = on_enh._laplacian_need(on_enh._c.get("pyramid"), active)
     assert 0.1 < np.mean([m.mean() for m in need.values()]) < 0.9
     # the impulses flat as far as the largest sigma reaches: their band is never evaluated
