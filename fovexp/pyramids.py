@@ -330,6 +330,8 @@ def reduce(
                              f"for {block} px blocks of a {image.shape} image")
         values = np.ascontiguousarray(values, image.dtype)
         flat = (np.asarray(radius) >= 1) & np.isfinite(values)
+        if not flat.any():  # in order: consecutive runs of rows share their source rows
+            return _reduce_2d(image, _NO_FLAT, np.zeros((0, 0), image.dtype), 1)
         return _reduce_2d(image, flat, values, int(block))
     if constant is not None:
         raise ValueError("constant blocks are for an (H, W) image without padding")
