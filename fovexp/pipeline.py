@@ -887,7 +887,8 @@ class Enhancer:
             amp.laplacian_level(np.array([bound]), self.preset.attenuation), top)
         index = _not_flat_at(radius, bx, by, reach[k0_max[0]])
         # the open ones, then at each impulse's own level, in one pass
-        return ImpulseParams(*_open_impulses(index, imp.x_px, imp.y_px, *bands().at(index),
+        s, f_lo, f_hi, level = bands().at(index)
+        return ImpulseParams(*_open_impulses(index, imp.x_px, imp.y_px, s, f_lo, f_hi, level,
                                              radius, bx, by, reach, top))
 
     def _imp_blocks(self, imp, shape) -> tuple[np.ndarray, np.ndarray]:
