@@ -366,18 +366,6 @@ def _open_impulses(index, x_px, y_px, s_px, f_low_cpp, f_high_cpp, level, radius
             lv[:m])
 
 
-@numba.njit(cache=True, fastmath=FASTMATH, nogil=True)
-def _not_flat_at(radius, bx, by, limit):  # pragma: no cover - compiled
-    """The impulses (indices) whose block's constant radius ``radius[by, bx]`` is below
-    ``limit``: ``np.flatnonzero(radius[by, bx] < limit)`` without the gathered array."""
-    out = np.empty(bx.shape[0], np.int64)
-    m = 0
-    for i in range(bx.shape[0]):
-        out[m] = i
-        m += radius[by[i], bx[i]] < limit  # no branch: the next index overwrites
-    return out[:m]
-
-
 #: :func:`_open_impulses` without the flat rule.
 _NO_RULE = (np.zeros((0, 0), np.int32), np.zeros(0, np.int64), np.zeros(0, np.int64),
             np.zeros(1, np.int64), 1)
@@ -885,7 +873,7 @@ class Enhancer:
                  else sigma_blocks().bound_px)
         k0_max, _ = amp.bracketing_levels(
             amp.laplacian_level(np.array([bound]), self.preset.attenuation), top)
-        index = _not_flat_at(radius, bx, by, reach[k0_max[0]])
+        index = np.flatnonzero(radius[by, bx] < reach[k0_max[0]])
         # the open ones, then at each impulse's own level, in one pass
         s, f_lo, f_hi, level = bands().at(index)
         return ImpulseParams(*_open_impulses(index, imp.x_px, imp.y_px, s, f_lo, f_hi, level,
