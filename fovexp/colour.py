@@ -388,8 +388,9 @@ def _encode_into(img, a, b, n_grey, spans_a, spans_b, p, offset, kept, out):
     raised to the power (:func:`_transfer_runs`), or copied where it repeats a pixel the
     change left as it was (:func:`_encode_runs`). With ``kept`` of ``img``'s shape (the
     encoded image ``img`` was linearised from; shape (0, 0, 0): none), a pixel whose grey
-    images add exactly 0 is ``kept``'s (:func:`_encode_kept`), and the columns outside the
-    row's spans are ``kept``'s row copied, without a grey row or runs."""
+    images add exactly 0 is ``kept``'s (:func:`_encode_kept`), and the columns before the
+    first span's start and after the last span's end are ``kept``'s row copied, without a
+    grey row or runs."""
     h, w, c = img.shape
     keep = kept.shape[0] > 0 and n_grey > 0
     stride = interleave(h)  # each thread's rows spread over the frame (:func:`_linearize_into`)

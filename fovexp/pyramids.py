@@ -324,12 +324,14 @@ def reduce(
         if constant is None:
             return _reduce_2d(image, _NO_FLAT, np.zeros((0, 0), image.dtype), 1)
         radius, values, block = constant
+        if int(block) < 2:  # the taps reach 2 px: within the next block only if it is as wide
+            raise ValueError(f"constant blocks of at least 2 px, not {block}")
         grid = (-(-image.shape[0] // block), -(-image.shape[1] // block))
         if radius.shape != grid or values.shape != grid:
             raise ValueError(f"constant blocks of shape {radius.shape} and {values.shape} "
                              f"for {block} px blocks of a {image.shape} image")
         values = np.ascontiguousarray(values, image.dtype)
-        flat = (np.asarray(radius) >= 1) & np.isfinite(values)
+        flat = np.ascontiguousarray((np.asarray(radius) >= 1) & np.isfinite(values))
         if not flat.any():  # in order: consecutive runs of rows share their source rows
             return _reduce_2d(image, _NO_FLAT, np.zeros((0, 0), image.dtype), 1)
         return _reduce_2d(image, flat, values, int(block))
@@ -704,6 +706,8 @@ def constant_radius_blocks(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     # channels first, each channel's rows contiguous (the kernel's loops vectorise)
     lo3 = lo[None] if lo.ndim == 2 else np.moveaxis(lo, -1, 0)
     hi3 = hi[None] if hi.ndim == 2 else np.moveaxis(hi, -1, 0)
+    if lo3.shape[1] == 0 or lo3.shape[2] == 0:  # no block: the kernel's rows assume one
+        return np.zeros(lo3.shape[1:], np.int32)
     return _constant_radius(np.ascontiguousarray(lo3), np.ascontiguousarray(hi3))
 
 

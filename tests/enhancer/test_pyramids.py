@@ -54,6 +54,10 @@ def test_constant_radius_answers_every_radius_as_the_window_filters_do():
     speck = flat.copy()
     speck[2, 3] = np.nan  # NaN is never one constant (SciPy's filters would skip it)
     assert (pyramids.constant_radius_blocks(speck, speck)[2, 3]) == -1
+    for shape in ((0, 4), (3, 0), (0, 0)):  # no block: an empty answer
+        empty = np.zeros(shape, np.float32)
+        got = pyramids.constant_radius_blocks(empty, empty)
+        assert got.shape == shape and got.dtype == np.int32
 
 
 # --- against independent implementations (issue 19: every formula of the stage checked) -----
@@ -165,6 +169,14 @@ def test_a_reduce_given_its_flat_blocks_is_the_same_and_does_not_read_them(dtype
         pyramids.reduce(img, constant=(told[:4], np.zeros((4, 6), dtype), 8))
     with pytest.raises(ValueError, match="without padding"):
         pyramids.reduce(img, pad_px=2, constant=(told, np.zeros((5, 6), dtype), 8))
+    # blocks of 2 px: the taps' reach; the same bytes there too, and 1 px blocks refused
+    img = np.full((33, 47), 0.5, dtype)
+    img[:9, :20] = rng.random((9, 20))
+    lo, hi = pyramids.channel_block_extremes(img[..., None], 1)
+    got = pyramids.reduce(img, constant=(pyramids.constant_radius_blocks(lo, hi), lo[..., 0], 2))
+    assert got.tobytes() == pyramids.reduce(img).tobytes()
+    with pytest.raises(ValueError, match="at least 2 px"):
+        pyramids.reduce(img, constant=(np.zeros((33, 47), np.int32), img, 1))
 
 
 def test_the_pyramids_levels_and_laplacian_bands():
